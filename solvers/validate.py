@@ -1,0 +1,67 @@
+"""Input checks shared by every solver: shape, finiteness, proper rigid transforms.
+
+Each check raises :class:`~solvers.errors.CalibrationError` naming the field and the reason,
+so a NaN or a wrong shape never reaches the math as a silent NaN result.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Sequence
+
+import numpy as np
+import numpy.typing as npt
+
+from solvers.errors import CalibrationError
+
+FloatArray = npt.NDArray[np.float64]
+
+
+def as_array(value: object, loc: str | tuple[str | int, ...], shape: Sequence[int | None]) -> FloatArray:
+    """Float array of the given shape (``None`` = any length), all values finite.
+
+    Examples
+    --------
+    >>> as_array([[1, 2, 3]], "points_mm", (None, 3)).shape
+    (1, 3)
+    >>> as_array([1, float("nan"), 3], "tcp_mm", (3,))
+    Traceback (most recent call last):
+    ...
+    solvers.errors.CalibrationError: tcp_mm.1: is not a finite number (nan)
+    """
+    base = (loc,) if isinstance(loc, str) else tuple(loc)
+    try:
+        arr = np.asarray(value, dtype=float)
+    except (TypeError, ValueError) as exc:
+        raise CalibrationError(base, f"must be numbers: {exc}") from None
+    want = "x".join("N" if s is None else str(s) for s in shape)
+    if arr.ndim != len(shape) or any(s is not None and s != n for s, n in zip(shape, arr.shape)):
+        raise CalibrationError(base, f"must have shape ({want}), got {arr.shape}")
+    bad = np.argwhere(~np.isfinite(arr))
+    if bad.size:
+        idx = tuple(int(i) for i in bad[0])
+        raise CalibrationError(base + idx, f"is not a finite number ({arr[idx]})")
+    return arr
+
+
+def as_transforms(value: object, loc: str, min_count: int = 1, tol: float = 1e-6) -> FloatArray:
+    """Stack of 4x4 rigid transforms (N, 4, 4), rotation orthonormal within ``tol``."""
+    T = as_array(value, loc, (None, 4, 4))
+    if len(T) < min_count:
+        raise CalibrationError((loc,), f"needs at least {min_count} poses, got {len(T)}")
+    R = T[:, :3, :3]
+    err = np.abs(R @ np.swapaxes(R, 1, 2) - np.eye(3)).max(axis=(1, 2))
+    det = np.linalg.det(R)
+    for k in range(len(T)):
+        if err[k] > tol or det[k] < 0:
+            raise CalibrationError((loc, k), "rotation part is not a proper rotation matrix")
+        if np.abs(T[k, 3] - [0, 0, 0, 1]).max() > tol:
+            raise CalibrationError((loc, k), "last row must be [0, 0, 0, 1]")
+    return T
+
+
+def as_points(value: object, loc: str, min_count: int = 1) -> FloatArray:
+    """Point set (N, 3) in mm with at least ``min_count`` points."""
+    P = as_array(value, loc, (None, 3))
+    if len(P) < min_count:
+        raise CalibrationError((loc,), f"needs at least {min_count} points, got {len(P)}")
+    return P
