@@ -123,7 +123,7 @@ def bound95(covariance: FloatArray) -> float:
     Examples
     --------
     >>> round(bound95(np.diag([0.01, 0.01, 0.04])), 4)
-    0.5597
+    0.5591
     """
     C = np.asarray(covariance, dtype=float)
     k = C.shape[0]
