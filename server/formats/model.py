@@ -1,0 +1,141 @@
+"""What every controller file format carries: numbered frames of four kinds, with loads.
+
+A :class:`FrameEntry` is one slot as the pendant shows it: its number, its name, its kind
+and its pose in the KUKA notation (x, y, z in mm, a, b, c in degrees). The kinds are
+
+- ``tool``: a robot-held tool, pose = T_flange_tcp;
+- ``workpiece``: a robot-held workpiece, pose = T_flange_workpiece;
+- ``base``: a base (user frame, work object), pose = T_world_base;
+- ``fixed_tool``: a stationary (external) tool, pose = T_world_fixedtool.
+
+Only robot-held frames (tool, workpiece) carry a :class:`LoadData`: it is what the robot
+carries when it works with that slot. Parsers raise :class:`FormatError`, which names the
+line and the field like ``("file", "line 12", "TOOL_DATA[3]")``.
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass
+from typing import Iterable, Literal, get_args
+
+from solvers.errors import CalibrationError
+from solvers.frames import Pose
+
+FrameKind = Literal["tool", "fixed_tool", "base", "workpiece"]
+FRAME_KINDS: tuple[str, ...] = get_args(FrameKind)
+ROBOT_HELD: frozenset[str] = frozenset({"tool", "workpiece"})
+
+
+class FormatError(CalibrationError):
+    """A controller file (or an entry to write into one) that cannot be read or written.
+
+    ``loc`` is ``("file", "line N", field)`` for a parse error, or ``("entries", i, field)``
+    for an entry that a format cannot hold; ``reason`` says what is wrong.
+
+    Examples
+    --------
+    >>> e = FormatError.at_line(12, "TOOL_DATA[3]", "expected a number for Y, got 'abc'")
+    >>> e.loc
+    ('file', 'line 12', 'TOOL_DATA[3]')
+    >>> e.line, e.field
+    (12, 'TOOL_DATA[3]')
+    """
+
+    def __init__(self, loc: tuple[str | int, ...], reason: str):
+        super().__init__(loc, reason)
+        self.line: int | None = None
+        self.field: str | None = str(loc[-1]) if loc else None
+
+    @classmethod
+    def at_line(cls, line: int, field: str, reason: str) -> "FormatError":
+        """Parse error on 1-based ``line`` in the field ``field``."""
+        err = cls(("file", f"line {line}", field), reason)
+        err.line = line
+        return err
+
+
+@dataclass(frozen=True)
+class LoadData:
+    """A payload as KUKA ``LOAD_DATA`` holds it.
+
+    ``com_mm`` is the centre of mass in the flange frame (mm), ``inertia_kgm2`` the
+    principal moments of inertia about it (kg m^2), and ``inertia_axes_deg`` the KUKA
+    A, B, C angles of the principal axes relative to the flange (``CM`` A, B, C; ABB's
+    ``aom``), zero when the axes are parallel to the flange.
+    """
+
+    mass_kg: float
+    com_mm: tuple[float, float, float] = (0.0, 0.0, 0.0)
+    inertia_kgm2: tuple[float, float, float] = (0.0, 0.0, 0.0)
+    inertia_axes_deg: tuple[float, float, float] = (0.0, 0.0, 0.0)
+
+    def __post_init__(self) -> None:
+        if not (math.isfinite(self.mass_kg) and self.mass_kg >= 0):
+            raise CalibrationError(("load", "mass_kg"),
+                                   f"must be finite and >= 0, got {self.mass_kg}")
+        for field in ("com_mm", "inertia_kgm2", "inertia_axes_deg"):
+            v = tuple(float(x) for x in getattr(self, field))
+            if len(v) != 3 or not all(math.isfinite(x) for x in v):
+                raise CalibrationError(("load", field), f"must be 3 finite numbers, got {v}")
+            object.__setattr__(self, field, v)
+        if any(x < 0 for x in self.inertia_kgm2):
+            raise CalibrationError(("load", "inertia_kgm2"), "moments of inertia must be >= 0")
+        object.__setattr__(self, "mass_kg", float(self.mass_kg))
+
+
+@dataclass(frozen=True)
+class FrameEntry:
+    """One numbered tool, workpiece, base or fixed-tool slot.
+
+    Examples
+    --------
+    >>> FrameEntry(1, "pointer", "tool", Pose(0, 0, 180, 0, 0, 0)).kind
+    'tool'
+    """
+
+    number: int
+    name: str
+    kind: FrameKind
+    pose: Pose
+    load: LoadData | None = None
+
+    def __post_init__(self) -> None:
+        if self.kind not in FRAME_KINDS:
+            raise CalibrationError(("kind",),
+                                   f"must be one of {', '.join(FRAME_KINDS)}, got {self.kind!r}")
+        if isinstance(self.number, bool) or not isinstance(self.number, int) or self.number < 1:
+            raise CalibrationError(("number",), f"must be an integer >= 1, got {self.number!r}")
+        values = self.pose.as_array()
+        if not all(math.isfinite(x) for x in values):
+            raise CalibrationError(("pose",), "x, y, z, a, b, c must be finite")
+        if self.load is not None and self.kind not in ROBOT_HELD:
+            raise CalibrationError(("load",), f"a {self.kind} is not carried by the robot; "
+                                              "only tool and workpiece take a load")
+
+
+def canonical_order(entries: Iterable[FrameEntry]) -> list[FrameEntry]:
+    """Entries in the order importers return them: robot-held slots (tool, workpiece) by
+    number, then stationary ones (base, fixed_tool) by number."""
+    return sorted(entries, key=lambda e: (e.kind not in ROBOT_HELD, e.number, e.kind))
+
+
+def check_unique_slots(entries: Iterable[FrameEntry], limits: dict[str, int], fmt: str) -> None:
+    """Refuse two entries in one slot, or a number beyond the format's slots.
+
+    ``limits`` maps each slot family (``"robot_held"``, ``"stationary"``) to its size.
+    """
+    seen: dict[tuple[str, int], int] = {}
+    for i, e in enumerate(entries):
+        family = "robot_held" if e.kind in ROBOT_HELD else "stationary"
+        if e.number > limits[family]:
+            raise FormatError(("entries", i, "number"),
+                              f"{fmt} has {limits[family]} {family.replace('_', '-')} slots; "
+                              f"{e.kind} {e.number} does not fit")
+        if (family, e.number) in seen:
+            j = seen[(family, e.number)]
+            raise FormatError(("entries", i, "number"),
+                              f"{e.kind} {e.number} shares its {fmt} slot with entries[{j}]; "
+                              "tools and workpieces share one numbering, "
+                              "bases and fixed tools another")
+        seen[(family, e.number)] = i
