@@ -27,6 +27,10 @@ def as_array(value: object, loc: str | tuple[str | int, ...], shape: Sequence[in
     Traceback (most recent call last):
     ...
     solvers.errors.CalibrationError: tcp_mm.1: is not a finite number (nan)
+    >>> as_array(float("inf"), "sigma_mm", ())
+    Traceback (most recent call last):
+    ...
+    solvers.errors.CalibrationError: sigma_mm: is not a finite number (inf)
     """
     base = (loc,) if isinstance(loc, str) else tuple(loc)
     try:
@@ -36,9 +40,8 @@ def as_array(value: object, loc: str | tuple[str | int, ...], shape: Sequence[in
     want = "x".join("N" if s is None else str(s) for s in shape)
     if arr.ndim != len(shape) or any(s is not None and s != n for s, n in zip(shape, arr.shape)):
         raise CalibrationError(base, f"must have shape ({want}), got {arr.shape}")
-    bad = np.argwhere(~np.isfinite(arr))
-    if bad.size:
-        idx = tuple(int(i) for i in bad[0])
+    if not np.all(np.isfinite(arr)):
+        idx = tuple(int(i) for i in np.argwhere(~np.isfinite(arr))[0]) if arr.ndim else ()
         raise CalibrationError(base + idx, f"is not a finite number ({arr[idx]})")
     return arr
 
