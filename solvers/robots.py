@@ -82,12 +82,13 @@ FANUC_LR_MATE_200ID = RobotModel(
     joints=_arm(a=[50, 330, 35, 0, 0, 0], alpha=[-90, 0, -90, 90, -90, 0],
                 d=[330, 0, 0, 335, 0, 80], offset=[0, -90, 0, 0, 0, 0],
                 direction=[1, 1, -1, -1, -1, -1],
-                limits=[(-170, 170), (-100, 145), (-140, 205), (-190, 190), (-125, 125), (-360, 360)]),
+                limits=[(-170, 170), (-100, 145), (-140.43, 280), (-190, 190), (-125, 125), (-360, 360)]),
     coupling=((1, 0, 0, 0, 0, 0), (0, 1, 0, 0, 0, 0), (0, 1, 1, 0, 0, 0),
               (0, 0, 0, 1, 0, 0), (0, 0, 0, 0, 1, 0), (0, 0, 0, 0, 0, 1)),
     base_pose=Pose(z=-330.0),  # FANUC's World frame sits 330 mm above DH frame 0
     source="DH: ros-industrial fanuc lrmate200id_macro.xacro (checked at 20 random configurations); "
-           "limits: same URDF; J2/J3 coupling from the FANUC controller convention.",
+           "limits: same URDF (J3 -140.43..280 deg, the data sheet's 420 deg range); J2/J3 coupling "
+           "from the FANUC controller convention (ROS driver J23_factor = 1).",
     payload_kg=7.0, reach_mm=717.0,
 )
 
