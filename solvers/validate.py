@@ -53,12 +53,13 @@ def as_transforms(value: object, loc: str, min_count: int = 1, tol: float = 1e-6
         raise CalibrationError((loc,), f"needs at least {min_count} poses, got {len(T)}")
     R = T[:, :3, :3]
     err = np.abs(R @ np.swapaxes(R, 1, 2) - np.eye(3)).max(axis=(1, 2))
-    det = np.linalg.det(R)
-    for k in range(len(T)):
-        if err[k] > tol or det[k] < 0:
+    bad_rot = (err > tol) | (np.linalg.det(R) < 0)
+    bad_row = np.abs(T[:, 3] - [0, 0, 0, 1]).max(axis=1) > tol
+    if bad_rot.any() or bad_row.any():
+        k = int(np.argmax(bad_rot | bad_row))
+        if bad_rot[k]:
             raise CalibrationError((loc, k), "rotation part is not a proper rotation matrix")
-        if np.abs(T[k, 3] - [0, 0, 0, 1]).max() > tol:
-            raise CalibrationError((loc, k), "last row must be [0, 0, 0, 1]")
+        raise CalibrationError((loc, k), "last row must be [0, 0, 0, 1]")
     return T
 
 
