@@ -1,0 +1,1 @@
+"""The pendant's storage: controllers, tool and base tables, history and calibration sessions."""

@@ -1,0 +1,368 @@
+"""Reads and writes of the pendant's tables. Every change of a slot leaves a history row.
+
+Functions take a SQLAlchemy ``Session`` and commit nothing themselves unless they say so;
+the routes commit once per request (``deps.get_session``).
+"""
+
+from __future__ import annotations
+
+from collections.abc import Sequence
+from datetime import datetime
+from typing import Any
+
+from sqlalchemy import select
+from sqlalchemy.orm import Session
+
+from db.models import (BASE_SLOTS, TOOL_SLOTS, CalibSession, Controller, EntryHistory, FrameEntry,
+                       StoredDocument, TaughtPoint, utcnow)
+
+SLOTS = {"tool": TOOL_SLOTS, "base": BASE_SLOTS}
+DEFAULT_KIND = {"tool": "tool", "base": "base"}
+KINDS_OF_TABLE = {"tool": ("tool", "workpiece"), "base": ("base", "fixed_tool")}
+
+
+class NotFound(LookupError):
+    """Something addressed by the path does not exist; ``loc`` names the path parameter."""
+
+    def __init__(self, loc: tuple[str | int, ...], reason: str):
+        super().__init__(reason)
+        self.loc, self.reason = tuple(loc), reason
+
+
+class StateConflict(Exception):
+    """The request does not fit the current state (saving an uncomputed session, ...)."""
+
+    def __init__(self, loc: tuple[str | int, ...], reason: str):
+        super().__init__(reason)
+        self.loc, self.reason = tuple(loc), reason
+
+
+# ----------------------------------------------------------------------------- controllers
+
+def create_controller(db: Session, name: str, robot_key: str | None, custom_robot: dict | None,
+                      cell_seed: int, joints_deg: Sequence[float]) -> Controller:
+    """A controller with empty tool (16) and base (32) tables."""
+    if db.scalar(select(Controller).where(Controller.name == name)) is not None:
+        raise StateConflict(("body", "name"), f"a controller named {name!r} exists already")
+    c = Controller(name=name, robot_key=robot_key, custom_robot=custom_robot, cell_seed=cell_seed,
+                   joints_deg=[float(q) for q in joints_deg], active_tool_no=0, active_base_no=0)
+    for table, n in SLOTS.items():
+        for k in range(1, n + 1):
+            e = FrameEntry(entry_table=table, number=k, name="", kind=DEFAULT_KIND[table])
+            e.set_pose_values((0.0,) * 6)
+            c.entries.append(e)
+    db.add(c)
+    db.flush()
+    return c
+
+
+def get_controller(db: Session, controller_id: int) -> Controller:
+    c = db.get(Controller, controller_id)
+    if c is None:
+        raise NotFound(("controller_id",), f"no controller {controller_id}")
+    return c
+
+
+def find_controller(db: Session, name_or_id: str) -> Controller:
+    c = db.scalar(select(Controller).where(Controller.name == name_or_id))
+    if c is None and name_or_id.isdigit():
+        c = db.get(Controller, int(name_or_id))
+    if c is None:
+        raise NotFound(("controller",), f"no controller named {name_or_id!r}")
+    return c
+
+
+def list_controllers(db: Session) -> list[Controller]:
+    return list(db.scalars(select(Controller).order_by(Controller.id)))
+
+
+def delete_controller(db: Session, controller: Controller) -> None:
+    db.delete(controller)
+
+
+# -------------------------------------------------------------------------------- entries
+
+def get_entry(db: Session, controller_id: int, table: str, number: int) -> FrameEntry:
+    if not 1 <= number <= SLOTS[table]:
+        raise NotFound(("number",), f"{table} slots are numbered 1..{SLOTS[table]}, got {number}")
+    e = db.scalar(select(FrameEntry).where(FrameEntry.controller_id == controller_id,
+                                           FrameEntry.entry_table == table,
+                                           FrameEntry.number == number))
+    if e is None:
+        raise NotFound(("number",), f"no {table} {number} on controller {controller_id}")
+    return e
+
+
+def list_entries(db: Session, controller_id: int, table: str | None = None,
+                 kind: str | None = None) -> list[FrameEntry]:
+    q = select(FrameEntry).where(FrameEntry.controller_id == controller_id)
+    if table:
+        q = q.where(FrameEntry.entry_table == table)
+    if kind:
+        q = q.where(FrameEntry.kind == kind)
+    return list(db.scalars(q.order_by(FrameEntry.entry_table.desc(), FrameEntry.number)))
+
+
+ENTRY_FIELDS = ("name", "kind", "x_mm", "y_mm", "z_mm", "a_deg", "b_deg", "c_deg", "mass_kg",
+                "com_x_mm", "com_y_mm", "com_z_mm", "inertia_x_kgm2", "inertia_y_kgm2",
+                "inertia_z_kgm2", "method", "session_id", "error_max_mm", "error_rms_mm",
+                "updated_at")
+
+
+def snapshot(e: FrameEntry) -> dict[str, Any]:
+    """The slot's values as a plain dict (the history's before/after)."""
+    out = {f: getattr(e, f) for f in ENTRY_FIELDS}
+    out["updated_at"] = e.updated_at.isoformat() if e.updated_at else None
+    return out
+
+
+def apply_snapshot(e: FrameEntry, snap: dict[str, Any]) -> None:
+    for f in ENTRY_FIELDS:
+        if f == "updated_at" or f not in snap:
+            continue
+        setattr(e, f, snap[f])
+
+
+def change_entry(db: Session, e: FrameEntry, values: dict[str, Any], reason: str,
+                 session_id: int | None = None) -> EntryHistory:
+    """Set ``values`` (ENTRY_FIELDS) on the slot and record the change with before and after.
+
+    Raises ValueError for a kind the table does not hold (the route checks it first).
+    """
+    before = snapshot(e)
+    if "kind" in values and values["kind"] not in KINDS_OF_TABLE[e.entry_table]:
+        kinds = " or ".join(KINDS_OF_TABLE[e.entry_table])
+        raise ValueError(f"a {e.entry_table} slot holds {kinds}, not {values['kind']!r}")
+    for k, v in values.items():
+        setattr(e, k, v)
+    e.updated_at = utcnow()
+    h = EntryHistory(controller_id=e.controller_id, entry_table=e.entry_table, number=e.number,
+                     reason=reason, session_id=session_id, before=before, after=snapshot(e))
+    db.add(h)
+    db.flush()
+    return h
+
+
+def history(db: Session, controller_id: int, table: str | None = None,
+            number: int | None = None) -> list[EntryHistory]:
+    q = select(EntryHistory).where(EntryHistory.controller_id == controller_id)
+    if table:
+        q = q.where(EntryHistory.entry_table == table)
+    if number is not None:
+        q = q.where(EntryHistory.number == number)
+    return list(db.scalars(q.order_by(EntryHistory.id)))
+
+
+def restore_entry(db: Session, e: FrameEntry, history_id: int) -> EntryHistory:
+    """Put the slot back to the state *before* history row ``history_id`` (recorded as a change)."""
+    h = db.get(EntryHistory, history_id)
+    slot = (e.controller_id, e.entry_table, e.number)
+    if h is None or (h.controller_id, h.entry_table, h.number) != slot:
+        raise NotFound(("history_id",),
+                       f"no history entry {history_id} for {e.entry_table} {e.number}")
+    values = {f: h.before[f] for f in ENTRY_FIELDS if f in h.before and f != "updated_at"}
+    return change_entry(db, e, values, reason="restore", session_id=h.session_id)
+
+
+# ------------------------------------------------------------------------------- sessions
+
+def open_session(db: Session, controller: Controller, method: str, target_table: str,
+                 target_no: int, params: dict[str, Any]) -> CalibSession:
+    s = CalibSession(controller_id=controller.id, method=method, target_table=target_table,
+                     target_no=target_no, params=params, state="open")
+    db.add(s)
+    db.flush()
+    return s
+
+
+def get_session(db: Session, controller_id: int, session_id: int) -> CalibSession:
+    s = db.get(CalibSession, session_id)
+    if s is None or s.controller_id != controller_id:
+        raise NotFound(("session_id",), f"no session {session_id} on controller {controller_id}")
+    return s
+
+
+def list_sessions(db: Session, controller_id: int, state: str | None = None) -> list[CalibSession]:
+    q = select(CalibSession).where(CalibSession.controller_id == controller_id)
+    if state:
+        q = q.where(CalibSession.state == state)
+    return list(db.scalars(q.order_by(CalibSession.id)))
+
+
+def require_open(s: CalibSession) -> None:
+    if s.state in ("saved", "discarded"):
+        raise StateConflict(("path", "session_id"), f"session {s.id} is {s.state}; open a new one")
+
+
+def put_point(db: Session, s: CalibSession, step: int, source: str, pose_values: Sequence[float],
+              joints_deg: Sequence[float] | None = None, beam_id: str | None = None,
+              edge: str | None = None, velocity_mm_s: Sequence[float] | None = None) -> TaughtPoint:
+    """Fill (or re-teach) one step; a new touch-up makes an earlier result stale."""
+    require_open(s)
+    old = next((p for p in s.points if p.step == step), None)
+    if old is not None:
+        s.points.remove(old)
+        db.flush()
+    joints = None if joints_deg is None else [float(q) for q in joints_deg]
+    p = TaughtPoint(step=step, source=source, joints_deg=joints, beam_id=beam_id, edge=edge)
+    p.set_pose_values(pose_values)
+    if velocity_mm_s is not None:
+        p.vx_mm_s, p.vy_mm_s, p.vz_mm_s = (float(v) for v in velocity_mm_s)
+    s.points.append(p)
+    _stale(s)
+    db.flush()
+    return p
+
+
+def delete_point(db: Session, s: CalibSession, step: int) -> None:
+    require_open(s)
+    p = next((p for p in s.points if p.step == step), None)
+    if p is None:
+        raise NotFound(("step",), f"step {step} of session {s.id} is not taught")
+    s.points.remove(p)
+    _stale(s)
+    db.flush()
+
+
+def clear_points(db: Session, s: CalibSession) -> None:
+    require_open(s)
+    s.points.clear()
+    _stale(s)
+    db.flush()
+
+
+def _stale(s: CalibSession) -> None:
+    if s.state == "computed":
+        s.state = "open"
+        s.report = None
+        s.set_result_values(None)
+
+
+def store_result(db: Session, s: CalibSession, pose_values: Sequence[float],
+                 report: dict[str, Any]) -> CalibSession:
+    require_open(s)
+    s.set_result_values(pose_values)
+    s.report = report
+    s.state = "computed"
+    s.computed_at = utcnow()
+    db.flush()
+    return s
+
+
+def close_session(db: Session, s: CalibSession, state: str) -> None:
+    s.state = state
+    s.closed_at = utcnow()
+    db.flush()
+
+
+# ------------------------------------------------------------------------------ backup
+
+def _iso(t: datetime | None) -> str | None:
+    return t.isoformat() if t else None
+
+
+def backup(db: Session, c: Controller) -> dict[str, Any]:
+    """The whole controller as one JSON document: robot, tables, history, sessions and points."""
+    def point(p: TaughtPoint) -> dict[str, Any]:
+        vel = None if p.vx_mm_s is None else [p.vx_mm_s, p.vy_mm_s, p.vz_mm_s]
+        return {"step": p.step, "source": p.source, "pose": list(p.pose_values()),
+                "joints_deg": p.joints_deg, "beam_id": p.beam_id, "edge": p.edge,
+                "velocity_mm_s": vel}
+
+    return {
+        "format": "pendant-backup/1",
+        "controller": {"name": c.name, "robot": c.robot_key, "custom_robot": c.custom_robot,
+                       "cell_seed": c.cell_seed, "joints_deg": c.joints_deg,
+                       "active_tool_no": c.active_tool_no, "active_base_no": c.active_base_no},
+        "entries": [{"table": e.entry_table, "number": e.number, **snapshot(e)}
+                    for e in list_entries(db, c.id)],
+        "history": [{"id": h.id, "table": h.entry_table, "number": h.number, "reason": h.reason,
+                     "session_id": h.session_id, "changed_at": _iso(h.changed_at),
+                     "before": h.before, "after": h.after} for h in history(db, c.id)],
+        "sessions": [{"id": s.id, "method": s.method, "target_table": s.target_table,
+                      "target_no": s.target_no, "params": s.params, "state": s.state,
+                      "created_at": _iso(s.created_at), "result": s.result_values(),
+                      "report": s.report, "points": [point(p) for p in s.points]}
+                     for s in list_sessions(db, c.id)],
+    }
+
+
+def _dt(s: str | None) -> datetime | None:
+    return datetime.fromisoformat(s) if s else None
+
+
+def restore_backup(db: Session, c: Controller, doc: dict[str, Any]) -> tuple[int, int]:
+    """Replace the controller's tables, history and sessions by a :func:`backup` document.
+
+    Session ids are renumbered; provenance and history keep pointing at the right session.
+    Returns (entries, history rows) restored. Raises KeyError/TypeError/ValueError on a
+    malformed document (the route names the field).
+    """
+    for s in list_sessions(db, c.id):
+        db.delete(s)
+    for h in history(db, c.id):
+        db.delete(h)
+    db.flush()
+    session_ids: dict[int, int] = {}
+    for sd in doc.get("sessions", []):
+        s = CalibSession(controller_id=c.id, method=sd["method"], target_table=sd["target_table"],
+                         target_no=int(sd["target_no"]), params=sd.get("params") or {},
+                         state=sd["state"], created_at=_dt(sd.get("created_at")) or utcnow(),
+                         report=sd.get("report"))
+        s.set_result_values(sd.get("result"))
+        for pd in sd.get("points", []):
+            p = TaughtPoint(step=int(pd["step"]), source=pd["source"],
+                            joints_deg=pd.get("joints_deg"), beam_id=pd.get("beam_id"),
+                            edge=pd.get("edge"))
+            p.set_pose_values(pd["pose"])
+            if pd.get("velocity_mm_s"):
+                p.vx_mm_s, p.vy_mm_s, p.vz_mm_s = (float(v) for v in pd["velocity_mm_s"])
+            s.points.append(p)
+        db.add(s)
+        db.flush()
+        session_ids[int(sd["id"])] = s.id
+    n_entries = 0
+    for ed in doc["entries"]:
+        e = get_entry(db, c.id, ed["table"], int(ed["number"]))
+        snap = dict(ed)
+        snap["session_id"] = session_ids.get(ed.get("session_id")) if ed.get("session_id") else None
+        apply_snapshot(e, snap)
+        e.updated_at = _dt(ed.get("updated_at"))
+        n_entries += 1
+    n_hist = 0
+    for hd in doc.get("history", []):
+        db.add(EntryHistory(controller_id=c.id, entry_table=hd["table"], number=int(hd["number"]),
+                            reason=hd["reason"], session_id=session_ids.get(hd.get("session_id")),
+                            changed_at=_dt(hd.get("changed_at")) or utcnow(), before=hd["before"],
+                            after=hd["after"]))
+        n_hist += 1
+    ctl = doc.get("controller") or {}
+    if "joints_deg" in ctl:
+        c.joints_deg = [float(q) for q in ctl["joints_deg"]]
+    c.active_tool_no = int(ctl.get("active_tool_no", c.active_tool_no))
+    c.active_base_no = int(ctl.get("active_base_no", c.active_base_no))
+    db.flush()
+    return n_entries, n_hist
+
+
+# ----------------------------------------------------------------------- stored documents
+
+COLLECTIONS = ("recordings", "analyses")
+
+
+def store_document(db: Session, collection: str, doc: dict[str, Any]) -> int:
+    """Keep a JSON document (a recording, an analysis report); returns its id."""
+    if collection not in COLLECTIONS:
+        raise ValueError(f"collection must be one of {COLLECTIONS}, got {collection!r}")
+    row = StoredDocument(collection=collection, doc=doc)
+    db.add(row)
+    db.flush()
+    return row.id
+
+
+def load_document(db: Session, collection: str, doc_id: int, loc: str) -> dict[str, Any]:
+    """The document ``doc_id`` of ``collection``; NotFound naming ``loc`` if absent."""
+    row = db.get(StoredDocument, doc_id)
+    if row is None or row.collection != collection:
+        raise NotFound((loc,), f"no {collection[:-1]} {doc_id}")
+    return row.doc

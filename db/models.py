@@ -1,0 +1,214 @@
+"""SQLAlchemy 2 typed models: one row per controller, table slot, history change, session, touch-up.
+
+Poses are columns (``x_mm ... c_deg``), never JSON. JSON is kept for documents that are not
+frames: a custom DH table, session parameters, the computed report and history snapshots.
+"""
+
+from __future__ import annotations
+
+from datetime import datetime, timezone
+from typing import Any
+
+from sqlalchemy import JSON, DateTime, ForeignKey, MetaData, String, TypeDecorator, UniqueConstraint
+from sqlalchemy.orm import DeclarativeBase, Mapped, mapped_column, relationship
+
+NAMING_CONVENTION = {
+    "ix": "ix_%(column_0_label)s",
+    "uq": "uq_%(table_name)s_%(column_0_N_name)s",
+    "ck": "ck_%(table_name)s_%(constraint_name)s",
+    "fk": "fk_%(table_name)s_%(column_0_name)s_%(referred_table_name)s",
+    "pk": "pk_%(table_name)s",
+}
+
+TOOL_SLOTS = 16  # KUKA TOOL_DATA[1..16]
+BASE_SLOTS = 32  # KUKA BASE_DATA[1..32]
+
+
+def utcnow() -> datetime:
+    return datetime.now(timezone.utc)
+
+
+class UTCDateTime(TypeDecorator):
+    """A UTC time stamp; SQLite stores no zone, so one read back is marked UTC again."""
+
+    impl = DateTime(timezone=True)
+    cache_ok = True
+
+    def process_result_value(self, value: datetime | None, dialect: object) -> datetime | None:
+        if value is not None and value.tzinfo is None:
+            return value.replace(tzinfo=timezone.utc)
+        return value
+
+
+def _controller_fk() -> ForeignKey:
+    return ForeignKey("controller.id", ondelete="CASCADE")
+
+
+def _session_fk(ondelete: str) -> ForeignKey:
+    return ForeignKey("calib_session.id", ondelete=ondelete)
+
+
+class Base(DeclarativeBase):
+    metadata = MetaData(naming_convention=NAMING_CONVENTION)
+    type_annotation_map = {dict[str, Any]: JSON, list[float]: JSON, datetime: UTCDateTime()}
+
+
+class PoseColumns:
+    """x, y, z in mm and KUKA a, b, c in degrees as six float columns."""
+
+    x_mm: Mapped[float] = mapped_column(default=0.0)
+    y_mm: Mapped[float] = mapped_column(default=0.0)
+    z_mm: Mapped[float] = mapped_column(default=0.0)
+    a_deg: Mapped[float] = mapped_column(default=0.0)
+    b_deg: Mapped[float] = mapped_column(default=0.0)
+    c_deg: Mapped[float] = mapped_column(default=0.0)
+
+    def pose_values(self) -> tuple[float, float, float, float, float, float]:
+        return (self.x_mm, self.y_mm, self.z_mm, self.a_deg, self.b_deg, self.c_deg)
+
+    def set_pose_values(self, v: object) -> None:
+        self.x_mm, self.y_mm, self.z_mm, self.a_deg, self.b_deg, self.c_deg = (float(x) for x in v)
+
+
+class Controller(Base):
+    """An emulated robot controller: its arm, its emulated cell and the pendant's state."""
+
+    __tablename__ = "controller"
+
+    id: Mapped[int] = mapped_column(primary_key=True)
+    name: Mapped[str] = mapped_column(String(64), unique=True)
+    robot_key: Mapped[str | None] = mapped_column(String(64))  # solvers.robots.ROBOTS key
+    custom_robot: Mapped[dict[str, Any] | None]  # custom DH table (a document, not a frame)
+    cell_seed: Mapped[int] = mapped_column(default=1)  # the emulated cell's hidden truth
+    joints_deg: Mapped[list[float]]  # the emulated robot's current joint values
+    active_tool_no: Mapped[int] = mapped_column(default=0)  # 0 = flange
+    active_base_no: Mapped[int] = mapped_column(default=0)  # 0 = world (robot base)
+    created_at: Mapped[datetime] = mapped_column(default=utcnow)
+
+    entries: Mapped[list[FrameEntry]] = relationship(back_populates="controller",
+                                                     cascade="all, delete-orphan")
+
+
+class FrameEntry(PoseColumns, Base):
+    """A tool slot (KUKA TOOL_DATA[n]) or a base slot (BASE_DATA[n]).
+
+    ``entry_table`` 'tool' holds robot-held tools and robot-held workpieces (T_flange_frame);
+    'base' holds bases and fixed (external) tools (T_world_frame).
+    """
+
+    __tablename__ = "frame_entry"
+    __table_args__ = (UniqueConstraint("controller_id", "entry_table", "number"),)
+
+    id: Mapped[int] = mapped_column(primary_key=True)
+    controller_id: Mapped[int] = mapped_column(_controller_fk(), index=True)
+    entry_table: Mapped[str] = mapped_column(String(8))  # 'tool' | 'base'
+    number: Mapped[int]  # 1..16 tools, 1..32 bases, as on the pendant
+    name: Mapped[str] = mapped_column(String(64), default="")
+    kind: Mapped[str] = mapped_column(String(16))  # tool | workpiece | base | fixed_tool
+    mass_kg: Mapped[float | None]
+    com_x_mm: Mapped[float | None]
+    com_y_mm: Mapped[float | None]
+    com_z_mm: Mapped[float | None]
+    inertia_x_kgm2: Mapped[float | None]
+    inertia_y_kgm2: Mapped[float | None]
+    inertia_z_kgm2: Mapped[float | None]
+    method: Mapped[str | None] = mapped_column(String(32))  # provenance: which menu wrote it
+    session_id: Mapped[int | None] = mapped_column(_session_fk("SET NULL"))
+    error_max_mm: Mapped[float | None]
+    error_rms_mm: Mapped[float | None]
+    updated_at: Mapped[datetime | None]
+
+    controller: Mapped[Controller] = relationship(back_populates="entries")
+
+
+class EntryHistory(Base):
+    """One change of a table slot: the slot before and after (snapshots), why, when."""
+
+    __tablename__ = "entry_history"
+
+    id: Mapped[int] = mapped_column(primary_key=True)
+    controller_id: Mapped[int] = mapped_column(_controller_fk(), index=True)
+    entry_table: Mapped[str] = mapped_column(String(8))
+    number: Mapped[int]
+    reason: Mapped[str] = mapped_column(String(16))  # calibration | edit | restore | import
+    session_id: Mapped[int | None] = mapped_column(_session_fk("SET NULL"))
+    changed_at: Mapped[datetime] = mapped_column(default=utcnow)
+    before: Mapped[dict[str, Any]]
+    after: Mapped[dict[str, Any]]
+
+
+class CalibSession(Base):
+    """One run of a calibration menu: method, target slot, parameters, result once computed.
+
+    The computed frame is stored as pose columns; the report (residuals, bounds, warnings)
+    as the JSON document the API returns.
+    """
+
+    __tablename__ = "calib_session"
+
+    id: Mapped[int] = mapped_column(primary_key=True)
+    controller_id: Mapped[int] = mapped_column(_controller_fk(), index=True)
+    method: Mapped[str] = mapped_column(String(32))
+    target_table: Mapped[str] = mapped_column(String(8))
+    target_no: Mapped[int]
+    params: Mapped[dict[str, Any]]
+    state: Mapped[str] = mapped_column(String(16), default="open")  # open|computed|saved|discarded
+    created_at: Mapped[datetime] = mapped_column(default=utcnow)
+    computed_at: Mapped[datetime | None]
+    closed_at: Mapped[datetime | None]
+    result_x_mm: Mapped[float | None]
+    result_y_mm: Mapped[float | None]
+    result_z_mm: Mapped[float | None]
+    result_a_deg: Mapped[float | None]
+    result_b_deg: Mapped[float | None]
+    result_c_deg: Mapped[float | None]
+    report: Mapped[dict[str, Any] | None]
+
+    points: Mapped[list[TaughtPoint]] = relationship(back_populates="session",
+                                                     order_by="TaughtPoint.step",
+                                                     cascade="all, delete-orphan")
+
+    def result_values(self) -> tuple[float, ...] | None:
+        v = (self.result_x_mm, self.result_y_mm, self.result_z_mm, self.result_a_deg,
+             self.result_b_deg, self.result_c_deg)
+        return None if v[0] is None else tuple(float(x) for x in v)  # type: ignore[arg-type]
+
+    def set_result_values(self, v: object | None) -> None:
+        vals = [None] * 6 if v is None else [float(x) for x in v]  # type: ignore[union-attr]
+        (self.result_x_mm, self.result_y_mm, self.result_z_mm, self.result_a_deg, self.result_b_deg,
+         self.result_c_deg) = vals
+
+
+class TaughtPoint(PoseColumns, Base):
+    """A touch-up: the flange pose (columns) of one step, its joints, or a beam trigger."""
+
+    __tablename__ = "taught_point"
+    __table_args__ = (UniqueConstraint("session_id", "step"),)
+
+    id: Mapped[int] = mapped_column(primary_key=True)
+    session_id: Mapped[int] = mapped_column(_session_fk("CASCADE"), index=True)
+    step: Mapped[int]  # 0-based step of the menu
+    source: Mapped[str] = mapped_column(String(16))  # touch_up | joints | flange_pose | beam
+    joints_deg: Mapped[list[float] | None]
+    beam_id: Mapped[str | None] = mapped_column(String(32))
+    edge: Mapped[str | None] = mapped_column(String(8))  # enter | leave | tip
+    vx_mm_s: Mapped[float | None]
+    vy_mm_s: Mapped[float | None]
+    vz_mm_s: Mapped[float | None]
+    created_at: Mapped[datetime] = mapped_column(default=utcnow)
+
+    session: Mapped[CalibSession] = relationship(back_populates="points")
+
+
+class StoredDocument(Base):
+    """A JSON document kept as sent: a ``robot-recording/1`` or an ``analysis-report/1``.
+
+    ``collection`` is 'recordings' or 'analyses' (see :func:`db.crud.store_document`).
+    """
+
+    __tablename__ = "stored_document"
+
+    id: Mapped[int] = mapped_column(primary_key=True)
+    collection: Mapped[str] = mapped_column(String(16), index=True)
+    doc: Mapped[dict[str, Any]]
+    created_at: Mapped[datetime] = mapped_column(default=utcnow)

@@ -1,0 +1,61 @@
+"""Controllers: the emulated robot controllers (cells) the pendant talks to."""
+
+from __future__ import annotations
+
+from fastapi import APIRouter, Response
+
+from db import crud
+from db.models import Controller
+from server.deps import SessionDep
+from server.emulator import home_joints, robot_from_custom
+from server.routers.common import cell_of, robot_of
+from server.schemas import CellOut, ControllerIn, ControllerOut
+from solvers.errors import CalibrationError
+from solvers.robots import ROBOTS
+
+router = APIRouter(prefix="/controllers", tags=["Controllers"])
+
+
+def controller_out(c: Controller) -> ControllerOut:
+    robot = robot_of(c)
+    return ControllerOut(id=c.id, name=c.name, robot=c.robot_key, robot_name=robot.name,
+                         dh_convention=robot.dh_convention, dof=robot.dof, joints_deg=c.joints_deg,
+                         active_tool_no=c.active_tool_no, active_base_no=c.active_base_no)
+
+
+@router.get("")
+def list_controllers(db: SessionDep) -> list[ControllerOut]:
+    """Every emulated controller."""
+    return [controller_out(c) for c in crud.list_controllers(db)]
+
+
+@router.post("", status_code=201)
+def create_controller(body: ControllerIn, db: SessionDep) -> ControllerOut:
+    """A new controller with a library arm (``robot``) or a custom DH table (``custom_robot``)."""
+    custom = body.custom_robot.model_dump() if body.custom_robot else None
+    key = None if custom else body.robot
+    if key is not None and key not in ROBOTS:
+        library = ", ".join(sorted(ROBOTS))
+        raise CalibrationError(("robot",), f"unknown robot {key!r}; the library has {library}")
+    robot = robot_from_custom(custom) if custom else ROBOTS[key]  # type: ignore[index]
+    c = crud.create_controller(db, body.name, key, custom, body.cell_seed, home_joints(robot))
+    return controller_out(c)
+
+
+@router.get("/{controller_id}")
+def get_controller(controller_id: int, db: SessionDep) -> ControllerOut:
+    return controller_out(crud.get_controller(db, controller_id))
+
+
+@router.delete("/{controller_id}", status_code=204)
+def delete_controller(controller_id: int, db: SessionDep) -> Response:
+    """Remove a controller with its tables, history and sessions."""
+    crud.delete_controller(db, crud.get_controller(db, controller_id))
+    return Response(status_code=204)
+
+
+@router.get("/{controller_id}/cell")
+def get_cell(controller_id: int, db: SessionDep) -> CellOut:
+    """What the person at the cell knows: approach targets, marked points from the drawings,
+    the light barrier's beams. The true tool, plate and fixed-tool poses stay hidden."""
+    return CellOut(**cell_of(crud.get_controller(db, controller_id)).public())

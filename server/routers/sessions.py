@@ -1,0 +1,215 @@
+"""Sessions: one run of a calibration menu: open, touch up step by step, compute, save or discard.
+
+Everything a session holds (params, taught points, the computed report) is in the DB, so a
+restart of the service loses nothing; a failed compute changes nothing.
+"""
+
+from __future__ import annotations
+
+from typing import Any
+
+import numpy as np
+from fastapi import APIRouter, Body
+
+from db import crud
+from server import emulator
+from server.deps import SessionDep
+from server.methods import METHODS, PARAM_HELP
+from server.routers.common import (cell_of, check_step, entry_matrix, entry_out, flange_pose_of,
+                                   next_step, resolve_inputs, robot_of, session_out, spec_of,
+                                   step_out, taught_data)
+from server.schemas import (EntryOut, ReportOut, RunCycleOut, SessionIn, SessionOut, TouchUpIn,
+                            jsonable)
+from solvers.dh import forward_kinematics
+from solvers.errors import CalibrationError
+from solvers.frames import Pose
+
+router = APIRouter(tags=["Sessions"])
+PREFIX = "/controllers/{controller_id}/sessions"
+POSE_KEYS = ("x_mm", "y_mm", "z_mm", "a_deg", "b_deg", "c_deg")
+
+
+@router.get("/methods")
+def list_methods() -> list[dict[str, Any]]:
+    """Every calibration menu: its table, what it writes, the params it needs and its steps."""
+    return [{"name": m.name, "menu": m.menu, "title": m.title, "table": m.table, "kind": m.kind,
+             "writes": m.writes, "required_params": {p: PARAM_HELP[p] for p in m.required},
+             "extra_steps": m.extra_steps,
+             "steps": [step_out(i, s, True, None).model_dump() for i, s in enumerate(m.steps)]}
+            for m in METHODS.values()]
+
+
+@router.post(PREFIX, status_code=201)
+def open_session(controller_id: int, body: SessionIn, db: SessionDep) -> SessionOut:
+    """Open a menu run on a target slot; the params the method needs are checked now."""
+    c = crud.get_controller(db, controller_id)
+    spec = METHODS[body.method]
+    params = body.params.model_dump(exclude_none=True)
+    for p in spec.required:
+        if p not in params:
+            raise CalibrationError(("params", p), f"required by {spec.name}: {PARAM_HELP[p]}")
+    if spec.table == "tool" and body.target_no > crud.SLOTS["tool"]:
+        raise CalibrationError(("target_no",),
+                               f"{spec.name} writes a tool slot (1..16), got {body.target_no}")
+    s = crud.open_session(db, c, spec.name, spec.table, body.target_no, jsonable(params))
+    return session_out(s)
+
+
+@router.get(PREFIX)
+def list_sessions(controller_id: int, db: SessionDep, state: str | None = None) -> list[SessionOut]:
+    crud.get_controller(db, controller_id)
+    return [session_out(s) for s in crud.list_sessions(db, controller_id, state)]
+
+
+@router.get(PREFIX + "/{session_id}")
+def get_session(controller_id: int, session_id: int, db: SessionDep) -> SessionOut:
+    """The steps with their prompts, which are filled, and the report once computed."""
+    return session_out(crud.get_session(db, controller_id, session_id))
+
+
+@router.post(PREFIX + "/{session_id}/touch-up")
+def touch_up(controller_id: int, session_id: int, db: SessionDep,
+             body: TouchUpIn | None = Body(None)) -> SessionOut:
+    """Fill a step (default: the next empty one) with the emulated robot's current joints, or
+    with ``joints_deg`` / ``flange_pose`` recorded on a real controller."""
+    body = body or TouchUpIn()
+    c = crud.get_controller(db, controller_id)
+    s = crud.get_session(db, controller_id, session_id)
+    crud.require_open(s)
+    if body.joints_deg is not None and body.flange_pose is not None:
+        raise CalibrationError(("flange_pose",), "give joints_deg or flange_pose, not both")
+    step = next_step(s) if body.step is None else body.step
+    check_step(s, step)
+    if body.flange_pose is not None:
+        pose, joints, source = body.flange_pose.to_pose(), None, "flange_pose"
+    else:
+        joints = c.joints_deg if body.joints_deg is None else body.joints_deg
+        source = "touch_up" if body.joints_deg is None else "joints"
+        pose = flange_pose_of(c, joints)
+    crud.put_point(db, s, step, source, pose.as_array(), joints)
+    return session_out(s)
+
+
+@router.delete(PREFIX + "/{session_id}/points/{step}")
+def delete_point(controller_id: int, session_id: int, step: int, db: SessionDep) -> SessionOut:
+    """Forget one taught step (to re-teach it)."""
+    s = crud.get_session(db, controller_id, session_id)
+    crud.delete_point(db, s, step)
+    return session_out(s)
+
+
+@router.post(PREFIX + "/{session_id}/compute")
+def compute(controller_id: int, session_id: int, db: SessionDep) -> ReportOut:
+    """Solve from the session's touch-ups; nothing is written into the table yet."""
+    s = crud.get_session(db, controller_id, session_id)
+    crud.require_open(s)
+    spec, points = spec_of(s), taught_data(s)
+    spec.check_taught(points, s.params)
+    result = spec.solve(points, resolve_inputs(db, s), s.params)
+    report = ReportOut.from_result(result)
+    frame = Pose.from_matrix(result.frame).as_array()
+    crud.store_result(db, s, frame, report.model_dump(mode="json"))
+    return report
+
+
+@router.post(PREFIX + "/{session_id}/save")
+def save(controller_id: int, session_id: int, db: SessionDep) -> EntryOut:
+    """Write the computed frame into the target slot (XYZ menus keep A, B, C), with provenance
+    and a history row."""
+    s = crud.get_session(db, controller_id, session_id)
+    if s.state != "computed":
+        raise crud.StateConflict(("path", "session_id"),
+                                 f"session {s.id} is {s.state}: compute it before saving")
+    spec = spec_of(s)
+    e = crud.get_entry(db, controller_id, s.target_table, s.target_no)
+    r = s.result_values()
+    keys = POSE_KEYS[:3] if spec.writes == "xyz" else POSE_KEYS  # XYZ menus keep A, B, C
+    values: dict[str, Any] = dict(zip(keys, r))  # type: ignore[arg-type]
+    report = s.report or {}
+    values.update(kind=spec.kind, method=spec.name, session_id=s.id,
+                  error_max_mm=report.get("max_error_mm"), error_rms_mm=report.get("rms_error_mm"))
+    if not e.name:
+        values["name"] = f"{spec.kind}{s.target_no}"
+    crud.change_entry(db, e, values, reason="calibration", session_id=s.id)
+    crud.close_session(db, s, "saved")
+    return entry_out(e)
+
+
+@router.post(PREFIX + "/{session_id}/discard")
+def discard(controller_id: int, session_id: int, db: SessionDep) -> SessionOut:
+    """Close the session without writing anything."""
+    s = crud.get_session(db, controller_id, session_id)
+    crud.require_open(s)
+    crud.close_session(db, s, "discarded")
+    return session_out(s)
+
+
+# ------------------------------------------------------------------------- light barrier
+
+def _light_barrier_session(db: SessionDep, controller_id: int, session_id: int):  # noqa: ANN202
+    s = crud.get_session(db, controller_id, session_id)
+    crud.require_open(s)
+    if s.method != "tool.light_barrier":
+        raise CalibrationError(("method",), f"session {s.id} is {s.method}; the cycle belongs to "
+                               "tool.light_barrier")
+    return s
+
+
+@router.post(PREFIX + "/{session_id}/run-cycle")
+def run_cycle(controller_id: int, session_id: int, db: SessionDep) -> RunCycleOut:
+    """Run the light-barrier measuring cycle on the emulated robot and sensor; every beam
+    trigger becomes a taught point (replacing earlier ones)."""
+    c = crud.get_controller(db, controller_id)
+    s = _light_barrier_session(db, controller_id, session_id)
+    cell = cell_of(c)
+    params = dict(s.params)
+    if not params.get("beams"):
+        params["beams"] = cell.public()["beams"]
+        params.setdefault("tool_diameter_mm", cell.tool_diameter_mm)
+        s.params = params
+    if "tool_diameter_mm" not in params:
+        raise CalibrationError(("params", "tool_diameter_mm"),
+                               "required with your own beams: the shaft diameter")
+    if params.get("nominal_tool"):
+        nominal = Pose(**params["nominal_tool"]).as_matrix()
+    else:
+        nominal = entry_matrix(crud.get_entry(db, controller_id, "tool", s.target_no))
+        if np.allclose(nominal[:3, 3], 0.0):
+            raise CalibrationError(("params", "nominal_tool"), f"tool {s.target_no} is empty: give "
+                                   "the nominal TCP (the tool's drawing length) for the cycle")
+    beams = resolve_inputs(db, s).beams
+    run = emulator.run_beam_cycle(robot_of(c), cell, c.joints_deg, nominal, beams,
+                                  float(params["tool_diameter_mm"]),
+                                  tuple(params.get("heights_mm") or (10.0, 40.0)))
+    crud.clear_points(db, s)
+    for k, ev in enumerate(run.triggers):
+        pose = Pose.from_matrix(ev.T_base_flange).as_array()
+        crud.put_point(db, s, k, "beam", pose, None, ev.beam_id, ev.edge, ev.tcp_velocity_mm_s)
+    c.joints_deg = [float(q) for q in run.joints_deg]
+    return RunCycleOut(triggers=len(run.triggers), passes=run.passes, session=session_out(s))
+
+
+@router.post(PREFIX + "/{session_id}/beam-recording")
+def post_beam_recording(controller_id: int, session_id: int, db: SessionDep,
+                        recording: dict[str, Any] = Body(...)) -> SessionOut:
+    """Take the triggers of a ``robot-recording/1`` document of kind ``beam`` (a real
+    controller's cycle) as the session's points; its sensor block becomes the params."""
+    from server.recording import parse_recording
+
+    s = _light_barrier_session(db, controller_id, session_id)
+    rec = parse_recording(recording)
+    if rec.kind != "beam":
+        raise CalibrationError(("kind",),
+                               f"must be 'beam' for the light-barrier menu, got {rec.kind!r}")
+    T = forward_kinematics(rec.robot, rec.joints_deg)
+    params = dict(s.params)
+    params["beams"] = [{"id": k, "point_mm": jsonable(p), "direction": jsonable(d)}
+                       for k, (p, d) in rec.beams.items()]
+    params["tool_diameter_mm"] = rec.tool_diameter_mm
+    s.params = params
+    crud.clear_points(db, s)
+    for k in range(rec.n_samples):
+        vel = None if rec.tcp_velocity_mm_s is None else rec.tcp_velocity_mm_s[k]
+        crud.put_point(db, s, k, "beam", Pose.from_matrix(T[k]).as_array(), rec.joints_deg[k],
+                       str(rec.beam_ids[k]), str(rec.edges[k]), vel)
+    return session_out(s)

@@ -1,0 +1,69 @@
+"""The slot routes every table menu shares: list, read, edit by hand, history, restore."""
+
+from __future__ import annotations
+
+from fastapi import APIRouter
+
+from db import crud
+from db.models import EntryHistory
+from server.deps import SessionDep
+from server.routers.common import entry_out, load_values
+from server.schemas import EntryIn, EntryOut, HistoryOut
+from solvers.errors import CalibrationError
+
+
+def history_out(h: EntryHistory) -> HistoryOut:
+    return HistoryOut(id=h.id, table=h.entry_table, number=h.number, reason=h.reason,
+                      session_id=h.session_id, changed_at=h.changed_at, before=h.before,
+                      after=h.after)
+
+
+def table_router(table: str, path: str, tag: str) -> APIRouter:
+    """Routes of ``/controllers/{id}/{path}``: the ``table`` ('tool' | 'base') slots."""
+    router = APIRouter(prefix=f"/controllers/{{controller_id}}/{path}", tags=[tag])
+    label = "tool (TOOL_DATA)" if table == "tool" else "base (BASE_DATA)"
+
+    @router.get("", name=f"list_{path}", summary=f"All {label} slots")
+    def list_slots(controller_id: int, db: SessionDep, kind: str | None = None) -> list[EntryOut]:
+        crud.get_controller(db, controller_id)
+        return [entry_out(e) for e in crud.list_entries(db, controller_id, table, kind)]
+
+    @router.get("/{number}", name=f"get_{table}", summary=f"One {label} slot")
+    def get_slot(controller_id: int, number: int, db: SessionDep) -> EntryOut:
+        return entry_out(crud.get_entry(db, controller_id, table, number))
+
+    @router.put("/{number}", name=f"edit_{table}",
+                summary=f"Edit a {label} slot by hand (recorded in history)")
+    def edit_slot(controller_id: int, number: int, body: EntryIn, db: SessionDep) -> EntryOut:
+        e = crud.get_entry(db, controller_id, table, number)
+        values: dict = {}
+        if body.name is not None:
+            values["name"] = body.name
+        if body.kind is not None:
+            if body.kind not in crud.KINDS_OF_TABLE[table]:
+                kinds = " or ".join(crud.KINDS_OF_TABLE[table])
+                raise CalibrationError(("kind",),
+                                       f"a {table} slot holds {kinds}, not {body.kind!r}")
+            values["kind"] = body.kind
+        if body.pose is not None:
+            values.update(zip(("x_mm", "y_mm", "z_mm", "a_deg", "b_deg", "c_deg"),
+                              body.pose.to_pose().as_array().tolist()))
+            values.update(method="numeric", session_id=None, error_max_mm=None, error_rms_mm=None)
+        values.update(load_values(body.load))
+        crud.change_entry(db, e, values, reason="edit")
+        return entry_out(e)
+
+    @router.get("/{number}/history", name=f"history_{table}",
+                summary="Every change of the slot, oldest first")
+    def slot_history(controller_id: int, number: int, db: SessionDep) -> list[HistoryOut]:
+        crud.get_entry(db, controller_id, table, number)
+        return [history_out(h) for h in crud.history(db, controller_id, table, number)]
+
+    @router.post("/{number}/restore/{history_id}", name=f"restore_{table}",
+                 summary="Put the slot back as it was before that change (recorded as a change)")
+    def restore(controller_id: int, number: int, history_id: int, db: SessionDep) -> EntryOut:
+        e = crud.get_entry(db, controller_id, table, number)
+        crud.restore_entry(db, e, history_id)
+        return entry_out(e)
+
+    return router

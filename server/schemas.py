@@ -1,0 +1,403 @@
+"""Pydantic models of the API: ``...In`` bodies (``extra="forbid"``, finite numbers) and ``...Out``.
+
+Units are in the field names (``_mm``, ``_deg``, ``_kg``). A pose is ``{x, y, z, a, b, c}``:
+mm and KUKA A, B, C degrees, ``R = Rz(a) Ry(b) Rx(c)``.
+"""
+
+from __future__ import annotations
+
+from datetime import datetime
+from typing import Annotated, Any, Literal
+
+import numpy as np
+from pydantic import BaseModel, ConfigDict, Field
+
+from server.methods import METHODS
+from solvers.frames import Pose
+from solvers.report import CalibrationResult
+
+MethodName = Literal[tuple(METHODS)]  # type: ignore[valid-type]
+EntryKind = Literal["tool", "workpiece", "base", "fixed_tool"]
+TableName = Literal["tool", "base"]
+Vec3 = Annotated[list[float], Field(min_length=3, max_length=3)]
+ExportFormat = Literal["kuka", "abb", "fanuc", "ur", "json"]
+ImportFormat = Literal["kuka", "abb", "json"]
+
+
+class In(BaseModel):
+    model_config = ConfigDict(extra="forbid", allow_inf_nan=False)
+
+
+class Out(BaseModel):
+    model_config = ConfigDict(extra="forbid")
+
+
+# ------------------------------------------------------------------------------------ poses
+
+class PoseIn(In):
+    """x, y, z (mm), a, b, c (deg), KUKA ``R = Rz(a) Ry(b) Rx(c)``."""
+
+    x: float = 0.0
+    y: float = 0.0
+    z: float = 0.0
+    a: float = 0.0
+    b: float = 0.0
+    c: float = 0.0
+
+    def to_pose(self) -> Pose:
+        return Pose(self.x, self.y, self.z, self.a, self.b, self.c)
+
+
+class PoseOut(Out):
+    x: float
+    y: float
+    z: float
+    a: float
+    b: float
+    c: float
+
+    @classmethod
+    def of(cls, values: object) -> "PoseOut":
+        v = [round(float(x), 6) + 0.0 for x in values]  # type: ignore[union-attr]
+        return cls(x=v[0], y=v[1], z=v[2], a=v[3], b=v[4], c=v[5])
+
+    @classmethod
+    def of_matrix(cls, T: object) -> "PoseOut":
+        p = Pose.from_matrix(np.asarray(T, dtype=float))
+        return cls.of(p.as_array())
+
+
+# ------------------------------------------------------------------------------ controllers
+
+class DHJointIn(In):
+    a_mm: float
+    alpha_deg: float
+    d_mm: float
+    offset_deg: float = 0.0
+    direction: Literal[1, -1] = 1
+    q_min_deg: float = -360.0
+    q_max_deg: float = 360.0
+
+
+class RobotIn(In):
+    """A custom arm: DH table (standard or modified), mounting and flange poses."""
+
+    name: str = Field("custom", max_length=64)
+    dh_convention: Literal["standard", "modified"]
+    joints: list[DHJointIn] = Field(min_length=1, max_length=7)
+    base_pose: PoseIn | None = None
+    flange_pose: PoseIn | None = None
+    reach_mm: float | None = Field(None, gt=0)
+
+
+class ControllerIn(In):
+    name: str = Field(min_length=1, max_length=64, pattern=r"^[A-Za-z0-9_.\-]+$")
+    robot: str | None = Field("kuka_kr6_r900_sixx",
+                              description="library key of solvers.robots.ROBOTS")
+    custom_robot: RobotIn | None = None
+    cell_seed: int = Field(1, ge=0, description="seed of the emulated cell's hidden truth")
+
+
+class ControllerOut(Out):
+    id: int
+    name: str
+    robot: str | None
+    robot_name: str
+    dh_convention: str
+    dof: int
+    joints_deg: list[float]
+    active_tool_no: int
+    active_base_no: int
+
+
+# ------------------------------------------------------------------------------------ robot
+
+class RobotStateOut(Out):
+    joints_deg: list[float]
+    limits_deg: list[list[float]]
+    active_tool_no: int
+    active_base_no: int
+    flange_pose: PoseOut  # T_world_flange
+    tcp_pose: PoseOut  # active TCP in the active base
+
+
+class JointsIn(In):
+    joints_deg: list[float] = Field(min_length=1, max_length=7)
+
+
+class JogIn(In):
+    mode: Literal["joint", "world", "base", "tool"]
+    axis: Literal["A1", "A2", "A3", "A4", "A5", "A6", "A7", "X", "Y", "Z", "A", "B", "C"]
+    increment: float = Field(description="mm for X, Y, Z; degrees for joints and A, B, C",
+                             ge=-100.0, le=100.0)
+
+
+class ActiveIn(In):
+    tool_no: int | None = Field(None, ge=0, le=16, description="0 = flange")
+    base_no: int | None = Field(None, ge=0, le=32, description="0 = world")
+
+
+class ApproachIn(In):
+    """Jog the true tip (or workpiece mark) onto a cell target from an orientation."""
+
+    target: str = Field(min_length=1, max_length=64)
+    tilt_deg: float = Field(0.0, ge=0.0, le=80.0,
+                            description="tool axis tilt from the target's normal")
+    around_deg: float = Field(0.0, description="azimuth of the tilt about the target's normal")
+    spin_deg: float = Field(0.0, description="rotation of the tool about its own axis")
+    tool_point_mm: Vec3 | None = Field(None,
+                                       description="another point of the held body (its frame)")
+    miss_mm: Vec3 | None = Field(None, description="miss the target by this vector (world, mm)")
+
+
+class CellOut(Out):
+    targets: list[str]
+    base_points_mm: dict[str, list[float]]
+    workpiece_points_mm: dict[str, list[float]]
+    beams: list[dict[str, Any]]
+    tool_diameter_mm: float
+
+
+# ------------------------------------------------------------------------------------ tables
+
+class LoadIn(In):
+    mass_kg: float = Field(ge=0.0)
+    com_mm: Vec3 = [0.0, 0.0, 0.0]
+    inertia_kgm2: Vec3 = [0.0, 0.0, 0.0]
+
+
+class LoadOut(Out):
+    mass_kg: float
+    com_mm: list[float]
+    inertia_kgm2: list[float]
+
+
+class ProvenanceOut(Out):
+    method: str | None
+    session_id: int | None
+    error_max_mm: float | None
+    error_rms_mm: float | None
+    updated_at: datetime | None
+
+
+class EntryIn(In):
+    """Edit a slot by hand (numeric input without a session). Omitted fields stay."""
+
+    name: str | None = Field(None, max_length=64)
+    kind: EntryKind | None = None
+    pose: PoseIn | None = None
+    load: LoadIn | None = None
+
+
+class EntryOut(Out):
+    table: TableName
+    number: int
+    name: str
+    kind: EntryKind
+    pose: PoseOut
+    load: LoadOut | None
+    provenance: ProvenanceOut
+
+
+class HistoryOut(Out):
+    id: int
+    table: TableName
+    number: int
+    reason: str
+    session_id: int | None
+    changed_at: datetime
+    before: dict[str, Any]
+    after: dict[str, Any]
+
+
+# ---------------------------------------------------------------------------------- sessions
+
+class BeamIn(In):
+    id: str = Field(min_length=1, max_length=32)
+    point_mm: Vec3
+    direction: Vec3
+
+
+class SessionParamsIn(In):
+    tool_no: int | None = Field(None, ge=1, le=16)
+    reference_tool_no: int | None = Field(None, ge=1, le=16)
+    fixed_tool_no: int | None = Field(None, ge=1, le=32)
+    known_points_mm: list[Vec3] | None = Field(None, min_length=3, max_length=64)
+    pose: PoseIn | None = None
+    beams: list[BeamIn] | None = Field(None, min_length=1)
+    tool_diameter_mm: float | None = Field(None, gt=0)
+    nominal_tool: PoseIn | None = Field(None,
+                                        description="light barrier: nominal TCP for the cycle")
+    heights_mm: list[float] | None = Field(None, min_length=2, max_length=4)
+
+
+class SessionIn(In):
+    method: MethodName
+    target_no: int = Field(ge=1, le=32, description="tool (1-16) or base (1-32) slot to calibrate")
+    params: SessionParamsIn = SessionParamsIn()
+
+
+class TouchUpIn(In):
+    """Fill a step: no body = the emulated robot's current joints; or joints / a flange pose
+    recorded on a real controller. ``step`` defaults to the first empty step."""
+
+    step: int | None = Field(None, ge=0)
+    joints_deg: list[float] | None = Field(None, min_length=1, max_length=7)
+    flange_pose: PoseIn | None = None
+
+
+class PointOut(Out):
+    step: int
+    source: str
+    joints_deg: list[float] | None
+    flange_pose: PoseOut
+    beam_id: str | None = None
+    edge: str | None = None
+    velocity_mm_s: list[float] | None = None
+    created_at: datetime
+
+
+class StepOut(Out):
+    index: int
+    prompt: str
+    required: bool
+    filled: bool
+    target: str | None
+    tilt_deg: float
+    around_deg: float
+    spin_deg: float
+    tool_point_mm: list[float] | None
+    point: PointOut | None
+
+
+class FindingOut(Out):
+    code: str
+    message: str
+    loc: list[str | int]
+    severity: str
+
+
+class BadPointOut(Out):
+    index: int
+    residual_mm: float
+    threshold_mm: float
+    refit_frame: PoseOut
+    refit_rms_mm: float
+    message: str
+
+
+class ReportOut(Out):
+    method: str
+    frame: PoseOut
+    residuals_mm: list[float]
+    residuals_deg: list[float] | None
+    max_error_mm: float
+    mean_error_mm: float
+    rms_error_mm: float
+    max_error_deg: float | None
+    worst_point: int | None
+    parameter_names: list[str]
+    covariance: list[list[float]] | None
+    sigma_mm: float | None
+    position_bound95_mm: float | None
+    angle_bound95_deg: float | None
+    tre_mm: float | None
+    bad_point: BadPointOut | None
+    warnings: list[FindingOut]
+    guidance: str | None
+    next_orientation: list[list[float]] | None
+    extras: dict[str, Any]
+
+    @classmethod
+    def from_result(cls, result: CalibrationResult) -> "ReportOut":
+        r = result.report
+        bp = r.bad_point
+        return cls(
+            method=result.method, frame=PoseOut.of_matrix(result.frame),
+            residuals_mm=jsonable(r.residuals_mm),
+            residuals_deg=None if r.residuals_deg is None else jsonable(r.residuals_deg),
+            max_error_mm=r.max_error_mm, mean_error_mm=r.mean_error_mm, rms_error_mm=r.rms_error_mm,
+            max_error_deg=r.max_error_deg, worst_point=r.worst_point,
+            parameter_names=list(r.parameter_names),
+            covariance=None if r.covariance is None else jsonable(r.covariance),
+            sigma_mm=_opt(r.sigma_mm), position_bound95_mm=_opt(r.position_bound95_mm),
+            angle_bound95_deg=_opt(r.angle_bound95_deg), tre_mm=_opt(r.tre_mm),
+            bad_point=None if bp is None else BadPointOut(
+                index=bp.index, residual_mm=float(bp.residual_mm),
+                threshold_mm=float(bp.threshold_mm),
+                refit_frame=PoseOut.of_matrix(bp.refit_frame), refit_rms_mm=float(bp.refit_rms_mm),
+                message=bp.message()),
+            warnings=[FindingOut(code=f.code, message=f.message, loc=list(f.loc),
+                                 severity=f.severity) for f in r.warnings],
+            guidance=r.guidance,
+            next_orientation=None if r.next_orientation is None else jsonable(r.next_orientation),
+            extras=jsonable(dict(r.extras)))
+
+
+class SessionOut(Out):
+    id: int
+    controller_id: int
+    method: str
+    title: str
+    state: Literal["open", "computed", "saved", "discarded"]
+    target_table: TableName
+    target_no: int
+    params: dict[str, Any]
+    steps: list[StepOut]
+    extra_steps_allowed: int
+    result: PoseOut | None
+    report: ReportOut | None
+    created_at: datetime
+
+
+class BeamRecordingIn(BaseModel):
+    """A ``robot-recording/1`` document of kind ``beam``; validated by server/recording.py."""
+
+    model_config = ConfigDict(extra="allow")
+
+
+class RunCycleOut(Out):
+    triggers: int
+    passes: int
+    session: SessionOut
+
+
+# ------------------------------------------------------------------------------ import/export
+
+class ImportIn(In):
+    format: ImportFormat
+    text: str = Field(min_length=1, max_length=5_000_000)
+
+
+class ImportOut(Out):
+    format: str
+    entries: int
+    history: int = 0
+
+
+# -------------------------------------------------------------------------------------- util
+
+def _opt(v: object) -> float | None:
+    return None if v is None else float(v)  # type: ignore[arg-type]
+
+
+def jsonable(v: Any) -> Any:
+    """numpy arrays and scalars, dataclasses' tuples and Poses as plain JSON values."""
+    if isinstance(v, np.ndarray):
+        return jsonable(v.tolist())
+    if isinstance(v, (np.floating, float)):
+        f = float(v)
+        return f if np.isfinite(f) else None
+    if isinstance(v, (np.integer,)):
+        return int(v)
+    if isinstance(v, (np.bool_,)):
+        return bool(v)
+    if isinstance(v, Pose):
+        return dict(zip("xyzabc", (float(x) for x in v.as_array())))
+    if isinstance(v, dict):
+        return {str(k): jsonable(x) for k, x in v.items()}
+    if isinstance(v, (list, tuple)):
+        return [jsonable(x) for x in v]
+    if isinstance(v, (str, int, bool)) or v is None:
+        return v
+    return str(v)

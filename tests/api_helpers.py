@@ -1,0 +1,111 @@
+"""Fixtures and helpers of the API and menu tests: a real app on a temporary SQLite file, and a
+person at the pendant (approach a target as the step says, touch up, compute, save).
+
+Import into a test module with ``from api_helpers import *`` (the fixtures ``db_url`` and
+``client`` come along).
+"""
+
+from __future__ import annotations
+
+from pathlib import Path
+
+import numpy as np
+import pytest
+from fastapi.testclient import TestClient
+
+from server.app import create_app
+from server.emulator import Cell, cell_for
+from server.settings import Settings
+from solvers.frames import Pose
+from solvers.robots import ROBOTS
+
+C = "/controllers/1"  # the demo controller "cell-1" (KUKA KR 6 R900 sixx, cell seed 1)
+CELL: Cell = cell_for(ROBOTS["kuka_kr6_r900_sixx"], 1)  # its hidden truth, for the asserts only
+TRUE_TCP_MM = CELL.T_flange_tool[:3, 3]
+
+
+def make_client(db_url: str) -> TestClient:
+    """A fresh app (migrations, demo controller) on ``db_url``: also how a restart is made."""
+    return TestClient(create_app(Settings(db_url=db_url)), raise_server_exceptions=False)
+
+
+@pytest.fixture
+def db_url(tmp_path: Path) -> str:
+    return f"sqlite:///{tmp_path / 'pendant.db'}"
+
+
+@pytest.fixture
+def client(db_url: str) -> TestClient:
+    with make_client(db_url) as c:
+        yield c
+
+
+def ok(r):  # noqa: ANN001, ANN201
+    """The JSON of a 2xx response, else fail with the body (the named error)."""
+    assert r.status_code < 300, \
+        f"{r.request.method} {r.request.url.path} -> {r.status_code}: {r.text}"
+    return r.json()
+
+
+def open_session(client: TestClient, method: str, target_no: int = 1, controller: str = C,
+                 **params) -> str:
+    """POST a session; returns its URL."""
+    body = {"method": method, "target_no": target_no, "params": params}
+    s = ok(client.post(f"{controller}/sessions", json=body))
+    return f"{controller}/sessions/{s['id']}"
+
+
+def approach(client: TestClient, target: str, controller: str = C, **kw) -> dict:
+    return ok(client.post(f"{controller}/robot/approach", json={"target": target, **kw}))
+
+
+def walk(client: TestClient, url: str, controller: str = C, extra: int = 0) -> dict:
+    """Do every required step as its prompt says (approach its target, touch up), then
+    ``extra`` optional ones; returns the session."""
+    s = ok(client.get(url))
+    for st in s["steps"]:
+        if st["target"]:
+            kw = {k: st[k] for k in ("tilt_deg", "around_deg", "spin_deg")}
+            if st["tool_point_mm"]:
+                kw["tool_point_mm"] = st["tool_point_mm"]
+            approach(client, st["target"], controller, **kw)
+        s = ok(client.post(f"{url}/touch-up", json={"step": st["index"]}))
+    for k in range(extra):
+        approach(client, s["steps"][0]["target"], controller, tilt_deg=25.0,
+                 around_deg=45.0 + 100.0 * k, spin_deg=70.0 * k - 90.0)
+        s = ok(client.post(f"{url}/touch-up"))
+    return s
+
+
+def calibrate(client: TestClient, method: str, target_no: int = 1, controller: str = C,
+              extra: int = 0, **params) -> tuple[dict, dict]:
+    """Open, walk, compute and save a session: (report, saved slot)."""
+    url = open_session(client, method, target_no, controller, **params)
+    walk(client, url, controller, extra)
+    report = ok(client.post(f"{url}/compute"))
+    slot = ok(client.post(f"{url}/save"))
+    return report, slot
+
+
+def pose_array(p: dict) -> np.ndarray:
+    return np.array([p[k] for k in "xyzabc"], dtype=float)
+
+
+def pose_matrix(p: dict) -> np.ndarray:
+    return Pose(*pose_array(p)).as_matrix()
+
+
+def angle_deg(R1: np.ndarray, R2: np.ndarray) -> float:
+    c = (np.trace(R1.T @ R2) - 1.0) / 2.0
+    return float(np.degrees(np.arccos(np.clip(c, -1.0, 1.0))))
+
+
+def calibrated_pointer(client: TestClient, number: int = 1) -> dict:
+    """Tool ``number`` = the mounted pointer as a person calibrates it: XYZ 4-point, ABC 2-point."""
+    calibrate(client, "tool.xyz_4point", number)
+    return calibrate(client, "tool.abc_2point", number)[1]
+
+
+__all__ = ["C", "CELL", "TRUE_TCP_MM", "make_client", "db_url", "client", "ok", "open_session",
+           "approach", "walk", "calibrate", "pose_array", "pose_matrix", "angle_deg",
+           "calibrated_pointer"]

@@ -1,0 +1,58 @@
+"""The ``pendant`` command: calibrate from a JSON/CSV file, export a controller."""
+
+from __future__ import annotations
+
+import json
+
+import numpy as np
+import pytest
+
+from api_helpers import CELL, TRUE_TCP_MM
+from server.cli import main
+from server.emulator import approach, home_joints
+from solvers.dh import forward_kinematics
+from solvers.frames import Pose
+from solvers.robots import ROBOTS
+
+KR6 = ROBOTS["kuka_kr6_r900_sixx"]
+
+
+@pytest.fixture(scope="module")
+def touches() -> list[np.ndarray]:
+    q, out = np.array(home_joints(KR6)), []
+    for tilt, around, spin in ((0, 0, 0), (30, 0, 0), (30, 120, 90), (30, 240, -90), (20, 60, 30)):
+        q = approach(KR6, CELL, q, "reference_tip", tilt, around, spin)
+        out.append(q)
+    return out
+
+
+def test_calibrate_json_joints(tmp_path, touches, capsys):
+    f = tmp_path / "touch.json"
+    f.write_text(json.dumps({"robot": "kuka_kr6_r900_sixx", "points": [{"joints_deg": q.tolist()} for q in touches]}))
+    assert main(["calibrate", "tool.xyz_4point", str(f), "--json"]) == 0
+    report = json.loads(capsys.readouterr().out)
+    assert [report["frame"][k] for k in "xyz"] == pytest.approx(TRUE_TCP_MM, abs=1e-3)
+    assert len(report["residuals_mm"]) == 5
+
+
+def test_calibrate_csv_flange_poses(tmp_path, touches, capsys):
+    rows = ["x,y,z,a,b,c"] + [",".join(f"{v:.9f}" for v in Pose.from_matrix(forward_kinematics(KR6, q)).as_array())
+                              for q in touches]
+    f = tmp_path / "touch.csv"
+    f.write_text("\n".join(rows) + "\n")
+    assert main(["calibrate", "tool.xyz_4point", str(f)]) == 0
+    out = capsys.readouterr().out
+    assert "max " in out and f"z {TRUE_TCP_MM[2]:.3f}" in out
+
+
+def test_calibrate_errors_name_the_field(tmp_path, touches, capsys):
+    f = tmp_path / "touch.json"
+    f.write_text(json.dumps({"points": [{"joints_deg": touches[0].tolist()}]}))
+    assert main(["calibrate", "tool.xyz_4point", str(f)]) == 2
+    assert "points.0.joints_deg" in capsys.readouterr().err
+
+
+def test_export_prints_the_controller_file(tmp_path, capsys):
+    assert main(["export", "cell-1", "--format", "kuka", "--db", f"sqlite:///{tmp_path / 'p.db'}"]) == 0
+    assert "TOOL_DATA" in capsys.readouterr().out
+    assert main(["export", "nope", "--db", f"sqlite:///{tmp_path / 'p.db'}"]) == 2

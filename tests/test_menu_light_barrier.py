@@ -1,0 +1,76 @@
+"""Tool > Light barrier through HTTP: the measuring cycle on the emulated robot and sensor, or a
+posted beam recording; then compute and save like any other menu."""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+
+from api_helpers import *  # noqa: F403
+from api_helpers import C, CELL, TRUE_TCP_MM, ok, open_session, pose_matrix
+from solvers.dh import forward_kinematics
+from solvers.robots import ROBOTS
+
+NOMINAL = {"x": 0.0, "y": 0.0, "z": 180.0}  # the drawing's length of the pointer
+
+
+def test_light_barrier_cycle_finds_tcp_and_axis(client):
+    url = open_session(client, "tool.light_barrier", 6, nominal_tool=NOMINAL)
+    run = ok(client.post(f"{url}/run-cycle"))
+    assert run["triggers"] >= 9 and run["passes"] == 9
+    edges = {st["point"]["edge"] for st in run["session"]["steps"]}
+    assert edges == {"enter", "leave", "tip"}
+    report = ok(client.post(f"{url}/compute"))
+    assert report["max_error_mm"] < 1e-3
+    assert report["extras"]["runout_deg"] == pytest.approx(
+        np.degrees(np.arccos(CELL.T_flange_tool[2, 2])), abs=1e-3)
+    slot = ok(client.post(f"{url}/save"))
+    T = pose_matrix(slot["pose"])
+    assert T[:3, 3] == pytest.approx(TRUE_TCP_MM, abs=1e-3)
+    assert float(T[:3, 2] @ CELL.T_flange_tool[:3, 2]) == pytest.approx(1.0, abs=1e-9)
+
+
+def test_light_barrier_needs_a_nominal_tool(client):
+    url = open_session(client, "tool.light_barrier", 6)
+    r = client.post(f"{url}/run-cycle")
+    assert r.status_code == 422
+    assert r.json()["detail"][0]["loc"] == ["body", "params", "nominal_tool"]
+
+
+def test_light_barrier_from_a_posted_beam_recording(client):
+    """A real controller's cycle: the triggers of the emulated run, written as robot-recording/1."""
+    first = open_session(client, "tool.light_barrier", 6, nominal_tool=NOMINAL)
+    steps = ok(client.post(f"{first}/run-cycle"))["session"]["steps"]
+    robot = ROBOTS["kuka_kr6_r900_sixx"]
+    samples = []
+    from server.emulator import solve_ik
+    q = np.array(ok(client.get(f"{C}/robot"))["joints_deg"])
+    for k, st in enumerate(steps):
+        T = pose_matrix(st["point"]["flange_pose"])
+        q = solve_ik(robot, T, q, tool=None)
+        samples.append({"t_s": float(k), "joints_deg": q.tolist(), "beam": st["point"]["beam_id"],
+                        "edge": st["point"]["edge"], "tcp_velocity_mm_s": st["point"]["velocity_mm_s"]})
+    cell = ok(client.get(f"{C}/cell"))
+    joints = [{"a_mm": j.a_mm, "alpha_deg": j.alpha_deg, "d_mm": j.d_mm, "offset_deg": j.offset_deg,
+               "direction": j.direction} for j in robot.joints]
+    doc = {"format": "robot-recording/1", "kind": "beam",
+           "robot": {"model": robot.name, "dh_convention": "standard", "joints": joints},
+           "tool": {"x": 0, "y": 0, "z": 180, "a": 0, "b": 0, "c": 0},
+           "sensor": {"beams": cell["beams"], "tool_diameter_mm": cell["tool_diameter_mm"]},
+           "samples": samples}
+    assert forward_kinematics(robot, samples[0]["joints_deg"]) == pytest.approx(
+        pose_matrix(steps[0]["point"]["flange_pose"]), abs=1e-6)
+    url = open_session(client, "tool.light_barrier", 7)
+    s = ok(client.post(f"{url}/beam-recording", json=doc))
+    assert len(s["steps"]) == len(steps)
+    report = ok(client.post(f"{url}/compute"))
+    assert pose_matrix(report["frame"])[:3, 3] == pytest.approx(TRUE_TCP_MM, abs=1e-3)
+
+
+def test_light_barrier_refuses_a_touch_recording(client):
+    url = open_session(client, "tool.light_barrier", 7)
+    doc = {"format": "robot-recording/1", "kind": "beam", "robot": {"model": "x", "dh_convention": "standard",
+           "joints": [{"a_mm": 0, "alpha_deg": 0, "d_mm": 0, "offset_deg": 0}]}, "samples": []}
+    r = client.post(f"{url}/beam-recording", json=doc)
+    assert r.status_code == 422
+    assert r.json()["detail"][0]["loc"][0] == "body"
