@@ -1,0 +1,177 @@
+"""The candidate-effect library: each effect's regressor in the baseline's residual space.
+
+An effect with parameter beta changes the true TCP pose at sample k by a twist
+``G_k beta`` (displacement mm, rotation rad, base frame); through the kind's sensitivity
+``S_k = dg_k / d twist`` it changes the constraint by ``X_k = S_k G_k``. ``X`` is the
+Jacobian column of the residual with respect to the effect's parameter; the selection
+(``selection.py``) fits ``-g ≈ B db + X beta``. Parameters are in report units, so beta is
+``offset_deg``, ``delta_mm``, ``compliance_deg_per_Nm``, ... directly.
+
+| effect | twist per unit parameter |
+|---|---|
+| joint_offset j | DH angle of joint j turns by 1 deg |
+| link_length j (a/d) | DH length a_j or d_j grows by 1 mm |
+| link_twist j | DH alpha_j turns by 1 deg (an axis misalignment) |
+| joint_compliance j | DH angle of joint j turns by ``tau_j`` deg (gravity torque, Nm) |
+| backlash j | DH angle turns by ``-s_j / 2`` deg (s_j = sign of the joint's last motion) |
+| thermal_drift | the TCP moves by ``(t - t_0) / (t_end - t_0)`` mm along base x, y, z |
+| trigger_latency | the TCP stood ``v · 1 ms`` behind where it was recorded (beam) |
+| tool_deflection | the TCP moves by ``F_perp`` mm (payload weight across the tool axis, N) |
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass, field
+
+import numpy as np
+
+from solvers.analysis.baseline import Baseline
+from solvers.gravity import G_M_S2
+from solvers.recording import last_motion_sign
+from solvers.validate import FloatArray
+
+DEG = np.pi / 180.0
+
+
+@dataclass(eq=False)
+class Candidate:
+    """One effect on one joint (or none): its residual-space columns and report mapping."""
+
+    effect: str
+    joint: int | None                 # 1-based
+    columns: FloatArray               # (rows, k)
+    param: str                        # report parameter name
+    dh_parameter: str | None = None   # 'a' / 'd' / 'alpha' for DH-row effects
+    regressor: str = ""               # plain words for what the effect grows with
+    feature: FloatArray | None = None  # per-sample scalar the effect scales with (locate)
+    # how the effect changes the model (to apply it nonlinearly, ``apply``):
+    theta_per_unit: FloatArray | None = None    # (N, n) DH angle change (rad) per unit beta
+    dh_per_unit: tuple[str, int, float] | None = None  # ('a'|'d'|'alpha', row 0-based, scale)
+    shift_per_unit: FloatArray | None = None    # (N, 3, k) TCP translation (mm) per unit beta
+
+    def apply(self, state, beta: FloatArray) -> None:
+        """Add this effect with parameter(s) ``beta`` to a :class:`State` (in place)."""
+        if self.theta_per_unit is not None:
+            state.dtheta_rad += self.theta_per_unit * float(beta[0])
+        if self.dh_per_unit is not None:
+            name, row, scale = self.dh_per_unit
+            state.ddh[name][row] += scale * float(beta[0])
+        if self.shift_per_unit is not None:
+            state.shift_mm += np.einsum("nik,k->ni", self.shift_per_unit, np.asarray(beta, float))
+
+    @property
+    def key(self) -> str:
+        j = "" if self.joint is None else f"_j{self.joint}"
+        dp = "" if self.dh_parameter is None else f"_{self.dh_parameter}"
+        return f"{self.effect}{j}{dp}"
+
+    @property
+    def label(self) -> str:
+        if self.effect == "link_length":
+            return f"link length {self.dh_parameter}{self.joint}"
+        if self.effect == "link_twist":
+            return f"link twist alpha{self.joint}"
+        j = "" if self.joint is None else f" J{self.joint}"
+        return self.effect.replace("_", " ") + j
+
+    def report_parameters(self, beta: FloatArray, std: FloatArray) -> dict[str, object]:
+        """``parameters`` block of a finding (magnitudes where the spec says so)."""
+        if self.effect == "thermal_drift":
+            v = float(np.linalg.norm(beta))
+            s = float(np.sqrt(np.sum((beta / max(v, 1e-12)) ** 2 * std ** 2)))
+            return {"drift_mm": v, "drift_std_mm": s,
+                    "drift_direction": [float(b / max(v, 1e-12)) for b in beta]}
+        b, s = float(beta[0]), float(std[0])
+        if self.effect == "backlash":
+            return {"backlash_deg": abs(b), "backlash_std_deg": s}
+        out: dict[str, object] = {self.param: b, f"{self.param}_std": s}
+        if self.dh_parameter is not None and self.effect == "link_length":
+            out["dh_parameter"] = self.dh_parameter
+        return out
+
+
+def gravity_torques_nm(rec) -> FloatArray:
+    """Gravity torque (N, n) in Nm on each joint, from ``solvers.gravity`` (the simulator's)."""
+    from solvers.gravity import gravity_torques
+    return np.asarray(gravity_torques(rec.robot, rec.joints_deg, rec.payload_mass_kg,
+                                      rec.payload_com_mm), dtype=float)
+
+
+def _apply(base: Baseline, twist: FloatArray) -> FloatArray:
+    """Residual column(s) of per-sample twists (N, 6) or (N, 6, k)."""
+    if twist.ndim == 2:
+        twist = twist[:, :, None]
+    X = np.einsum("nmi,nik->nmk", base.S, twist)
+    return X.reshape(-1, twist.shape[2])
+
+
+@dataclass
+class Library:
+    candidates: list[Candidate] = field(default_factory=list)
+    torques_nm: FloatArray | None = None
+    signs: FloatArray | None = None
+
+
+def build_library(rec, base: Baseline, torques_nm: FloatArray | None = None,
+                  include_twist: bool = True) -> Library:
+    """Every candidate effect of the spec's table (plus ``link_twist``) for this recording."""
+    sens = base.sens
+    n = rec.joints_deg.shape[1]
+    cands: list[Candidate] = []
+    tau = gravity_torques_nm(rec) if torques_nm is None else torques_nm
+    sg = last_motion_sign(rec)
+    # twist per controller joint (deg): theta = direction * (C q) + offset
+    ctrl = np.einsum("nij,j,jk->nik", sens.theta, rec.robot.params()["direction"],
+                     rec.robot.coupling_matrix())
+    direction = rec.robot.params()["direction"]
+    C = rec.robot.coupling_matrix()
+    N = len(rec.joints_deg)
+    for j in range(n):
+        th = sens.theta[:, :, j] * DEG
+        thq = ctrl[:, :, j] * DEG
+        unit = np.zeros((N, n))
+        unit[:, j] = DEG
+        ctrl_unit = np.tile(direction * C[:, j] * DEG, (N, 1))   # DH angles per controller deg
+        cands.append(Candidate("joint_offset", j + 1, _apply(base, th), "offset_deg",
+                               regressor="a constant", feature=np.ones(N), theta_per_unit=unit))
+        cands.append(Candidate("link_length", j + 1, _apply(base, sens.a[:, :, j]), "delta_mm", "a",
+                               regressor="a constant", dh_per_unit=("a", j, 1.0)))
+        cands.append(Candidate("link_length", j + 1, _apply(base, sens.d[:, :, j]), "delta_mm", "d",
+                               regressor="a constant", dh_per_unit=("d", j, 1.0)))
+        if include_twist:
+            cands.append(Candidate("link_twist", j + 1, _apply(base, sens.alpha[:, :, j] * DEG),
+                                   "delta_alpha_deg", "alpha", regressor="a constant",
+                                   dh_per_unit=("alpha", j, DEG)))
+        cands.append(Candidate("joint_compliance", j + 1, _apply(base, thq * tau[:, j:j + 1]),
+                               "compliance_deg_per_Nm",
+                               regressor=f"the gravity torque on joint {j + 1}", feature=tau[:, j],
+                               theta_per_unit=ctrl_unit * tau[:, j:j + 1]))
+        cands.append(Candidate("backlash", j + 1, _apply(base, thq * (-0.5 * sg[:, j:j + 1])),
+                               "backlash_deg",
+                               regressor=f"the direction joint {j + 1} last moved in",
+                               feature=sg[:, j], theta_per_unit=ctrl_unit * (-0.5 * sg[:, j:j + 1])))
+    t = np.asarray(rec.t_s, float)
+    span = float(t.max() - t.min())
+    if span > 0:
+        f = (t - t.min()) / span
+        tw = np.zeros((len(t), 6, 3))
+        tw[:, 0, 0] = tw[:, 1, 1] = tw[:, 2, 2] = f
+        cands.append(Candidate("thermal_drift", None, _apply(base, tw), "drift_mm",
+                               regressor="time", feature=f, shift_per_unit=tw[:, :3, :]))
+    if rec.kind == "beam" and rec.tcp_velocity_mm_s is not None:
+        w = np.asarray(rec.tcp_velocity_mm_s, float)
+        tw = np.zeros((len(w), 6))
+        tw[:, :3] = -w * 1e-3
+        cands.append(Candidate("trigger_latency", None, _apply(base, tw), "latency_ms",
+                               regressor="the TCP velocity",
+                               feature=np.linalg.norm(w, axis=1), shift_per_unit=tw[:, :3, None]))
+    if rec.payload_mass_kg > 0:
+        u = sens.axis
+        gdir = np.array([0.0, 0.0, -1.0])
+        fperp = rec.payload_mass_kg * G_M_S2 * (gdir - np.outer(u @ gdir, np.ones(3)) * u)
+        tw = np.zeros((len(u), 6))
+        tw[:, :3] = fperp
+        cands.append(Candidate("tool_deflection", None, _apply(base, tw), "deflection_mm_per_N",
+                               regressor="the payload weight across the tool axis",
+                               feature=np.linalg.norm(fperp, axis=1), shift_per_unit=tw[:, :3, None]))
+    return Library(cands, tau, sg)

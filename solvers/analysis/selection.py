@@ -1,0 +1,180 @@
+"""Forward model selection on the linearised residual, held-out RMS and the structure test.
+
+The baseline residual ``y = -g`` is (to first order in the small effects) ``y = B db + X beta +
+noise``. Everything here is linear algebra on that stack, so a fit, a K-fold refit and an
+F-test cost a QR each:
+
+- ``heldout_rms``: K-fold cross-validation by sample (all rows of a sample leave together); the
+  baseline parameters are refitted on each training set, as the rigid model would be.
+- ``f_test``: the extra-sum-of-squares F-test of a column group against the current model
+  (no noise level needed: the residual of the larger model estimates it).
+- forward selection: at each step every identifiable candidate is F-tested; the family of
+  candidates tried at that step is Holm-corrected; the best passing candidate is added if it
+  also lowers the held-out RMS and explains a substantial part of the structure the generic
+  smooth-function library finds at that step (the guard against naming an effect outside
+  the library).
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+from scipy import stats
+
+from solvers.validate import FloatArray
+
+
+NOISE_FLOOR_MM = 1e-6
+
+
+def normalise(X: FloatArray) -> FloatArray:
+    n = np.linalg.norm(X, axis=0)
+    return X / np.where(n > 0, n, 1.0)
+
+
+def orth(X: FloatArray, rtol: float = 1e-9) -> FloatArray:
+    """Orthonormal basis of span(X) (columns normalised first; rank by relative tolerance)."""
+    if X.shape[1] == 0:
+        return np.zeros((X.shape[0], 0))
+    Xn = normalise(X)
+    if X.shape[1] == 1:
+        return Xn if np.any(Xn) else np.zeros((X.shape[0], 0))
+    # eigen-decomposition of the small Gram matrix, twice (CholQR2-like) for orthogonality
+    w, V = np.linalg.eigh(Xn.T @ Xn)
+    if w[-1] <= 0:
+        return np.zeros((X.shape[0], 0))
+    keep = w > (rtol ** 2) * w[-1]
+    Q = Xn @ (V[:, keep] / np.sqrt(w[keep]))
+    w2, V2 = np.linalg.eigh(Q.T @ Q)
+    return Q @ (V2 / np.sqrt(np.maximum(w2, 1e-300)))
+
+
+def project_out(Q: FloatArray, X: FloatArray) -> FloatArray:
+    return X - Q @ (Q.T @ X)
+
+
+def residual_ratio(Q: FloatArray, X: FloatArray) -> float:
+    """How much of X (relative, worst column direction) is left outside span(Q)."""
+    nx = np.linalg.norm(X, axis=0)
+    if np.all(nx == 0):
+        return 0.0
+    Xn = normalise(X[:, nx > 0])
+    P = project_out(Q, Xn)
+    if P.shape[1] == 1:
+        return float(np.linalg.norm(P))
+    return float(np.linalg.svd(P, compute_uv=False)[-1])
+
+
+def folds_of(n_samples: int, k: int, seed: int) -> list[FloatArray]:
+    rng = np.random.default_rng(seed)
+    perm = rng.permutation(n_samples)
+    k = max(2, min(k, n_samples))
+    return [np.sort(perm[i::k]) for i in range(k)]
+
+
+@dataclass
+class CV:
+    """Row index sets of the folds."""
+    test_rows: list[FloatArray]
+    train_rows: list[FloatArray]
+    m: int
+    n_samples: int
+    scale: FloatArray | None = None   # per-row factor turning a residual into mm
+
+    @classmethod
+    def make(cls, n_samples: int, m: int, k: int, seed: int) -> "CV":
+        te, tr = [], []
+        allr = np.arange(n_samples * m)
+        for f in folds_of(n_samples, k, seed):
+            rows = (f[:, None] * m + np.arange(m)).ravel()
+            mask = np.ones(n_samples * m, bool)
+            mask[rows] = False
+            te.append(rows)
+            tr.append(allr[mask])
+        return cls(te, tr, m, n_samples)
+
+    def heldout_rms(self, y: FloatArray, M: FloatArray, Q: FloatArray | None = None) -> float:
+        """sqrt(mean over samples of |held-out residual|^2).
+
+        The fit on the training rows only depends on span(M), so an orthonormal basis Q of
+        it is used: the training Gram matrix is then ``I - Q_te^T Q_te``.
+        """
+        Q = orth(M) if Q is None else Q
+        p = Q.shape[1]
+        qty = Q.T @ y
+        sse = 0.0
+        for te in self.test_rows:
+            Qt, yt = Q[te], y[te]
+            if p:
+                G = np.eye(p) - Qt.T @ Qt
+                rhs = qty - Qt.T @ yt
+                try:
+                    beta = np.linalg.solve(G, rhs)
+                except np.linalg.LinAlgError:
+                    beta = np.linalg.lstsq(G, rhs, rcond=1e-12)[0]
+                e = yt - Qt @ beta
+            else:
+                e = yt
+            if self.scale is not None:
+                e = e * self.scale[te]
+            sse += float(e @ e)
+        return float(np.sqrt(sse / self.n_samples))
+
+
+def fit_linear(y: FloatArray, M: FloatArray) -> tuple[FloatArray, FloatArray, float, int]:
+    """beta, covariance (from J^T J and the residual variance), RSS, rank."""
+    Mn = normalise(M)
+    scale = np.linalg.norm(M, axis=0)
+    scale = np.where(scale > 0, scale, 1.0)
+    w, V = np.linalg.eigh(Mn.T @ Mn)
+    keep = w > 1e-18 * w[-1]
+    rank = int(np.sum(keep))
+    G_pinv = (V[:, keep] / w[keep]) @ V[:, keep].T
+    beta = (G_pinv @ (Mn.T @ y)) / scale
+    r = y - M @ beta
+    rss = float(r @ r)
+    dof = max(len(y) - rank, 1)
+    cov = G_pinv / np.outer(scale, scale) * rss / dof
+    return beta, cov, rss, int(rank)
+
+
+def f_test(y_perp: FloatArray, Qm_cols: int, Xp: FloatArray, n_rows: int) -> tuple[float, float, int]:
+    """Extra-sum-of-squares F-test of the projected group Xp on the projected residual.
+
+    Returns (gain = RSS reduction, p-value, k = group rank).
+    """
+    Qx = orth(Xp, 1e-6)
+    k = Qx.shape[1]
+    if k == 0:
+        return 0.0, 1.0, 0
+    rss0 = float(y_perp @ y_perp)
+    gain = float(np.sum((Qx.T @ y_perp) ** 2))
+    dof = n_rows - Qm_cols - k
+    if dof <= 0:
+        return gain, 1.0, k
+    # a floor on the noise (1e-6 mm per row): exact data must not make rounding significant
+    rss1 = max(rss0 - gain, dof * NOISE_FLOOR_MM ** 2)
+    F = (gain / k) / (rss1 / dof)
+    return gain, float(stats.f.sf(F, k, dof)), k
+
+
+def holm_pass(pvals: list[float], alpha: float) -> list[bool]:
+    """Holm step-down: which hypotheses are rejected at family-wise level alpha.
+
+    Examples
+    --------
+    >>> holm_pass([0.0001, 0.04, 0.0004], 0.0005)
+    [True, False, False]
+    >>> holm_pass([0.0001, 0.04, 0.0004], 0.01)
+    [True, False, True]
+    """
+    order = np.argsort(pvals)
+    m = len(pvals)
+    ok = [False] * m
+    for i, idx in enumerate(order):
+        if pvals[idx] * (m - i) < alpha:
+            ok[idx] = True
+        else:
+            break
+    return ok

@@ -1,0 +1,149 @@
+"""Plain words: finding explanations, why an effect cannot be seen, and ``render_text``."""
+
+from __future__ import annotations
+
+WHAT = {
+    "joint_offset": "the zero of joint {j} is off",
+    "link_length": "the DH length {p}{j} differs from the nominal table",
+    "link_twist": "axis {j} is tilted against the nominal table (DH alpha{j})",
+    "joint_compliance": "joint {j} yields under gravity",
+    "backlash": "joint {j} has lost motion (backlash)",
+    "thermal_drift": "the arm or the cell drifts over time",
+    "trigger_latency": "the trigger is recorded late, along the motion",
+    "tool_deflection": "the tool bends under the payload's weight",
+}
+
+
+def _value(f: dict) -> str:
+    p = f["parameters"]
+    if "offset_deg" in p:
+        return f"{p['offset_deg']:+.4f} deg (± {p['offset_deg_std']:.4f})"
+    if "delta_mm" in p:
+        return f"{p['delta_mm']:+.3f} mm (± {p['delta_mm_std']:.3f})"
+    if "delta_alpha_deg" in p:
+        return f"{p['delta_alpha_deg']:+.4f} deg (± {p['delta_alpha_deg_std']:.4f})"
+    if "compliance_deg_per_Nm" in p:
+        return f"{p['compliance_deg_per_Nm']:.3g} deg/Nm (± {p['compliance_deg_per_Nm_std']:.2g})"
+    if "backlash_deg" in p:
+        return f"{p['backlash_deg']:.4f} deg (± {p['backlash_std_deg']:.4f})"
+    if "drift_mm" in p:
+        return f"{p['drift_mm']:.3f} mm over the recording (± {p['drift_std_mm']:.3f})"
+    if "latency_ms" in p:
+        return f"{p['latency_ms']:+.2f} ms (± {p['latency_ms_std']:.2f})"
+    if "deflection_mm_per_N" in p:
+        return f"{p['deflection_mm_per_N']:.4g} mm/N (± {p['deflection_mm_per_N_std']:.2g})"
+    return ""
+
+
+def explanation(c, f: dict, same: list[str] | None = None,
+                alternatives: list[str] | None = None) -> str:
+    ev = f["evidence"]
+    j = c.joint if c.joint is not None else ""
+    what = WHAT.get(c.effect, c.effect).format(j=j, p=c.dh_parameter or "")
+    grows = (f"the residual grows with {c.regressor} (r = {ev['correlation_r']:.2f})"
+             if c.regressor != "a constant" else
+             f"the residual follows this parameter's pose signature (r = {ev['correlation_r']:.2f})")
+    text = (f"{what}: {grows}; modelled as {_value(f)}; held-out RMS "
+            f"{ev['heldout_rms_before_mm']:.3f} → {f['heldout_rms_mm']:.3f} mm "
+            f"(p = {ev['p_value']:.1e} among {ev['candidates_tested']} candidates).")
+    share = ev.get("angle_term_share", 0.0)
+    if share > 0.9:
+        text += (f" Caution: {100 * share:.0f}% of this signature is also that of a smooth error of "
+                 f"joint {j}'s own angle (a cos q{j}-like term, e.g. a gear error); a second "
+                 "payload separates the two.")
+    if same:
+        text += (" This recording cannot tell it from " + ", ".join(same)
+                 + ": their effects on these poses are the same.")
+    if alternatives:
+        text += (" Almost as good an explanation here: " + ", ".join(alternatives)
+                 + " (more varied poses would separate them).")
+    return text
+
+
+def absorber_of(base, c) -> str:
+    """Which of the baseline's parameter blocks soaks up the candidate's regressor."""
+    from solvers.analysis.selection import orth, residual_ratio
+
+    alone = [name for name, sl in base.blocks.items()
+             if residual_ratio(orth(base.B[:, sl]), c.columns) < 3e-3]
+    if alone:
+        return " or ".join(alone)
+    names = list(base.blocks)
+    return " and ".join(names) if names else "the rigid model's parameters"
+
+
+def not_identifiable_reason(rec, c, base=None) -> str:
+    """What the rigid model absorbs the effect into, and what data would reveal it."""
+    kind = rec.kind
+    absorber = absorber_of(base, c) if base is not None else "the rigid model's parameters"
+    e, j = c.effect, c.joint
+    if e == "trigger_latency":
+        return (f"absorbed by {absorber}: the passes ran in one direction at one speed, so a late "
+                "trigger looks like a shifted TCP: add reverse passes (and a second speed) to "
+                "separate latency from the TCP and beam positions")
+    if e == "thermal_drift":
+        return (f"absorbed by {absorber}: a static thermal growth is indistinguishable from "
+                "link lengths and frames; only its change over time shows it — record longer, "
+                "revisiting poses early and late")
+    if e == "tool_deflection":
+        return (f"absorbed by {absorber}: the payload's weight across the tool axis hardly "
+                "changes between the samples: tilt the tool axis through several angles to gravity")
+    if e == "backlash":
+        return (f"absorbed by {absorber}: joint {j} approached (nearly) every sample from the same "
+                "side: approach the poses from both directions")
+    if e == "joint_compliance":
+        return (f"absorbed by {absorber}: the gravity torque on joint {j} hardly varies over these "
+                f"poses: use poses with different loads on joint {j}, or a second payload")
+    if e in ("joint_offset", "link_length", "link_twist"):
+        what = {"joint_offset": f"joint {j}'s zero", "link_length": f"DH {c.dh_parameter}{j}",
+                "link_twist": f"DH alpha{j}"}[e]
+        if " or " in absorber:
+            hint = ("each of them alone takes it up; only a known tool and a reference on the "
+                    "robot's own base show it")
+        elif kind == "tracker" and "instrument" in absorber and "TCP" not in absorber:
+            hint = ("it moves every measured point rigidly; only a reference on the robot's own "
+                    "base (not a free instrument frame) shows it")
+        elif absorber == "the fixed point":
+            hint = ("it only moves where the touched point seems to be; touching several points "
+                    "known in base shows it")
+        elif "TCP" in absorber and " and " not in absorber:
+            hint = ("it moves the TCP by the same amount in the flange for every pose; only a "
+                    "known tool (or a tool measured off the robot) shows it")
+        else:
+            hint = "measure with more spread in the joint angles to separate it"
+        return f"{what} is absorbed by {absorber}: {hint}"
+    return f"absorbed by {absorber}"
+
+
+def render_text(report: dict) -> str:
+    """The human form of an analysis report (``pendant analyze`` without ``--json``)."""
+    b, fin = report["baseline"], report["final"]
+    lines = [f"Analysis of a {report['kind']} recording, {report['n_samples']} samples",
+             f"Verdict: {report['verdict'].replace('_', ' ')}",
+             f"Rigid model: RMS {b['rms_mm']:.3f} mm, held-out {b['heldout_rms_mm']:.3f} mm",
+             f"Where: {report['locate']['summary']}"]
+    if report["findings"]:
+        lines.append("Findings (strongest first):")
+        for i, f in enumerate(report["findings"], 1):
+            name = f["effect"] + (f" J{f['joint']}" if f.get("joint") else "")
+            lines.append(f"  {i}. {name}: {f['explanation']}")
+    else:
+        lines.append("Findings: none — the residual is consistent with measurement noise.")
+    lines.append(f"With the findings: RMS {fin['rms_mm']:.3f} mm, held-out "
+                 f"{fin['heldout_rms_mm']:.3f} mm")
+    for w in report.get("withheld") or []:
+        name = w["effect"] + (f" J{w['joint']}" if w.get("joint") else "") + (
+            f" ({w['dh_parameter']})" if w.get("dh_parameter") else "")
+        lines.append(f"Withheld: {name}: {w['reason']}.")
+    ni = report.get("not_identifiable") or []
+    if ni:
+        lines.append("Not identifiable from this recording:")
+        seen = set()
+        for e in ni:
+            name = e["effect"] + (f" J{e['joint']}" if e.get("joint") else "") + (
+                f" ({e['dh_parameter']})" if e.get("dh_parameter") else "")
+            if name in seen:
+                continue
+            seen.add(name)
+            lines.append(f"  - {name}: {e['reason']}")
+    return "\n".join(lines)

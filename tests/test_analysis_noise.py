@@ -1,0 +1,46 @@
+"""Analysis stays silent on noise, and says "unexplained structure" (never a confident wrong
+name) for an effect outside its library (a gear's periodic transmission error)."""
+
+from __future__ import annotations
+
+import pytest
+
+from server.recording import parse_recording
+from solvers.analysis import analyze
+from solvers.physics import Imperfections
+from solvers.robots import ROBOTS
+from solvers.simulate import simulate_recording
+
+# 200 recordings: (kind, samples) cycled; small recordings keep the test fast
+MIX = [("tracker", 40)] * 6 + [("touch", 8)] * 3 + [("beam", 20)]
+
+
+def test_pure_noise_gives_at_most_two_recordings_with_findings() -> None:
+    keys = sorted(ROBOTS)
+    with_findings, kinds = [], set()
+    for i in range(200):
+        kind, n = MIX[i % len(MIX)]
+        robot = keys[(i // len(MIX) + i) % len(keys)]
+        doc = simulate_recording(kind, robot, Imperfections(noise_mm=0.02), n, seed=1000 + i,
+                                 payload=(1.0 + i % 3, [0.0, 0.0, 40.0]))
+        rep = analyze(parse_recording(doc), folds=3)
+        kinds.add(kind)
+        if rep["findings"]:
+            with_findings.append((i, kind, robot, [f["effect"] for f in rep["findings"]]))
+        else:
+            assert rep["verdict"] in ("no_missing_physics", "unexplained_structure")
+    assert kinds == {"tracker", "touch", "beam"}
+    assert len(with_findings) <= 2, with_findings
+
+
+@pytest.mark.parametrize("robot, joint, periods", [("ur10", 2, 3), ("tm5_900", 3, 2),
+                                                   ("kuka_kr6_r900_sixx", 1, 5)])
+def test_cyclic_gear_error_is_unexplained_structure(robot: str, joint: int, periods: int) -> None:
+    imp = Imperfections(noise_mm=0.02, cyclic_error={joint: (0.01, periods)})
+    doc = simulate_recording("tracker", robot, imp, 60, seed=joint * 10 + periods,
+                             payload=(3.0, [0.0, 0.0, 60.0]))
+    rep = analyze(parse_recording(doc))
+    assert rep["verdict"] == "unexplained_structure"
+    assert not rep["findings"], [(f["effect"], f["joint"]) for f in rep["findings"]]
+    assert f"joint {joint}'s angle" in rep["locate"]["summary"]
+    assert rep["locate"]["unexplained"]
