@@ -196,15 +196,22 @@ def require_open(s: CalibSession) -> None:
 
 def put_point(db: Session, s: CalibSession, step: int, source: str, pose_values: Sequence[float],
               joints_deg: Sequence[float] | None = None, beam_id: str | None = None,
-              edge: str | None = None, velocity_mm_s: Sequence[float] | None = None) -> TaughtPoint:
-    """Fill (or re-teach) one step; a new touch-up makes an earlier result stale."""
+              edge: str | None = None, velocity_mm_s: Sequence[float] | None = None,
+              t_s: float | None = None,
+              motion_sign: Sequence[float] | None = None) -> TaughtPoint:
+    """Fill (or re-teach) one step; a new touch-up makes an earlier result stale.
+
+    ``t_s`` is the emulated clock at the touch-up and ``motion_sign`` the direction each
+    joint last moved before it (both for the session's ``robot-recording/1`` export)."""
     require_open(s)
     old = next((p for p in s.points if p.step == step), None)
     if old is not None:
         s.points.remove(old)
         db.flush()
     joints = None if joints_deg is None else [float(q) for q in joints_deg]
-    p = TaughtPoint(step=step, source=source, joints_deg=joints, beam_id=beam_id, edge=edge)
+    p = TaughtPoint(step=step, source=source, joints_deg=joints, beam_id=beam_id, edge=edge,
+                    t_s=None if t_s is None else float(t_s),
+                    motion_sign=None if motion_sign is None else [float(v) for v in motion_sign])
     p.set_pose_values(pose_values)
     if velocity_mm_s is not None:
         p.vx_mm_s, p.vy_mm_s, p.vz_mm_s = (float(v) for v in velocity_mm_s)
@@ -267,7 +274,7 @@ def backup(db: Session, c: Controller) -> dict[str, Any]:
         vel = None if p.vx_mm_s is None else [p.vx_mm_s, p.vy_mm_s, p.vz_mm_s]
         return {"step": p.step, "source": p.source, "pose": list(p.pose_values()),
                 "joints_deg": p.joints_deg, "beam_id": p.beam_id, "edge": p.edge,
-                "velocity_mm_s": vel}
+                "velocity_mm_s": vel, "t_s": p.t_s, "motion_sign": p.motion_sign}
 
     return {
         "format": "pendant-backup/1",
@@ -313,7 +320,8 @@ def restore_backup(db: Session, c: Controller, doc: dict[str, Any]) -> tuple[int
         for pd in sd.get("points", []):
             p = TaughtPoint(step=int(pd["step"]), source=pd["source"],
                             joints_deg=pd.get("joints_deg"), beam_id=pd.get("beam_id"),
-                            edge=pd.get("edge"))
+                            edge=pd.get("edge"), t_s=pd.get("t_s"),
+                            motion_sign=pd.get("motion_sign"))
             p.set_pose_values(pd["pose"])
             if pd.get("velocity_mm_s"):
                 p.vx_mm_s, p.vy_mm_s, p.vz_mm_s = (float(v) for v in pd["velocity_mm_s"])

@@ -84,6 +84,13 @@ class Controller(Base):
     active_tool_no: Mapped[int] = mapped_column(default=0)  # 0 = flange
     active_base_no: Mapped[int] = mapped_column(default=0)  # 0 = world (robot base)
     created_at: Mapped[datetime] = mapped_column(default=utcnow)
+    # the arm's hidden physics (revision 0002): a solvers.physics.Imperfections document
+    # (None = rigid), the emulated clock since power-on, the direction each joint last moved
+    # (backlash) and a count of motions (seeds the operator's aim)
+    physics: Mapped[dict[str, Any] | None]
+    clock_s: Mapped[float] = mapped_column(default=0.0, server_default="0")
+    motion_sign: Mapped[list[float] | None]
+    motion_count: Mapped[int] = mapped_column(default=0, server_default="0")
 
     entries: Mapped[list[FrameEntry]] = relationship(back_populates="controller",
                                                      cascade="all, delete-orphan")
@@ -196,6 +203,10 @@ class TaughtPoint(PoseColumns, Base):
     vy_mm_s: Mapped[float | None]
     vz_mm_s: Mapped[float | None]
     created_at: Mapped[datetime] = mapped_column(default=utcnow)
+    # revision 0002: the emulated clock at the touch-up / trigger (s since power-on) and the
+    # direction each joint last moved before it (a recording's start_joints_deg)
+    t_s: Mapped[float | None]
+    motion_sign: Mapped[list[float] | None]
 
     session: Mapped[CalibSession] = relationship(back_populates="points")
 

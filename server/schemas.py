@@ -158,6 +158,53 @@ class CellOut(Out):
     tool_diameter_mm: float
 
 
+
+CyclicError = Annotated[list[float], Field(min_length=2, max_length=2,
+                                           description="[amplitude_deg, periods_per_rev]")]
+
+
+class PhysicsIn(In):
+    """The emulated arm's hidden imperfections (``solvers.physics.Imperfections``); an omitted
+    field is no such effect, ``{}`` the rigid arm. Per-joint lists have one value per joint."""
+
+    joint_offset_deg: list[float] | None = Field(None, description="true minus shown, per joint")
+    dh_delta: dict[str, float] = Field(default_factory=dict,
+                                       description='true minus nominal DH, {"a_mm:2": 0.3}; '
+                                                   "a_mm, d_mm or alpha_deg of joint 1..n")
+    compliance_deg_per_Nm: list[float] | None = Field(None, description="joint yield per torque")
+    backlash_deg: list[float] | None = Field(None, description="full lost motion per joint")
+    thermal_drift_mm: float = Field(0.0, description="base shift reached after the warm-up hour")
+    thermal_direction: Vec3 = Field([0.0, 0.0, 1.0], description="direction of the drift")
+    trigger_latency_ms: float = Field(0.0, description="light barrier: recorded this much later")
+    tool_deflection_mm_per_N: float = Field(0.0, description="tool tip bending per N of payload "
+                                                             "weight across the tool axis")
+    cyclic_error: dict[str, CyclicError] = Field(default_factory=dict,
+                                                 description='{"3": [0.02, 4]} gear ripple')
+    noise_mm: float = Field(0.0, description="operator's aim / trigger jitter, std per axis")
+
+
+class PhysicsOut(Out):
+    joint_offset_deg: list[float] | None
+    dh_delta: dict[str, float]
+    compliance_deg_per_Nm: list[float] | None
+    backlash_deg: list[float] | None
+    thermal_drift_mm: float
+    thermal_direction: list[float]
+    trigger_latency_ms: float
+    tool_deflection_mm_per_N: float
+    cyclic_error: dict[str, list[float]]
+    noise_mm: float
+    rigid: bool = Field(description="no effect and no noise: the emulator is the model exactly")
+
+
+class ClockIn(In):
+    clock_s: float = Field(ge=0.0, description="emulated seconds since the cell was powered")
+
+
+class ClockOut(Out):
+    clock_s: float
+    thermal_warmup_s: float = Field(description="the thermal drift is complete after this time")
+
 # ------------------------------------------------------------------------------------ tables
 
 class LoadIn(In):

@@ -7,10 +7,13 @@ from fastapi import APIRouter, Response
 from db import crud
 from db.models import Controller
 from server.deps import SessionDep
-from server.emulator import home_joints, robot_from_custom
+from server.emulator import (THERMAL_WARMUP_S, home_joints, imperfections_document,
+                             imperfections_from_document, robot_from_custom)
 from server.routers.common import cell_of, robot_of
-from server.schemas import CellOut, ControllerIn, ControllerOut
+from server.schemas import (CellOut, ClockIn, ClockOut, ControllerIn, ControllerOut, PhysicsIn,
+                            PhysicsOut)
 from solvers.errors import CalibrationError
+from solvers.physics import Imperfections
 from solvers.robots import ROBOTS
 
 router = APIRouter(prefix="/controllers", tags=["Controllers"])
@@ -59,3 +62,42 @@ def get_cell(controller_id: int, db: SessionDep) -> CellOut:
     """What the person at the cell knows: approach targets, marked points from the drawings,
     the light barrier's beams. The true tool, plate and fixed-tool poses stay hidden."""
     return CellOut(**cell_of(crud.get_controller(db, controller_id)).public())
+
+
+def physics_out(c: Controller) -> PhysicsOut:
+    robot = robot_of(c)
+    imp = imperfections_from_document(c.physics, robot.dof) if c.physics else Imperfections()
+    return PhysicsOut(**imperfections_document(imp),
+                      rigid=imp.is_rigid() and imp.noise_mm == 0)
+
+
+@router.get("/{controller_id}/cell/physics")
+def get_physics(controller_id: int, db: SessionDep) -> PhysicsOut:
+    """The emulated arm's hidden imperfections (what the controller's model does not know)."""
+    return physics_out(crud.get_controller(db, controller_id))
+
+
+@router.put("/{controller_id}/cell/physics")
+def put_physics(controller_id: int, body: PhysicsIn, db: SessionDep) -> PhysicsOut:
+    """Give the emulated arm imperfections (``{}`` = the rigid arm again). Checked against the
+    arm: per-joint lists need one value per joint; backlash, compliance, latency, bending and
+    noise must be >= 0; DH deltas name a_mm, d_mm or alpha_deg of a joint 1..n."""
+    c = crud.get_controller(db, controller_id)
+    imp = imperfections_from_document(body.model_dump(), robot_of(c).dof)
+    c.physics = None if imp == Imperfections() else imperfections_document(imp)
+    return physics_out(c)
+
+
+@router.get("/{controller_id}/cell/clock")
+def get_clock(controller_id: int, db: SessionDep) -> ClockOut:
+    """The emulated clock: seconds since the cell was powered, advanced by every motion."""
+    c = crud.get_controller(db, controller_id)
+    return ClockOut(clock_s=float(c.clock_s or 0.0), thermal_warmup_s=THERMAL_WARMUP_S)
+
+
+@router.put("/{controller_id}/cell/clock")
+def put_clock(controller_id: int, body: ClockIn, db: SessionDep) -> ClockOut:
+    """Set the clock: 0 = just powered (cold), ``thermal_warmup_s`` or more = warm."""
+    c = crud.get_controller(db, controller_id)
+    c.clock_s = float(body.clock_s)
+    return ClockOut(clock_s=c.clock_s, thermal_warmup_s=THERMAL_WARMUP_S)

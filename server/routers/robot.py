@@ -1,7 +1,11 @@
-"""Robot: the emulated arm's joints, jogging, active tool and base, and the approach motion."""
+"""Robot: the emulated arm's joints, jogging, active tool and base, and the approach motion.
+
+Every motion moves the commanded joints (what the controller shows), turns the backlash
+flanks of the joints that moved and advances the emulated clock (server.emulator)."""
 
 from __future__ import annotations
 
+import numpy as np
 from fastapi import APIRouter
 
 from db import crud
@@ -12,6 +16,7 @@ from server.routers.common import active_frames, cell_of, robot_of
 from server.schemas import ActiveIn, ApproachIn, JogIn, JointsIn, PoseOut, RobotStateOut
 from solvers.dh import check_joint_limits, forward_kinematics
 from solvers.errors import CalibrationError
+from solvers.physics import Imperfections
 
 router = APIRouter(prefix="/controllers/{controller_id}/robot", tags=["Robot"])
 
@@ -27,8 +32,34 @@ def state_out(db: SessionDep, c: Controller) -> RobotStateOut:
                          tcp_pose=PoseOut.of_matrix(T_base_tcp))
 
 
-def _move(c: Controller, q: object) -> None:
-    c.joints_deg = [float(x) for x in q]  # type: ignore[union-attr]
+def physics_of(db: SessionDep, c: Controller) -> emulator.RobotPhysics:
+    """The arm's hidden state: stored imperfections (None = rigid), clock, backlash flanks,
+    the active tool's load as the payload, the operator's noise seed."""
+    robot = robot_of(c)
+    imp = (emulator.imperfections_from_document(c.physics, robot.dof) if c.physics
+           else Imperfections())
+    mass, com = 0.0, np.zeros(3)
+    if c.active_tool_no:
+        e = crud.get_entry(db, c.id, "tool", c.active_tool_no)
+        if e.mass_kg:
+            mass, com = float(e.mass_kg), np.array([e.com_x_mm or 0.0, e.com_y_mm or 0.0,
+                                                    e.com_z_mm or 0.0])
+    signs = np.zeros(robot.dof) if c.motion_sign is None else np.array(c.motion_sign, float)
+    return emulator.RobotPhysics(imp, float(c.clock_s or 0.0), signs, mass, com,
+                                 (int(c.cell_seed), int(c.id), int(c.motion_count or 0)))
+
+
+def move_to(c: Controller, q: object, extra_s: float = 0.0) -> None:
+    """Command joints ``q``: the joints that moved turn their flank, the clock advances by the
+    move's time plus ``extra_s``."""
+    robot = robot_of(c)
+    q_new = [float(x) for x in q]  # type: ignore[union-attr]
+    signs = np.zeros(robot.dof) if c.motion_sign is None else np.array(c.motion_sign, float)
+    c.motion_sign = emulator.updated_signs(signs, c.joints_deg, q_new).tolist()
+    c.clock_s = float(c.clock_s or 0.0) + emulator.motion_duration_s(robot, c.joints_deg, q_new) \
+        + extra_s
+    c.motion_count = int(c.motion_count or 0) + 1
+    c.joints_deg = q_new
 
 
 @router.get("")
@@ -46,7 +77,7 @@ def set_joints(controller_id: int, body: JointsIn, db: SessionDep) -> RobotState
         raise CalibrationError(("joints_deg",), f"has {len(body.joints_deg)} values; the robot has "
                                f"{robot.dof} joints")
     check_joint_limits(robot, body.joints_deg)
-    _move(c, body.joints_deg)
+    move_to(c, body.joints_deg)
     return state_out(db, c)
 
 
@@ -54,7 +85,7 @@ def set_joints(controller_id: int, body: JointsIn, db: SessionDep) -> RobotState
 def home(controller_id: int, db: SessionDep) -> RobotStateOut:
     """Move to HOME (flange pointing down in front of the arm)."""
     c = crud.get_controller(db, controller_id)
-    _move(c, emulator.home_joints(robot_of(c)))
+    move_to(c, emulator.home_joints(robot_of(c)))
     return state_out(db, c)
 
 
@@ -71,7 +102,7 @@ def jog(controller_id: int, body: JogIn, db: SessionDep) -> RobotStateOut:
         raise CalibrationError(("axis",),
                                f"{body.mode} mode jogs X, Y, Z, A, B, C, got {body.axis!r}")
     tool, base = active_frames(db, c)
-    _move(c, emulator.jog(robot, c.joints_deg, body.mode, body.axis, body.increment, tool, base))
+    move_to(c, emulator.jog(robot, c.joints_deg, body.mode, body.axis, body.increment, tool, base))
     return state_out(db, c)
 
 
@@ -90,9 +121,12 @@ def set_active(controller_id: int, body: ActiveIn, db: SessionDep) -> RobotState
 def approach(controller_id: int, body: ApproachIn, db: SessionDep) -> RobotStateOut:
     """Careful jogging, done for you: the physical tip (true tool, or a mark of the held
     workpiece) onto a cell target from tilt/around; ``fixed_tool_align`` aligns the flange
-    with the fixed tool. Refused (422) when the pose is out of reach or limits."""
+    with the fixed tool. Refused (422) when the pose is out of reach or limits. On an
+    imperfect arm (``.../cell/physics``) the TRUE tip goes onto the target, so the joints
+    shown differ from the nominal solution."""
     c = crud.get_controller(db, controller_id)
     q = emulator.approach(robot_of(c), cell_of(c), c.joints_deg, body.target, body.tilt_deg,
-                          body.around_deg, body.spin_deg, body.tool_point_mm, body.miss_mm)
-    _move(c, q)
+                          body.around_deg, body.spin_deg, body.tool_point_mm, body.miss_mm,
+                          physics=physics_of(db, c))
+    move_to(c, q, emulator.APPROACH_S)
     return state_out(db, c)

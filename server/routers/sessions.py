@@ -18,6 +18,7 @@ from server.methods import METHODS, PARAM_HELP
 from server.routers.common import (cell_of, check_step, entry_matrix, entry_out, flange_pose_of,
                                    next_step, resolve_inputs, robot_of, session_out, spec_of,
                                    step_out, taught_data)
+from server.routers.robot import physics_of
 from server.schemas import (EntryOut, ReportOut, RunCycleOut, SessionIn, SessionOut, TouchUpIn,
                             jsonable)
 from solvers.dh import forward_kinematics
@@ -86,7 +87,10 @@ def touch_up(controller_id: int, session_id: int, db: SessionDep,
         joints = c.joints_deg if body.joints_deg is None else body.joints_deg
         source = "touch_up" if body.joints_deg is None else "joints"
         pose = flange_pose_of(c, joints)
-    crud.put_point(db, s, step, source, pose.as_array(), joints)
+    sign = c.motion_sign if source == "touch_up" else None  # the emulated arm's flanks
+    crud.put_point(db, s, step, source, pose.as_array(), joints, t_s=float(c.clock_s or 0.0),
+                   motion_sign=sign)
+    c.clock_s = float(c.clock_s or 0.0) + emulator.TOUCH_UP_S
     return session_out(s)
 
 
@@ -155,6 +159,17 @@ def _light_barrier_session(db: SessionDep, controller_id: int, session_id: int):
     return s
 
 
+def _nominal_tool(db: SessionDep, s) -> np.ndarray:  # noqa: ANN001
+    """T_flange_tcp the cycle is planned for: params.nominal_tool, else the target slot."""
+    if s.params.get("nominal_tool"):
+        return Pose(**s.params["nominal_tool"]).as_matrix()
+    nominal = entry_matrix(crud.get_entry(db, s.controller_id, "tool", s.target_no))
+    if np.allclose(nominal[:3, 3], 0.0):
+        raise CalibrationError(("params", "nominal_tool"), f"tool {s.target_no} is empty: give "
+                               "the nominal TCP (the tool's drawing length) for the cycle")
+    return nominal
+
+
 @router.post(PREFIX + "/{session_id}/run-cycle")
 def run_cycle(controller_id: int, session_id: int, db: SessionDep) -> RunCycleOut:
     """Run the light-barrier measuring cycle on the emulated robot and sensor; every beam
@@ -170,22 +185,22 @@ def run_cycle(controller_id: int, session_id: int, db: SessionDep) -> RunCycleOu
     if "tool_diameter_mm" not in params:
         raise CalibrationError(("params", "tool_diameter_mm"),
                                "required with your own beams: the shaft diameter")
-    if params.get("nominal_tool"):
-        nominal = Pose(**params["nominal_tool"]).as_matrix()
-    else:
-        nominal = entry_matrix(crud.get_entry(db, controller_id, "tool", s.target_no))
-        if np.allclose(nominal[:3, 3], 0.0):
-            raise CalibrationError(("params", "nominal_tool"), f"tool {s.target_no} is empty: give "
-                                   "the nominal TCP (the tool's drawing length) for the cycle")
+    nominal = _nominal_tool(db, s)
     beams = resolve_inputs(db, s).beams
     run = emulator.run_beam_cycle(robot_of(c), cell, c.joints_deg, nominal, beams,
                                   float(params["tool_diameter_mm"]),
-                                  tuple(params.get("heights_mm") or (10.0, 40.0)))
+                                  tuple(params.get("heights_mm") or (10.0, 40.0)),
+                                  physics=physics_of(db, c))
     crud.clear_points(db, s)
     for k, ev in enumerate(run.triggers):
         pose = Pose.from_matrix(ev.T_base_flange).as_array()
-        crud.put_point(db, s, k, "beam", pose, None, ev.beam_id, ev.edge, ev.tcp_velocity_mm_s)
+        crud.put_point(db, s, k, "beam", pose, run.trigger_joints_deg[k], ev.beam_id, ev.edge,
+                       ev.tcp_velocity_mm_s, t_s=float(run.trigger_t_s[k]),
+                       motion_sign=run.trigger_signs[k])
     c.joints_deg = [float(q) for q in run.joints_deg]
+    c.motion_sign = [float(v) for v in run.motion_sign]
+    c.clock_s = float(run.clock_s)
+    c.motion_count = int(c.motion_count or 0) + 1
     return RunCycleOut(triggers=len(run.triggers), passes=run.passes, session=session_out(s))
 
 
@@ -211,5 +226,72 @@ def post_beam_recording(controller_id: int, session_id: int, db: SessionDep,
     for k in range(rec.n_samples):
         vel = None if rec.tcp_velocity_mm_s is None else rec.tcp_velocity_mm_s[k]
         crud.put_point(db, s, k, "beam", Pose.from_matrix(T[k]).as_array(), rec.joints_deg[k],
-                       str(rec.beam_ids[k]), str(rec.edges[k]), vel)
+                       str(rec.beam_ids[k]), str(rec.edges[k]), vel, t_s=float(rec.t_s[k]))
     return session_out(s)
+
+
+# ---------------------------------------------------------------------------- recordings
+
+RECORDING_KINDS = {"tool.xyz_4point": "touch", "tool.xyz_reference": "touch",
+                   "tool.light_barrier": "beam"}
+
+
+@router.get(PREFIX + "/{session_id}/recording")
+def session_recording(controller_id: int, session_id: int, db: SessionDep) -> dict[str, Any]:
+    """The session's taught points as a ``robot-recording/1`` document: kind ``touch`` for
+    tool.xyz_4point / tool.xyz_reference (>= 4 points), kind ``beam`` for tool.light_barrier
+    (>= 6 triggers). Samples in the order they were taught (emulated clock, ``t_s`` from the
+    first), the controller's DH table (decoupled), the nominal tool (the session's result, else
+    the slot; the cycle's nominal tool for beams), the active tool's load as the payload, and
+    ``start_joints_deg`` one degree behind the first sample along each joint's last motion
+    (so the backlash flank of the first sample is the one the emulated arm had)."""
+    from server.recording import to_document
+    from solvers.recording import MIN_SAMPLES, RecordingData
+    from solvers.simulate import _arm
+
+    c = crud.get_controller(db, controller_id)
+    s = crud.get_session(db, controller_id, session_id)
+    kind = RECORDING_KINDS.get(s.method)
+    if kind is None:
+        raise CalibrationError(("method",), f"session {s.id} is {s.method}; recordings are made "
+                               "from " + ", ".join(RECORDING_KINDS) + " sessions")
+    points = sorted(s.points, key=lambda p: (p.t_s is None, p.t_s or 0.0, p.step))
+    for p in points:
+        if p.joints_deg is None:
+            raise CalibrationError(("points", p.step, "joints_deg"), "taught as a flange pose: a "
+                                   "recording needs the joint values")
+    need = MIN_SAMPLES[kind]
+    if len(points) < need:
+        raise CalibrationError(("points",), f"a {kind} recording needs at least {need} taught "
+                               f"points; session {s.id} has {len(points)}")
+    if kind == "beam":
+        tool = _nominal_tool(db, s)
+    elif s.result_values() is not None:
+        tool = Pose(*s.result_values()).as_matrix()
+    else:
+        tool = entry_matrix(crud.get_entry(db, controller_id, "tool", s.target_no))
+    arm = _arm(robot_of(c), tool)  # the format holds decoupled joints (FANUC J2/J3)
+    q = np.array([p.joints_deg for p in points], dtype=float)
+    times, t_prev = [], 0.0
+    for p in points:
+        t_prev = p.t_s if p.t_s is not None else t_prev
+        times.append(t_prev)
+    t = np.maximum.accumulate(np.array(times) - times[0])
+    start = None
+    if points[0].motion_sign is not None:
+        start = (q[0] - np.array(points[0].motion_sign, dtype=float)) @ arm.C.T
+    physics = physics_of(db, c)
+    extra: dict[str, Any] = {}
+    if kind == "beam":
+        params = s.params
+        extra = dict(beams=resolve_inputs(db, s).beams,
+                     tool_diameter_mm=float(params.get("tool_diameter_mm") or 0.0),
+                     beam_ids=np.array([p.beam_id for p in points], dtype=str),
+                     edges=np.array([p.edge for p in points], dtype=str),
+                     tcp_velocity_mm_s=np.array([[p.vx_mm_s, p.vy_mm_s, p.vz_mm_s]
+                                                 for p in points], dtype=float))
+    rec = RecordingData(kind=kind, robot=arm.model, tool=tool, t_s=t, joints_deg=q @ arm.C.T,
+                        payload_mass_kg=physics.payload_mass_kg,
+                        payload_com_mm=physics.payload_com_mm, start_joints_deg=start,
+                        recorded_at=s.created_at.isoformat(), **extra)
+    return to_document(rec)
