@@ -35,7 +35,7 @@ from solvers.errors import CalibrationError, KinematicsError
 from solvers.frames import Pose, invert, rotation_matrix
 from solvers.physics import Imperfections, tool_deflection_mm, true_flange_poses
 from solvers.robots import ROBOTS
-from solvers.simulate import _newton
+from solvers.simulate import solve_pose_newton
 from solvers.validate import FloatArray
 
 JogMode = Literal["joint", "world", "base", "tool"]
@@ -402,7 +402,7 @@ def approach(robot: RobotModel, cell: Cell, q_now: FloatArray, target: str,
 
     With ``physics`` (an imperfect arm), the TRUE held point goes onto the target: inverse
     kinematics on the nominal model, then Newton steps on the true pose (the nominal
-    Jacobian, :func:`solvers.simulate._newton`), the move's backlash flank taken from
+    Jacobian, :func:`solvers.simulate.solve_pose_newton`), the move's backlash flank taken from
     ``q_now``, the thermal drift at the clock when the approach ends (``physics.clock_s`` +
     the move + :data:`APPROACH_S`, as the route advances it). The operator stops
     ``noise_mm`` (per axis, seeded by ``physics.noise_seed``) off the mark. The joints
@@ -433,7 +433,7 @@ def _true_newton(robot: RobotModel, physics: RobotPhysics, q_now: FloatArray, q_
     arm as it is when the approach ends (clock + move time + :data:`APPROACH_S`)."""
     arrival = physics.clock_s + motion_duration_s(robot, q_now, q_nominal) + APPROACH_S
     physics = replace(physics, clock_s=arrival)
-    q = _newton(lambda x: true_pose(robot, physics, q_now, x, T_flange_held, bends),
+    q = solve_pose_newton(lambda x: true_pose(robot, physics, q_now, x, T_flange_held, bends),
                 lambda x: geometric_jacobian(robot, x, T_flange_held), T_goal, q_nominal,
                 tol_mm=1e-7)
     check_joint_limits(robot, q)

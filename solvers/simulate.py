@@ -125,7 +125,9 @@ class _Arm:
         return self.model.flange_pose.as_matrix() @ self.tool
 
 
-def _arm(robot: RobotModel | str, tool: FloatArray) -> _Arm:
+def decoupled_arm(robot: RobotModel | str, tool: FloatArray) -> _Arm:
+    """The arm as a recording holds it: J2/J3 coupling folded into the DH angles, so that
+    ``q`` is the decoupled joint vector; ``fk``/``jac`` of the TCP with ``tool``."""
     if isinstance(robot, str):
         if robot not in ROBOTS:
             raise CalibrationError(("robot",), f"unknown robot {robot!r}; the library has "
@@ -143,9 +145,13 @@ def _arm(robot: RobotModel | str, tool: FloatArray) -> _Arm:
     return _Arm(model, C, robot.limits_deg(), reach, tool)
 
 
-def _newton(fk, jac, goal: FloatArray, q0: FloatArray, tol_mm: float = 1e-9,
+def solve_pose_newton(fk, jac, goal: FloatArray, q0: FloatArray, tol_mm: float = 1e-9,
             max_iter: int = 60) -> FloatArray:
-    """Joint values with ``fk(q) == goal`` (pose), Gauss-Newton on the weighted pose error."""
+    """Joint values with ``fk(q) == goal`` (pose), Gauss-Newton on the weighted pose error.
+
+    ``fk`` may be the true (imperfect) robot while ``jac`` is the nominal one: that is how a
+    touch-up is found on a robot whose model is off (used by the simulator and the emulator).
+    """
     q = np.array(q0, dtype=float)
     for _ in range(max_iter):
         e = pose_error(fk(q), goal)
@@ -215,7 +221,7 @@ def _ready(arm: _Arm, rng: np.random.Generator, point_mm: FloatArray | None = No
             goal[:3, :3] = (Rn * Rotation.from_matrix(T[k, :3, :3])).as_matrix()
             goal[:3, 3] = np.round(p[k], 0) if point_mm is None else point_mm
             try:
-                q = _newton(arm.fk, arm.jac, goal, Qd[k])
+                q = solve_pose_newton(arm.fk, arm.jac, goal, Qd[k])
             except KinematicsError:
                 continue
             if arm.within_limits(q, 5.0) and _cond(arm, q[None])[0] < MAX_COND:
@@ -286,8 +292,8 @@ def _touch(arm: _Arm, imp: Imperfections, n: int, rng: np.random.Generator,
         goal[:3, :3] = rot.as_matrix()
         goal[:3, 3] = point + (rng.normal(0.0, imp.noise_mm, 3) if imp.noise_mm > 0 else 0.0)
         try:
-            q = _newton(arm.fk, arm.jac, goal, q0)
-            q = _newton(lambda x: hist.true_T(x, float(t[k])), arm.jac, goal, q, tol_mm=1e-9)
+            q = solve_pose_newton(arm.fk, arm.jac, goal, q0)
+            q = solve_pose_newton(lambda x: hist.true_T(x, float(t[k])), arm.jac, goal, q, tol_mm=1e-9)
         except KinematicsError:
             continue
         if not arm.within_limits(q) or _cond(arm, q[None])[0] > MAX_COND:
@@ -381,7 +387,7 @@ def _seed_turn(arm: _Arm, goal: FloatArray, q_ready: FloatArray) -> FloatArray:
         seed = q_ready.copy()
         seed[-1] += turn
         try:
-            q = _newton(arm.fk, arm.jac, goal, seed)
+            q = solve_pose_newton(arm.fk, arm.jac, goal, seed)
         except KinematicsError:
             continue
         if not arm.within_limits(q, 2.0):
@@ -429,7 +435,7 @@ def _beam(arm: _Arm, imp: Imperfections, n: int, rng: np.random.Generator,
         if cache.get("rotation") is not e.rotation:  # a new turn about the tool axis: reseed
             cache["rotation"] = e.rotation
             cache["q"] = _seed_turn(arm, goal, q_ready)
-        q = _newton(arm.fk, arm.jac, goal, cache["q"])
+        q = solve_pose_newton(arm.fk, arm.jac, goal, cache["q"])
         cache["q"] = q
         return q
 
@@ -564,7 +570,7 @@ def simulate_recording(kind: str, robot: RobotModel | str,
     if n < 1:
         raise CalibrationError(("n_samples",), f"must be >= 1, got {n}")
     tool = _tool_matrix(tool_mm)
-    arm = _arm(robot, tool)
+    arm = decoupled_arm(robot, tool)
     imp.check(arm.model.dof)
     pay = _payload(payload)
     rng = np.random.default_rng(seed)

@@ -247,7 +247,7 @@ def session_recording(controller_id: int, session_id: int, db: SessionDep) -> di
     (so the backlash flank of the first sample is the one the emulated arm had)."""
     from server.recording import to_document
     from solvers.recording import MIN_SAMPLES, RecordingData
-    from solvers.simulate import _arm
+    from solvers.simulate import decoupled_arm
 
     c = crud.get_controller(db, controller_id)
     s = crud.get_session(db, controller_id, session_id)
@@ -270,7 +270,7 @@ def session_recording(controller_id: int, session_id: int, db: SessionDep) -> di
         tool = Pose(*s.result_values()).as_matrix()
     else:
         tool = entry_matrix(crud.get_entry(db, controller_id, "tool", s.target_no))
-    arm = _arm(robot_of(c), tool)  # the format holds decoupled joints (FANUC J2/J3)
+    arm = decoupled_arm(robot_of(c), tool)  # the format holds decoupled joints (FANUC J2/J3)
     q = np.array([p.joints_deg for p in points], dtype=float)
     times, t_prev = [], 0.0
     for p in points:
