@@ -8,7 +8,6 @@ controller "cell-1" (KUKA KR 6 R900 sixx) in an empty DB and serves ``web/`` at 
 from __future__ import annotations
 
 import asyncio
-import importlib.util
 from pathlib import Path
 
 from fastapi import FastAPI
@@ -19,7 +18,8 @@ from db import crud
 from db.session import make_engine, make_sessionmaker, run_migrations
 from server import errors
 from server.emulator import DEMO_ROBOT, home_joints
-from server.routers import base, controllers, export, fixed_tool, robot, sessions, tool, workpiece
+from server.routers import (analysis, base, controllers, export, fixed_tool, robot, sessions, tool,
+                            workpiece)
 from server.settings import Settings
 from solvers.robots import ROBOTS
 
@@ -43,15 +43,6 @@ PLACEHOLDER = """<!doctype html><html><head><meta charset="utf-8"><title>pendant
 at <a href="/docs">/docs</a>.</p></body></html>"""
 
 
-def _analysis_router():  # noqa: ANN202
-    """The recordings & analysis router when server/routers/analysis.py is installed."""
-    if importlib.util.find_spec("server.routers.analysis") is None:
-        return None
-    from server.routers import analysis  # errors inside it are real errors: not swallowed
-
-    return analysis.router
-
-
 def ensure_demo(app: FastAPI) -> None:
     """An empty DB gets the demo controller "cell-1" so the pendant page has something to show."""
     with app.state.sessionmaker() as db:
@@ -73,11 +64,9 @@ def create_app(settings: Settings | None = None) -> FastAPI:
     app.state.write_lock = asyncio.Lock()  # one writer at a time (SQLite); see deps.get_session
     app.state.settings = settings
     errors.install(app)
-    for module in (controllers, robot, tool, base, fixed_tool, workpiece, sessions, export):
+    for module in (controllers, robot, tool, base, fixed_tool, workpiece, sessions, export,
+                   analysis):
         app.include_router(module.router)
-    analysis = _analysis_router()
-    if analysis is not None:
-        app.include_router(analysis)
     if settings.demo_controller:
         ensure_demo(app)
     _mount_web(app, Path(settings.web_dir))

@@ -12,7 +12,6 @@ from __future__ import annotations
 
 import argparse
 import csv
-import importlib.util
 import io
 import json
 import sys
@@ -21,6 +20,7 @@ from typing import Any, Sequence
 
 import numpy as np
 
+from server.analysis_cli import add_analysis_commands
 from server.methods import METHODS, MethodInputs, TaughtData
 from server.schemas import ReportOut
 from solvers.errors import CalibrationError
@@ -170,10 +170,7 @@ def build_parser() -> argparse.ArgumentParser:
     e.add_argument("--format", choices=["kuka", "abb", "fanuc", "ur", "json"], default="kuka")
     e.add_argument("--db", help="database URL")
 
-    if importlib.util.find_spec("server.analysis_cli") is not None:
-        from server.analysis_cli import add_analysis_commands  # its own errors are real errors
-
-        add_analysis_commands(sub)
+    add_analysis_commands(sub)
     return p
 
 
