@@ -6,7 +6,8 @@
    joint-2/3 compliance, a joint offset, two DH length errors, backlash on joint 1, noise
    0.02 mm), and held-out RMS of the physics-aware model next to a blind recalibration of
    every identifiable DH parameter on the same recordings.
-2. The same on the real UR10 laser-tracker data (tests/data/ur10-laser-tracker).
+2. The same on the real UR10 laser-tracker data (tests/data/ur10-laser-tracker); its
+   analysis time is the speed target that used to be a test (< 10 s; tests never time).
 
 The last line is machine-read:
 ``analysis_1000_s=<s> heldout_physics_mm=<mm> heldout_blind_dh_mm=<mm>`` (the held-out
@@ -29,6 +30,7 @@ from solvers.analysis.blind import blind_dh  # noqa: E402
 from solvers.physics import Imperfections  # noqa: E402
 from solvers.simulate import simulate_recording  # noqa: E402
 
+UR10_TARGET_S = 10.0
 UR10_DATA = ROOT / "tests" / "data" / "ur10-laser-tracker" / "recording-series-d.json"
 SIM_EFFECTS = Imperfections(
     noise_mm=0.02,
@@ -40,7 +42,10 @@ SIM_EFFECTS = Imperfections(
 
 
 def names(rep: dict) -> str:
-    return ", ".join(f["effect"] + (f" J{f['joint']}" if f["joint"] else "") for f in rep["findings"])
+    return ", ".join(f["effect"] + (f" J{f['joint']}" if f["joint"] else "")
+                     + (f" ({f['parameters']['dh_parameter']})"
+                        if f["parameters"].get("dh_parameter") else "")
+                     for f in rep["findings"])
 
 
 def row(label: str, rec) -> tuple[float, dict, dict]:
@@ -66,7 +71,9 @@ def main() -> None:
         if n == 1000:
             t1000 = dt
     rec = parse_recording(json.loads(UR10_DATA.read_text(encoding="utf-8")))
-    _, rep, blind = row("real UR10 (series D)", rec)
+    t_ur10, rep, blind = row("real UR10 (series D)", rec)
+    print(f"real UR10 analysis time: {t_ur10:.2f} s for {rec.n_samples} samples "
+          f"(target < {UR10_TARGET_S:g} s: {'met' if t_ur10 < UR10_TARGET_S else 'MISSED'})")
     print(f"analysis_1000_s={t1000:.3f} heldout_physics_mm={rep['final']['heldout_rms_mm']:.4f} "
           f"heldout_blind_dh_mm={blind['heldout_rms_mm']:.4f}")
 

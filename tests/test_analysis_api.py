@@ -6,7 +6,7 @@ from __future__ import annotations
 import json
 
 import pytest
-from api_helpers import client, db_url, ok  # noqa: F401  (fixtures)
+from api_helpers import client, db_url, make_client, ok  # noqa: F401  (fixtures)
 
 from server.analysis_cli import parse_effects
 from server.cli import main
@@ -34,10 +34,29 @@ def test_store_analyze_and_read_back(client) -> None:  # noqa: F811
     assert set(rep["baseline"]) >= {"rms_mm", "heldout_rms_mm", "parameters"}
     assert set(rep["locate"]) >= {"summary", "worst_samples"}
     assert set(rep["final"]) >= {"rms_mm", "heldout_rms_mm"}
+    for block in ("baseline", "final"):  # per-sample |r_k|, sample order (the page plots them)
+        r = rep[block]["residuals_mm"]
+        assert len(r) == rep["n_samples"] and min(r) >= 0.0
+        rms = (sum(v * v for v in r) / len(r)) ** 0.5
+        assert rms == pytest.approx(rep[block]["rms_mm"], rel=1e-3, abs=1e-5)
     assert set(f) >= {"effect", "joint", "explanation", "parameters", "rms_mm", "heldout_rms_mm", "evidence"}
     again = ok(client.get(f"/analysis/{rep['id']}"))
     assert again["findings"] == rep["findings"]
     assert ok(client.get(f"/recordings/{rec['id']}"))["format"] == "robot-recording/1"
+
+
+def test_recording_and_analysis_survive_a_restart(db_url) -> None:  # noqa: F811
+    doc = compliant_ur10()
+    with make_client(db_url) as first:
+        rid = ok(first.post("/recordings", json=doc))["id"]
+        rep = ok(first.post(f"/recordings/{rid}/analyze"))
+        first.app.state.engine.dispose()
+    with make_client(db_url) as second:  # a new process on the same SQLite file
+        assert ok(second.get(f"/recordings/{rid}")) == doc
+        assert ok(second.get(f"/analysis/{rep['id']}")) == rep
+        again = ok(second.post(f"/recordings/{rid}/analyze"))  # ids go on, not start over
+        assert again["id"] != rep["id"] and again["findings"] == rep["findings"]
+        second.app.state.engine.dispose()
 
 
 def test_bad_recording_is_422_naming_the_field(client) -> None:  # noqa: F811

@@ -1,9 +1,21 @@
 """Analysis: each effect of the library, simulated on several arms and both DH conventions,
-is named with the right joint and value, and the model with it predicts held-out samples
-better; concealed cases included (see ``CASES``)."""
+is named with the right joint and value, and the model with it predicts held-out samples at
+most 0.6x as far off as the rigid model does; concealed cases included (see ``CASES``).
+
+Concealed, as the requirement words it:
+
+- *by noise*: the effect's rigid-fit RMS (what the rigid fit leaves of the effect alone, the
+  same poses without noise) is within 1.5x the noise floor (the rigid-fit RMS of the same
+  recording with the noise alone). Those cases sit at 1.3..1.5x: the best any model can then
+  do held out is about ``1 / sqrt(1 + 1.45^2) = 0.57`` of the baseline, so they need enough
+  samples (60..250) for the final model's held-out RMS to come close to the noise.
+- *absorbed*: the rigid fit takes more than half of the effect's squared size into its own
+  parameters (the TCP, the instrument frame, the fixed point, the tool axis).
+"""
 
 from __future__ import annotations
 
+from dataclasses import replace
 from functools import lru_cache
 
 import numpy as np
@@ -11,14 +23,17 @@ import pytest
 
 from server.recording import parse_recording
 from solvers.analysis import analyze
-from solvers.analysis.baseline import fit_baseline
-from solvers.analysis.effects import build_library
+from solvers.analysis.baseline import _beam_constraint, _beam_inputs, fit_baseline, rms_mm
 from solvers.analysis.selection import orth, project_out
-from solvers.physics import Imperfections
+from solvers.dh import forward_kinematics
+from solvers.physics import Imperfections, true_tcp_poses
+from solvers.robots import ROBOTS
 from solvers.simulate import simulate_recording
 
 NOISE_MM = 0.02
 PAYLOAD = (3.0, [0.0, 0.0, 60.0])
+CONCEALED_BAND = (1.3, 1.5)   # effect rigid-fit RMS / noise floor of a case concealed by noise
+HELDOUT_RATIO = 0.6           # final held-out RMS / the rigid baseline's, every case
 
 
 def per_joint(j: int, v: float) -> tuple[float, ...]:
@@ -27,24 +42,27 @@ def per_joint(j: int, v: float) -> tuple[float, ...]:
     return tuple(out)
 
 
-# (kind, n, robot, effects, effect, joint, parameter, true value)
+# (kind, n, robot, effects, effect, joint, parameter, true value, concealed)
+# concealed: "noise" (effect rigid-fit RMS within CONCEALED_BAND x the noise floor),
+# "absorbed" (the rigid fit absorbs more than half of it), "both", or "" (in plain view)
 CASES = [
-    ("tracker", 60, "ur10", dict(compliance_deg_per_Nm=per_joint(2, 3e-4)), "joint_compliance", 2, "compliance_deg_per_Nm", 3e-4),
-    ("tracker", 60, "tm5_900", dict(compliance_deg_per_Nm=per_joint(3, 1e-3)), "joint_compliance", 3, "compliance_deg_per_Nm", 1e-3),
-    ("tracker", 60, "fanuc_lrmate200id", dict(compliance_deg_per_Nm=per_joint(2, 1e-3)), "joint_compliance", 2, "compliance_deg_per_Nm", 1e-3),
-    ("tracker", 60, "kuka_kr6_r900_sixx", dict(joint_offset_deg=per_joint(3, 0.01)), "joint_offset", 3, "offset_deg", 0.01),
-    ("tracker", 60, "tm5_900", dict(joint_offset_deg=per_joint(2, 0.01)), "joint_offset", 2, "offset_deg", 0.01),
-    ("tracker", 60, "tm5_900", dict(dh_delta={("a_mm", 3): 0.08}), "link_length", 3, "delta_mm", 0.08),
-    ("tracker", 60, "abb_irb120", dict(dh_delta={("a_mm", 2): 0.08}), "link_length", 2, "delta_mm", 0.08),
-    ("tracker", 60, "ur10", dict(backlash_deg=per_joint(1, 0.01)), "backlash", 1, "backlash_deg", 0.01),
-    ("tracker", 60, "tm5_900", dict(backlash_deg=per_joint(2, 0.008)), "backlash", 2, "backlash_deg", 0.008),
-    ("tracker", 60, "abb_irb120", dict(thermal_drift_mm=0.08), "thermal_drift", None, "drift_mm", 0.08),
-    ("tracker", 60, "ur5e", dict(tool_deflection_mm_per_N=0.002), "tool_deflection", None, "deflection_mm_per_N", 0.002),
-    ("touch", 30, "kuka_kr6_r900_sixx", dict(joint_offset_deg=per_joint(5, 0.03)), "joint_offset", 5, "offset_deg", 0.03),
-    ("touch", 30, "tm5_900", dict(compliance_deg_per_Nm=per_joint(2, 3e-3)), "joint_compliance", 2, "compliance_deg_per_Nm", 3e-3),
-    ("touch", 30, "abb_irb120", dict(thermal_drift_mm=0.25), "thermal_drift", None, "drift_mm", 0.25),
-    ("beam", 72, "kuka_kr6_r900_sixx", dict(trigger_latency_ms=4.0), "trigger_latency", None, "latency_ms", 4.0),
-    ("beam", 72, "tm5_900", dict(trigger_latency_ms=3.0), "trigger_latency", None, "latency_ms", 3.0),
+    ("tracker", 60, "ur10", dict(compliance_deg_per_Nm=per_joint(2, 3e-4)), "joint_compliance", 2, "compliance_deg_per_Nm", 3e-4, "absorbed"),
+    ("tracker", 60, "tm5_900", dict(compliance_deg_per_Nm=per_joint(3, 1e-3)), "joint_compliance", 3, "compliance_deg_per_Nm", 1e-3, ""),
+    ("tracker", 60, "fanuc_lrmate200id", dict(compliance_deg_per_Nm=per_joint(2, 1e-3)), "joint_compliance", 2, "compliance_deg_per_Nm", 1e-3, ""),
+    ("tracker", 60, "kuka_kr6_r900_sixx", dict(joint_offset_deg=per_joint(3, 0.01)), "joint_offset", 3, "offset_deg", 0.01, ""),
+    ("tracker", 60, "tm5_900", dict(joint_offset_deg=per_joint(2, 0.01)), "joint_offset", 2, "offset_deg", 0.01, ""),
+    ("tracker", 60, "tm5_900", dict(dh_delta={("a_mm", 3): 0.08}), "link_length", 3, "delta_mm", 0.08, ""),
+    ("tracker", 60, "abb_irb120", dict(dh_delta={("a_mm", 2): 0.08}), "link_length", 2, "delta_mm", 0.08, "absorbed"),
+    ("tracker", 60, "ur10", dict(backlash_deg=per_joint(1, 0.01)), "backlash", 1, "backlash_deg", 0.01, ""),
+    ("tracker", 250, "tm5_900", dict(backlash_deg=per_joint(2, 0.011)), "backlash", 2, "backlash_deg", 0.011, "noise"),
+    ("tracker", 250, "abb_irb120", dict(thermal_drift_mm=0.17), "thermal_drift", None, "drift_mm", 0.17, "both"),
+    ("tracker", 250, "ur5e", dict(tool_deflection_mm_per_N=0.0037), "tool_deflection", None, "deflection_mm_per_N", 0.0037, "both"),
+    ("touch", 60, "kuka_kr6_r900_sixx", dict(joint_offset_deg=per_joint(5, 0.031)), "joint_offset", 5, "offset_deg", 0.031, "both"),
+    ("touch", 30, "tm5_900", dict(compliance_deg_per_Nm=per_joint(2, 3e-3)), "joint_compliance", 2, "compliance_deg_per_Nm", 3e-3, "absorbed"),
+    ("touch", 30, "abb_irb120", dict(thermal_drift_mm=0.25), "thermal_drift", None, "drift_mm", 0.25, "absorbed"),
+    ("beam", 72, "kuka_kr6_r900_sixx", dict(trigger_latency_ms=4.0), "trigger_latency", None, "latency_ms", 4.0, ""),
+    ("beam", 216, "tm5_900", dict(trigger_latency_ms=3.1), "trigger_latency", None, "latency_ms", 3.1, "noise"),
+    ("touch", 80, "tm5_900", dict(joint_offset_deg=per_joint(5, 0.027)), "joint_offset", 5, "offset_deg", 0.027, "both"),
 ]
 
 
@@ -52,63 +70,113 @@ def case_id(c) -> str:
     return f"{c[0]}-{c[2]}-{c[4]}" + (f"-J{c[5]}" if c[5] else "")
 
 
+def effect_rows(rec, imp: Imperfections) -> np.ndarray:
+    """The rigid model's residual rows (mm) that the effect alone causes at the recorded
+    joints: the nominal model's constraint minus the true robot's (noise left out)."""
+    T_nom = forward_kinematics(rec.robot, rec.joints_deg, rec.tool)
+    T_true = true_tcp_poses(rec.robot, rec.joints_deg, rec.t_s, replace(imp, noise_mm=0.0),
+                            rec.tool, rec.start_joints_deg, rec.payload_mass_kg,
+                            rec.payload_com_mm, rec.tcp_velocity_mm_s)
+    if rec.kind == "beam":
+        b, v, w, edge, radius = _beam_inputs(rec)
+
+        def g(T):
+            return _beam_constraint(T[:, :3, 3], T[:, :3, 2], b, v, w, edge, radius)
+
+        return g(T_nom) - g(T_true)
+    return (T_nom[:, :3, 3] - T_true[:, :3, 3]).ravel()
+
+
+def effect_figures(rec, imp: Imperfections) -> tuple[float, float]:
+    """(the effect's rigid-fit RMS in mm, the share of its squared size the rigid fit absorbs).
+
+    The rigid fit of the effect alone, linearised at the recording's rigid fit (the effects
+    are far smaller than the scale on which the rigid model bends; checked against a
+    noise-free recording by ``test_effect_rms_is_the_rigid_fit_of_the_effect_alone``).
+    """
+    base = fit_baseline(rec)
+    e = effect_rows(rec, imp)
+    if rec.kind == "tracker":
+        e = (e.reshape(-1, 3) @ base.R_instrument_base.T).ravel()   # into the instrument frame
+    ew = e if base.w is None else e * base.w
+    left = project_out(orth(base.B), ew[:, None])[:, 0]
+    absorbed = 1.0 - float(left @ left) / float(ew @ ew)
+    return rms_mm(left * base.row_scale, base.m), absorbed
+
+
+def floor_mm(kind: str, n: int, robot: str, seed: int) -> float:
+    """The noise floor: the rigid-fit RMS of the same recording with the noise alone."""
+    rec0 = parse_recording(simulate_recording(kind, robot, Imperfections(noise_mm=NOISE_MM), n,
+                                              seed=seed, payload=PAYLOAD))
+    base = fit_baseline(rec0)
+    return rms_mm(base.g_mm, base.m)
+
+
 @lru_cache(maxsize=None)
 def run(i: int) -> dict:
     kind, n, robot, effects, *_ = CASES[i]
     seed = 200 + i
-    rec = parse_recording(simulate_recording(kind, robot, Imperfections(noise_mm=NOISE_MM, **effects),
-                                             n, seed=seed, payload=PAYLOAD))
-    rec0 = parse_recording(simulate_recording(kind, robot, Imperfections(noise_mm=NOISE_MM), n,
-                                              seed=seed, payload=PAYLOAD))
-    report = analyze(rec)
-    floor = analyze(rec0)["baseline"]["rms_mm"]
-    # how much of the effect the rigid fit absorbs into its own parameters (TCP, frames)
-    base = fit_baseline(rec0)
-    dh = next(iter(effects.get("dh_delta", {("", 0): 0.0})))[0].replace("_mm", "") or None
-    cand = [c for c in build_library(rec0, base).candidates
-            if (c.effect, c.joint) == (CASES[i][4], CASES[i][5]) and c.dh_parameter in (None, dh)]
-    absorbed = 0.0
-    if cand and cand[0].columns.shape[1] == 1:
-        x = cand[0].columns[:, 0]
-        absorbed = 1.0 - float(np.sum(project_out(orth(base.B), x[:, None]) ** 2) / np.sum(x ** 2))
-    return {"report": report, "floor": floor, "absorbed": absorbed}
+    imp = Imperfections(noise_mm=NOISE_MM, **effects)
+    rec = parse_recording(simulate_recording(kind, robot, imp, n, seed=seed, payload=PAYLOAD))
+    effect_rms, absorbed = effect_figures(rec, imp)
+    floor = floor_mm(kind, n, robot, seed)
+    return {"report": analyze(rec), "effect_ratio": effect_rms / floor, "absorbed": absorbed}
 
 
 @pytest.mark.parametrize("i", range(len(CASES)), ids=[case_id(c) for c in CASES])
 def test_effect_is_named_with_joint_value_and_better_prediction(i: int) -> None:
-    kind, n, robot, effects, effect, joint, param, true = CASES[i]
+    kind, n, robot, effects, effect, joint, param, true, concealed = CASES[i]
     out = run(i)
     rep = out["report"]
     assert rep["format"] == "analysis-report/1" and rep["kind"] == kind
+    if concealed in ("noise", "both"):
+        lo, hi = CONCEALED_BAND
+        assert lo <= out["effect_ratio"] <= hi, out["effect_ratio"]
+    if concealed in ("absorbed", "both"):
+        assert out["absorbed"] > 0.5, out["absorbed"]
     assert rep["findings"], rep["locate"]["summary"]
     first = rep["findings"][0]
     assert (first["effect"], first["joint"]) == (effect, joint), [
         (f["effect"], f["joint"]) for f in rep["findings"]]
     assert first["parameters"][param] == pytest.approx(true, rel=0.3)
     assert rep["verdict"] == "explained"
-    base_ho = rep["baseline"]["heldout_rms_mm"]
-    concealed_by_noise = rep["baseline"]["rms_mm"] <= 1.5 * out["floor"]
-    if concealed_by_noise:
-        # the noise floor bounds what any model can reach: 1/1.5 of the baseline at best
-        assert rep["final"]["heldout_rms_mm"] < 0.95 * base_ho
-    else:
-        assert rep["final"]["heldout_rms_mm"] <= 0.6 * base_ho
+    ratio = rep["final"]["heldout_rms_mm"] / rep["baseline"]["heldout_rms_mm"]
+    assert ratio <= HELDOUT_RATIO, (ratio, out["effect_ratio"])
     assert first["explanation"] and isinstance(first["evidence"]["p_value"], float)
 
 
 def test_suite_has_concealed_cases() -> None:
-    """At least four cases hide the effect: within 1.5x the noise floor, or mostly absorbed."""
-    concealed = []
-    for i in range(len(CASES)):
-        out = run(i)
-        rep = out["report"]
-        if rep["baseline"]["rms_mm"] <= 1.5 * out["floor"] or out["absorbed"] > 0.5:
-            concealed.append(case_id(CASES[i]))
-    assert len(concealed) >= 4, concealed
+    """At least three cases concealed by noise and three mostly absorbed, on tracker and
+    touch/beam recordings and on both DH conventions."""
+    by_noise = [c for c in CASES if c[8] in ("noise", "both")]
+    absorbed = [c for c in CASES if c[8] in ("absorbed", "both")]
+    for group in (by_noise, absorbed):
+        assert len(group) >= 3, [case_id(c) for c in group]
+        assert {c[0] == "tracker" for c in group} == {True, False}
+        assert {ROBOTS[c[2]].dh_convention for c in group} == {"standard", "modified"}
 
 
 def test_both_dh_conventions_in_suite() -> None:
-    from solvers.robots import ROBOTS
-
     conventions = {ROBOTS[c[2]].dh_convention for c in CASES}
     assert conventions == {"standard", "modified"}
+
+
+@pytest.mark.parametrize("kind, n, robot, effects", [
+    ("tracker", 40, "ur10", dict(compliance_deg_per_Nm=per_joint(2, 3e-4))),
+    ("touch", 20, "tm5_900", dict(joint_offset_deg=per_joint(5, 0.03))),
+    ("beam", 40, "kuka_kr6_r900_sixx", dict(trigger_latency_ms=4.0, backlash_deg=per_joint(1, 0.01))),
+])
+def test_effect_rms_is_the_rigid_fit_of_the_effect_alone(kind, n, robot, effects) -> None:
+    """``effect_figures`` (linearised, at the noisy recording's joints) equals the rigid fit of
+    a noise-free recording; for a tracker the same seed gives the same poses without noise."""
+    imp = Imperfections(**effects)
+    clean = parse_recording(simulate_recording(kind, robot, imp, n, seed=5, payload=PAYLOAD))
+    base = fit_baseline(clean)
+    assert effect_figures(clean, imp)[0] == pytest.approx(rms_mm(base.g_mm, base.m), rel=1e-3)
+    if kind == "tracker":
+        noisy_imp = replace(imp, noise_mm=NOISE_MM)
+        noisy = parse_recording(simulate_recording(kind, robot, noisy_imp, n, seed=5,
+                                                   payload=PAYLOAD))
+        np.testing.assert_array_equal(noisy.joints_deg, clean.joints_deg)
+        assert effect_figures(noisy, noisy_imp)[0] == pytest.approx(
+            rms_mm(base.g_mm, base.m), rel=1e-2)

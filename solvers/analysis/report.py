@@ -24,14 +24,14 @@ from __future__ import annotations
 
 import numpy as np
 
-from solvers.analysis.baseline import Baseline, fit_baseline, rms_mm
+from solvers.analysis.baseline import Baseline, fit_baseline, per_sample_rms, rms_mm
 from solvers.analysis.blas import single_thread
 from solvers.analysis.effects import Candidate, build_library
 from solvers.analysis.kinematics import State
 from solvers.analysis.locate import (correlations, features, joint_angle_terms, locate,
                                      structure_groups)
-from solvers.analysis.selection import (CV, f_test, fit_linear, holm_pass, normalise, orth,
-                                        project_out, residual_ratio)
+from solvers.analysis.selection import (CV, f_test, fit_linear, holm_pass, identifiable_part,
+                                        normalise, orth, project_out, residual_ratio)
 from solvers.analysis.text import explanation, not_identifiable_reason
 from solvers.errors import CalibrationError
 from solvers.recording import MIN_SAMPLES
@@ -60,9 +60,10 @@ def _model(base: Baseline, chosen: list[Candidate], extra: list | None = None) -
 
 
 def _group_gains(y_perp, Q, groups, n_rows):
+    """(name, gain, p, k) of each structure group; only its identifiable directions count."""
     out = []
     for name, cols in groups:
-        Xp = project_out(Q, normalise(cols))
+        Xp = identifiable_part(Q, cols, IDENT_TOL)
         gain, p, k = f_test(y_perp, Q.shape[1], Xp, n_rows)
         out.append((name, gain, p, k))
     return out
@@ -216,6 +217,7 @@ def _analyze(rec, *, folds: int = 5, seed: int = 0, alpha: float = ALPHA,
     feats = features(rec, base, lib.torques_nm, lib.signs)
     QB = orth(base.B)
     base_rms = rms_mm(base.g_mm, m)
+    base_residuals = per_sample_rms(base.g_mm, m)
     cv.scale = base.row_scale
     base_cv = cv.heldout_rms(y, base.B, QB)
     locate_block = locate(rec, base, y, QB, feats)
@@ -356,6 +358,7 @@ def _analyze(rec, *, folds: int = 5, seed: int = 0, alpha: float = ALPHA,
         out_findings.append(entry)
 
     resid = y - M @ beta
+    final_residuals = per_sample_rms(resid * base.row_scale, m)
     sig = structure_test(y, Q, groups, n_rows)
     if sig:
         verdict = "unexplained_structure"
@@ -378,13 +381,15 @@ def _analyze(rec, *, folds: int = 5, seed: int = 0, alpha: float = ALPHA,
         "n_samples": int(N),
         "verdict": verdict,
         "baseline": {"rms_mm": round(base_rms, 5), "heldout_rms_mm": round(base_cv, 5),
-                     "parameters": {k: round(v, 6) for k, v in rigid_parameters.items()}},
+                     "parameters": {k: round(v, 6) for k, v in rigid_parameters.items()},
+                     "residuals_mm": [round(float(v), 6) for v in base_residuals]},
         "locate": locate_block,
         "findings": out_findings,
         "final": {"rms_mm": round(float(np.sqrt(rss_mm / N)), 5),
                   "heldout_rms_mm": round(final_cv, 5),
                   "noise_mm": round(sigma_row * float(np.sqrt(m)), 5),
-                  "n_parameters": int(M.shape[1])},
+                  "n_parameters": int(M.shape[1]),
+                  "residuals_mm": [round(float(v), 6) for v in final_residuals]},
         "not_identifiable": not_ident,
         "withheld": withheld,
     }

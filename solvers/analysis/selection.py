@@ -66,6 +66,33 @@ def residual_ratio(Q: FloatArray, X: FloatArray) -> float:
     return float(np.linalg.svd(P, compute_uv=False)[-1])
 
 
+def identifiable_part(Q: FloatArray, X: FloatArray, tol: float) -> FloatArray:
+    """The directions of span(X) that stand out of span(Q) by at least ``tol``.
+
+    Columns are normalised, projected out of span(Q) and split into principal directions;
+    a direction whose projection is shorter than ``tol`` (relative to unit columns) is left
+    out, as a candidate with ``residual_ratio < tol`` is. Such a direction is mostly what
+    rounding or the noise in the regressors themselves makes of it: in a beam recording the
+    joints are recorded where the trigger fired, so a trigger's jitter along the motion
+    moves both the residual and every regressor computed from the joints, and a direction
+    that is almost inside span(Q) is then mostly that jitter (errors in the variables).
+    Returns (rows, k') columns (principal directions scaled by their length).
+
+    Examples
+    --------
+    >>> Q = np.array([[1.0], [0.0], [0.0]])
+    >>> X = np.array([[1.0, 1.0], [1e-6, 0.0], [0.0, 1.0]])
+    >>> identifiable_part(Q, X, 3e-3).shape   # the first column is (almost) in span(Q)
+    (3, 1)
+    """
+    Xp = project_out(Q, normalise(X))
+    if Xp.shape[1] == 0:
+        return Xp
+    U, s, _ = np.linalg.svd(Xp, full_matrices=False)
+    keep = s >= tol
+    return U[:, keep] * s[keep]
+
+
 def folds_of(n_samples: int, k: int, seed: int) -> list[FloatArray]:
     rng = np.random.default_rng(seed)
     perm = rng.permutation(n_samples)
