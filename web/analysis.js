@@ -1,0 +1,564 @@
+// pendant: the analysis page. Plain ES module, no build step, no libraries.
+//
+// A person uploads (or pastes) a robot-recording/1 document; the page POSTs it as it is to
+// /recordings (so the service, not the browser, judges it: a NaN or a wrong joint count
+// comes back as a 422 naming the field), then POST /recordings/{id}/analyze, and shows the
+// analysis-report/1: verdict, RMS before/after, where the mismatch is, each finding, what is
+// not identifiable, and per-sample residual plots before (rigid model) and after (final
+// model). The page only draws what the report carries; it computes no statistics itself.
+//
+// Per-sample residuals are read from `baseline.residuals_mm` and `final.residuals_mm` (or
+// `residuals.baseline_mm` / `residuals.final_mm`): |r_k| in mm, one per sample, in sample
+// order. A report without them gets a note in place of the plot.
+//
+// ?analysis=ID shows the stored report GET /analysis/ID.
+
+const $ = (sel, root = document) => root.querySelector(sel);
+const SVG = "http://www.w3.org/2000/svg";
+
+const EFFECTS = {
+  joint_offset: "Joint offset",
+  link_length: "Link length",
+  link_twist: "Link twist",
+  joint_compliance: "Joint compliance",
+  backlash: "Backlash",
+  thermal_drift: "Thermal drift",
+  trigger_latency: "Trigger latency",
+  tool_deflection: "Tool deflection",
+};
+const VERDICTS = {
+  explained: ["Explained", "The findings bring the residual down to the noise level."],
+  no_missing_physics: ["No missing physics", "The rigid model fits to the noise level: nothing is missing."],
+  unexplained_structure: ["Unexplained structure",
+    "Structure remains that no known effect explains; see where the mismatch is."],
+};
+const UNITS = [["_deg_per_Nm", "deg/Nm"], ["_mm_per_N", "mm/N"], ["_mm", "mm"], ["_deg", "deg"],
+  ["_ms", "ms"], ["_s", "s"], ["_kg", "kg"]];
+const EVIDENCE = {
+  p_value: "p-value", candidates_tested: "candidates tested", correlation_r: "correlation r",
+  identifiability: "identifiability", t_value: "t value",
+  heldout_rms_before_mm: "held-out RMS before", structure_share: "share of the structure",
+  indistinguishable_from: "indistinguishable from",
+};
+
+// Tests wait for `window.analysisPage.pending === 0` (nothing in flight, file reads included).
+const page = { pending: 0, recording: null, report: null };
+window.analysisPage = page;
+
+// ------------------------------------------------------------------------------ requests
+
+class ApiError extends Error {
+  constructor(status, detail) {
+    super(typeof detail === "string" ? detail : JSON.stringify(detail));
+    this.status = status;
+    this.detail = detail;
+  }
+}
+
+async function request(method, path, bodyText) {
+  const init = { method, headers: {} };
+  if (bodyText !== undefined) {
+    init.headers["Content-Type"] = "application/json";
+    init.body = bodyText; // as the person gave it: the service parses and judges it
+  }
+  let r;
+  try {
+    r = await fetch(path, init);
+  } catch (err) {
+    throw new ApiError(0, [{ loc: [], msg: `the service did not answer (${err.message})` }]);
+  }
+  const text = await r.text();
+  let data = null;
+  try { data = text ? JSON.parse(text) : null; } catch { data = text; }
+  if (!r.ok) {
+    const detail = data && data.detail !== undefined ? data.detail : `${r.status} ${r.statusText}`;
+    throw new ApiError(r.status, detail);
+  }
+  return data;
+}
+
+/** Run an async job, counting it in page.pending from the first synchronous moment. */
+async function busy(job) {
+  page.pending += 1;
+  $("#main").setAttribute("aria-busy", "true");
+  for (const b of document.querySelectorAll("#input-panel button")) b.disabled = true;
+  try {
+    await job();
+  } finally {
+    page.pending -= 1;
+    if (page.pending === 0) {
+      $("#main").setAttribute("aria-busy", "false");
+      for (const b of document.querySelectorAll("#input-panel button")) b.disabled = false;
+    }
+  }
+}
+
+// ------------------------------------------------------------------------------ formatting
+
+function el(tag, attrs = {}, ...children) {
+  const e = document.createElement(tag);
+  for (const [k, v] of Object.entries(attrs)) {
+    if (k === "class") e.className = v;
+    else if (k === "text") e.textContent = v;
+    else e.setAttribute(k, v);
+  }
+  for (const c of children) e.append(c);
+  return e;
+}
+
+function svg(tag, attrs = {}, text) {
+  const e = document.createElementNS(SVG, tag);
+  for (const [k, v] of Object.entries(attrs)) e.setAttribute(k, v);
+  if (text !== undefined) e.textContent = text;
+  return e;
+}
+
+function isNum(v) { return typeof v === "number" && Number.isFinite(v); }
+
+function mm(v) {
+  if (!isNum(v)) return "–";
+  return `${Math.abs(v) < 0.01 && v !== 0 ? v.toFixed(4) : v.toFixed(3)} mm`;
+}
+
+function num(v) {
+  if (!isNum(v)) return v === null || v === undefined ? "–" : String(v);
+  if (Number.isInteger(v)) return String(v);
+  const a = Math.abs(v);
+  if (a !== 0 && (a < 1e-5 || a >= 1e6)) return v.toExponential(2);
+  if (a < 1e-3) return v.toPrecision(3);
+  return String(Number(v.toPrecision(4)));
+}
+
+function unitOf(key) {
+  for (const [suffix, unit] of UNITS) if (key.endsWith(suffix)) return [key.slice(0, -suffix.length), unit];
+  return [key, ""];
+}
+
+function effectName(effect) { return EFFECTS[effect] || String(effect).replace(/_/g, " "); }
+
+function findingTitle(f) {
+  const joint = f.joint !== null && f.joint !== undefined ? ` J${f.joint}` : "";
+  const dh = f.dh_parameter ? ` (${f.dh_parameter})` : "";
+  return `${effectName(f.effect)}${joint}${dh}`;
+}
+
+/** ["body", "samples", 3, "joints_deg"] -> "samples[3].joints_deg" (the JSON path). */
+function fieldPath(loc) {
+  const parts = Array.isArray(loc) ? loc.slice(["body", "query", "path"].includes(loc[0]) ? 1 : 0) : [];
+  let out = "";
+  for (const p of parts) out += typeof p === "number" ? `[${p}]` : (out ? `.${p}` : String(p));
+  return out;
+}
+
+/** Line and column of a character offset of the text (a JSON decode error's loc). */
+function lineCol(text, offset) {
+  const before = text.slice(0, offset).split("\n");
+  return `line ${before.length}, column ${before[before.length - 1].length + 1}`;
+}
+
+// ------------------------------------------------------------------------------ errors
+
+function clearErrors() {
+  const box = $("#upload-error");
+  box.replaceChildren();
+  box.hidden = true;
+  for (const e of document.querySelectorAll("[aria-invalid]")) e.removeAttribute("aria-invalid");
+}
+
+/** A refused request: each item of the 422's detail with its field, beside the upload box. */
+function showError(err, text, step) {
+  const box = $("#upload-error");
+  const items = Array.isArray(err.detail) ? err.detail : [{ loc: [], msg: String(err.detail ?? err.message) }];
+  const list = el("ul");
+  for (const d of items) {
+    const loc = Array.isArray(d.loc) ? d.loc : [];
+    let where = fieldPath(loc);
+    if (loc[0] === "body" && loc.length === 2 && typeof loc[1] === "number" && text) {
+      where = `the JSON text at ${lineCol(text, loc[1])}`; // json_invalid: loc is the offset
+    }
+    if (loc[0] === "query" && loc[1]) $(`#${loc[1]}`)?.setAttribute("aria-invalid", "true");
+    else if (loc[0] !== "path") $("#paste").setAttribute("aria-invalid", "true");
+    const li = el("li", { "data-loc": where });
+    if (where) li.append(el("code", { class: "loc", text: where }), " ");
+    li.append(el("span", { class: "msg", text: d.msg ?? "" }));
+    list.append(li);
+  }
+  const head = err.status ? `${step} was refused (${err.status}):` : `${step} failed:`;
+  box.replaceChildren(el("p", { class: "err-head", text: head }), list);
+  box.hidden = false;
+  setStatus(`${step} was refused; nothing was analysed.`, "err");
+}
+
+function setStatus(text, kind = "") {
+  const s = $("#status");
+  s.textContent = text;
+  s.className = `status ${kind}`;
+}
+
+// ------------------------------------------------------------------------------ the flow
+
+async function analyseText(text) {
+  clearErrors();
+  $("#report").hidden = true;
+  $("#empty").hidden = false;
+  $("#notes-panel").hidden = true;
+  $("#recording-panel").hidden = true;
+  page.report = null;
+  if (!text.trim()) {
+    showError(new ApiError(0, [{ loc: ["body"], msg: "is empty: choose a file, paste a recording or simulate one" }]),
+      text, "Reading the recording");
+    return;
+  }
+  setStatus("Storing the recording …");
+  let rec;
+  try {
+    rec = await request("POST", "/recordings", text);
+  } catch (err) {
+    showError(err, text, "Storing the recording");
+    return;
+  }
+  page.recording = rec;
+  showRecording(rec);
+  setStatus(`Analysing recording ${rec.id} (${rec.n_samples} ${rec.kind} samples) …`);
+  const q = new URLSearchParams({ folds: $("#folds").value || "5", seed: $("#seed").value || "0" });
+  let rep;
+  try {
+    rep = await request("POST", `/recordings/${rec.id}/analyze?${q}`);
+  } catch (err) {
+    showError(err, text, "The analysis");
+    return;
+  }
+  render(rep);
+  if (rep.id !== undefined) history.replaceState(null, "", `?analysis=${rep.id}`);
+  setStatus(`Analysis ${rep.id ?? ""} of recording ${rec.id}: ${rep.verdict}.`, "ok");
+}
+
+function showRecording(rec) {
+  const dl = $("#recording-info");
+  dl.replaceChildren();
+  for (const [k, v] of [["Recording", rec.id], ["Robot", rec.robot], ["Kind", rec.kind], ["Samples", rec.n_samples]]) {
+    if (v === undefined) continue;
+    dl.append(el("dt", { text: k }), el("dd", { text: String(v) }));
+  }
+  $("#recording-panel").hidden = false;
+}
+
+async function loadStored(id) {
+  setStatus(`Loading analysis ${id} …`);
+  try {
+    const rep = await request("GET", `/analysis/${encodeURIComponent(id)}`);
+    render(rep);
+    setStatus(`Analysis ${id}: ${rep.verdict}.`, "ok");
+  } catch (err) {
+    showError(err, "", `Loading analysis ${id}`);
+  }
+}
+
+// ------------------------------------------------------------------------------ the report
+
+function render(rep) {
+  page.report = rep;
+  renderVerdict(rep);
+  renderPlots(rep);
+  renderLocate(rep.locate || {});
+  renderFindings(rep.findings || []);
+  renderNotes(rep);
+  renderMore(rep);
+  $("#empty").hidden = true;
+  $("#report").hidden = false;
+}
+
+function renderVerdict(rep) {
+  const [label, text] = VERDICTS[rep.verdict] || [String(rep.verdict), ""];
+  const v = $("#verdict");
+  v.textContent = label;
+  v.dataset.verdict = rep.verdict;
+  v.className = `verdict v-${rep.verdict}`;
+  $("#verdict-text").textContent = `${text} ${rep.n_samples ?? "?"} ${rep.kind ?? ""} samples.`;
+  const b = rep.baseline || {};
+  const f = rep.final || {};
+  const nb = b.parameters ? Object.keys(b.parameters).length : undefined;
+  const nf = (rep.findings || []).length;
+  const rows = [
+    ["before", "Rigid model (baseline)", b.rms_mm, b.heldout_rms_mm, nb],
+    ["after", `With ${nf} finding${nf === 1 ? "" : "s"} (final)`, f.rms_mm, f.heldout_rms_mm, f.n_parameters],
+  ];
+  const tbody = $("#metrics tbody");
+  tbody.replaceChildren();
+  for (const [key, name, rms, held, np] of rows) {
+    tbody.append(el("tr", { "data-row": key }, el("th", { text: name }),
+      el("td", { class: "rms", text: mm(rms) }), el("td", { class: "heldout", text: mm(held) }),
+      el("td", { text: np === undefined ? "–" : String(np) })));
+  }
+  if (isNum(f.noise_mm)) {
+    tbody.append(el("tr", { "data-row": "noise" }, el("th", { text: "Noise level (estimated)" }),
+      el("td", { text: mm(f.noise_mm) }), el("td"), el("td")));
+  }
+}
+
+// ------------------------------------------------------------------------------ plots
+
+/** Per-sample |r_k| of "baseline" or "final" if the report carries them, else null. */
+function residuals(rep, which) {
+  const block = rep[which];
+  if (block && Array.isArray(block.residuals_mm)) return block.residuals_mm;
+  const r = rep.residuals;
+  if (r && Array.isArray(r[`${which}_mm`])) return r[`${which}_mm`];
+  return null;
+}
+
+/** Round numbers for an axis from 0 to at least max. */
+function ticks(max, target = 5) {
+  if (!(max > 0)) return [0, 1];
+  const raw = max / target;
+  const mag = 10 ** Math.floor(Math.log10(raw));
+  const step = [1, 2, 2.5, 5, 10].map((m) => m * mag).find((s) => s >= raw);
+  const out = [];
+  for (let v = 0; v < max + step * 0.999; v += step) out.push(Number(v.toPrecision(6)));
+  return out;
+}
+
+const W = 560, H = 230, M = { l: 52, r: 10, t: 12, b: 34 };
+const SW = 400, SH = 190; // the small RMS-by-model chart
+
+function axes(root, yTicks, top, unit, w = W, h = H) {
+  const pw = w - M.l - M.r, ph = h - M.t - M.b;
+  const y = (v) => M.t + ph * (1 - v / top);
+  for (const t of yTicks) {
+    root.append(svg("line", { class: "grid", x1: M.l, x2: M.l + pw, y1: y(t), y2: y(t) }));
+    root.append(svg("text", { class: "tick", x: M.l - 5, y: y(t) + 4, "text-anchor": "end" }, num(t)));
+  }
+  root.append(svg("text", { class: "axis-label", x: 12, y: M.t + ph / 2, transform: `rotate(-90 12 ${M.t + ph / 2})`,
+    "text-anchor": "middle" }, unit));
+  root.append(svg("line", { class: "axis", x1: M.l, x2: M.l + pw, y1: M.t + ph, y2: M.t + ph }));
+  return { pw, ph, y };
+}
+
+/** A dashed level line; the RMS label sits at the right end, the noise label at the left. */
+function hline(root, cls, yv, label, pw) {  // cls: rms | noise
+  root.append(svg("line", { class: cls, x1: M.l, x2: M.l + pw, y1: yv, y2: yv }));
+  const right = cls === "rms";
+  root.append(svg("text", { class: `${cls}-label level-label`, x: right ? M.l + pw - 4 : M.l + 4, y: yv - 4,
+    "text-anchor": right ? "end" : "start" }, label));
+}
+
+/** Bars of |r_k| per sample (0-based sample numbers, as the locate block's). */
+function residualChart(values, { top, rms, noise, worst, label }) {
+  const root = svg("svg", { viewBox: `0 0 ${W} ${H}`, class: "chart", role: "img",
+    "aria-label": `${label}: |r_k| of ${values.length} samples`, "data-n": values.length });
+  const yTicks = ticks(top);
+  const topTick = yTicks[yTicks.length - 1];
+  const { pw, ph, y } = axes(root, yTicks, topTick, "|r| mm");
+  const n = values.length;
+  const slot = pw / Math.max(n, 1);
+  const gap = slot > 4 ? slot * 0.18 : 0;
+  const bars = svg("g", { class: "bars" });
+  values.forEach((v, k) => {
+    const h = isNum(v) ? Math.min(v, topTick) / topTick * ph : 0;
+    const rect = svg("rect", { class: worst.has(k) ? "bar worst" : "bar", x: M.l + k * slot + gap / 2,
+      y: M.t + ph - h, width: Math.max(slot - gap, 0.5), height: h, "data-sample": k });
+    rect.append(svg("title", {}, `sample ${k}: ${isNum(v) ? mm(v) : "–"}`));
+    bars.append(rect);
+  });
+  root.append(bars);
+  const every = Math.max(1, ticks(n, 8)[1] || 1);
+  for (let k = 0; k < n; k += every) {
+    root.append(svg("text", { class: "tick", x: M.l + (k + 0.5) * slot, y: M.t + ph + 14, "text-anchor": "middle" }, String(k)));
+  }
+  root.append(svg("text", { class: "axis-label", x: M.l + pw / 2, y: H - 3, "text-anchor": "middle" }, "sample"));
+  if (isNum(noise) && noise <= topTick) hline(root, "noise", y(noise), `noise ${mm(noise)}`, pw);
+  if (isNum(rms) && rms <= topTick) hline(root, "rms", y(rms), `RMS ${mm(rms)}`, pw);
+  return root;
+}
+
+/** Grouped bars: RMS and held-out RMS of the rigid model and after each finding. */
+function stepsChart(rep) {
+  const b = rep.baseline || {};
+  const models = [{ name: "rigid", title: "rigid model", rms: b.rms_mm, held: b.heldout_rms_mm }];
+  (rep.findings || []).forEach((f, i) => models.push({ name: `+${i + 1}`, title: `+ ${findingTitle(f)}`,
+    rms: f.rms_mm, held: f.heldout_rms_mm }));
+  const vals = models.flatMap((m) => [m.rms, m.held]).filter(isNum);
+  const top = Math.max(...vals, 1e-9) * 1.05; // headroom above the tallest bar
+  const yTicks = ticks(top, 4);
+  const topTick = yTicks[yTicks.length - 1];
+  const root = svg("svg", { viewBox: `0 0 ${SW} ${SH}`, class: "chart", role: "img", "aria-label": "RMS model by model" });
+  const { pw, ph, y } = axes(root, yTicks, topTick, "mm", SW, SH);
+  const slot = Math.min(pw / models.length, 110);
+  models.forEach((m, i) => {
+    const x0 = M.l + i * slot + slot * 0.15;
+    const bw = slot * 0.33;
+    [["step-rms", m.rms, "RMS"], ["step-held", m.held, "held-out RMS"]].forEach(([cls, v, what], j) => {
+      const h = isNum(v) ? v / topTick * ph : 0;
+      const r = svg("rect", { class: `step ${cls}`, x: x0 + j * (bw + 2), y: M.t + ph - h, width: bw, height: h });
+      r.append(svg("title", {}, `${m.title}: ${what} ${mm(v)}`));
+      root.append(r);
+    });
+    const t = svg("text", { class: "tick", x: x0 + bw, y: M.t + ph + 14, "text-anchor": "middle" }, m.name);
+    t.append(svg("title", {}, m.title));
+    root.append(t);
+  });
+  const f = rep.final || {};
+  if (isNum(f.noise_mm) && f.noise_mm <= topTick) hline(root, "noise", y(f.noise_mm), `noise ${mm(f.noise_mm)}`, pw);
+  root.append(svg("text", { class: "axis-label", x: M.l + pw / 2, y: SH - 3, "text-anchor": "middle" },
+    "dark: RMS, light: held-out RMS; +k: with findings 1..k"));
+  return root;
+}
+
+function renderPlots(rep) {
+  const before = residuals(rep, "baseline");
+  const after = residuals(rep, "final");
+  const worst = new Set(((rep.locate || {}).worst_samples || []).filter(Number.isInteger));
+  const same = $("#same-scale").checked;
+  const maxOf = (a) => Math.max(0, ...(a || []).filter(isNum));
+  const b = rep.baseline || {}, f = rep.final || {};
+  const shared = Math.max(maxOf(before), maxOf(after), 1e-9);
+  const plots = [
+    ["#plot-before", before, "baseline.residuals_mm", { rms: b.rms_mm, noise: undefined, worst, label: "before" }],
+    ["#plot-after", after, "final.residuals_mm", { rms: f.rms_mm, noise: f.noise_mm, worst: new Set(), label: "after" }],
+  ];
+  for (const [sel, values, field, opts] of plots) {
+    const body = $(`${sel} .plot-body`);
+    if (!values) {
+      const rms = sel === "#plot-before" ? b.rms_mm : f.rms_mm;
+      body.replaceChildren(el("p", { class: "no-data", text:
+        `The report carries no per-sample residuals (field ${field}); only the RMS is known: ${mm(rms)}.` }));
+      continue;
+    }
+    const top = same ? shared : Math.max(maxOf(values), 1e-9);
+    body.replaceChildren(residualChart(values, { ...opts, top }));
+  }
+  $("#plot-steps .plot-body").replaceChildren(stepsChart(rep));
+}
+
+// ------------------------------------------------------------------------------ locate, findings, notes
+
+function renderLocate(loc) {
+  $("#locate-summary").textContent = loc.summary || "";
+  const ol = $("#worst-samples");
+  ol.replaceChildren(...(loc.worst_samples || []).map((k) => el("li", { "data-sample": k, text: `sample ${k}` })));
+  const dirs = Object.entries(loc.directions || {});
+  $("#directions-box").hidden = dirs.length === 0;
+  $("#directions tbody").replaceChildren(...dirs.map(([name, share]) => shareRow(name, share, `${Math.round(share * 100)}%`)));
+  const corr = loc.correlations || [];
+  $("#correlations-box").hidden = corr.length === 0;
+  $("#correlations tbody").replaceChildren(...corr.map((c) => shareRow(c.feature, Math.abs(c.r), `r = ${num(c.r)}`)));
+  const un = loc.unexplained || [];
+  $("#unexplained").replaceChildren(...un.map((u) => el("li", { text:
+    `Unexplained structure varies with ${u.varies_with} (p = ${num(u.p_value)})` })));
+}
+
+function shareRow(name, share, text) {
+  const bar = el("span", { class: "share-bar" });
+  bar.style.width = `${Math.max(0, Math.min(1, share)) * 100}%`;
+  return el("tr", {}, el("th", { text: name }), el("td", { class: "share" }, bar), el("td", { class: "share-val", text }));
+}
+
+function paramRows(params) {
+  const rows = [];
+  for (const [key, value] of Object.entries(params || {})) {
+    if (key.endsWith("_std") && key.slice(0, -4) in params) continue;
+    const [name, unit] = unitOf(key);
+    const std = params[`${key}_std`];
+    const text = isNum(value) ? `${num(value)}${isNum(std) ? ` ± ${num(std)}` : ""}${unit ? ` ${unit}` : ""}` : String(value);
+    rows.push(el("tr", { "data-param": key }, el("th", { text: name.replace(/_/g, " ") }), el("td", { text })));
+  }
+  return rows;
+}
+
+function evidenceRows(ev) {
+  return Object.entries(ev || {}).map(([key, value]) => {
+    let [name, unit] = unitOf(key);
+    name = EVIDENCE[key] || name.replace(/_/g, " ");
+    if (EVIDENCE[key]) unit = key.endsWith("_mm") ? "mm" : "";
+    const text = Array.isArray(value) ? value.join(", ") : `${num(value)}${unit ? ` ${unit}` : ""}`;
+    return el("tr", { "data-evidence": key }, el("th", { text: name }), el("td", { text }));
+  });
+}
+
+function renderFindings(findings) {
+  $("#no-findings").hidden = findings.length > 0;
+  const ol = $("#findings");
+  ol.replaceChildren();
+  findings.forEach((f, i) => {
+    const li = el("li", { class: "finding", "data-effect": f.effect, "data-joint": f.joint ?? "" });
+    li.append(el("h3", {}, el("span", { class: "rank", text: `${i + 1}` }),
+      el("span", { class: "title", text: findingTitle(f) }), el("code", { class: "code", text: f.effect })));
+    li.append(el("p", { class: "explanation", text: f.explanation || "" }));
+    const grid = el("div", { class: "finding-grid" });
+    const p = el("table", { class: "params", "aria-label": "parameters" },
+      el("caption", { text: "Parameters" }), el("tbody", {}, ...paramRows(f.parameters)));
+    const fit = el("table", { class: "params", "aria-label": "fit with this finding" },
+      el("caption", { text: "With this and earlier findings" }),
+      el("tbody", {}, el("tr", {}, el("th", { text: "RMS" }), el("td", { text: mm(f.rms_mm) })),
+        el("tr", {}, el("th", { text: "held-out RMS" }), el("td", { text: mm(f.heldout_rms_mm) }))));
+    const ev = el("table", { class: "params evidence", "aria-label": "evidence" },
+      el("caption", { text: "Evidence" }), el("tbody", {}, ...evidenceRows(f.evidence)));
+    grid.append(p, fit, ev);
+    li.append(grid);
+    ol.append(li);
+  });
+}
+
+function noteItem(n, extra) {
+  const li = el("li", { "data-effect": n.effect, "data-joint": n.joint ?? "" });
+  li.append(el("strong", { text: findingTitle(n) }), `: ${n.reason || ""}`);
+  if (extra) li.append(el("span", { class: "muted", text: ` (${extra})` }));
+  return li;
+}
+
+function renderNotes(rep) {
+  const ni = rep.not_identifiable || [];
+  $("#not-identifiable").replaceChildren(...ni.map((n) => noteItem(n)));
+  $("#notes-panel").hidden = ni.length === 0;
+  const wh = rep.withheld || [];
+  $("#withheld").replaceChildren(...wh.map((n) => noteItem(n,
+    isNum(n.p_value_with_structure) ? `p with the structure = ${num(n.p_value_with_structure)}` : "")));
+  $("#withheld-panel").hidden = wh.length === 0;
+}
+
+function renderMore(rep) {
+  $("#baseline-params tbody").replaceChildren(...paramRows((rep.baseline || {}).parameters));
+  $("#report-json").textContent = JSON.stringify(rep, null, 1);
+  const a = $("#report-link");
+  if (rep.id !== undefined) {
+    a.href = `/analysis/${rep.id}`;
+    a.textContent = `GET /analysis/${rep.id}`;
+  }
+}
+
+// ------------------------------------------------------------------------------ wiring
+
+function init() {
+  $("#file").addEventListener("change", (ev) => {
+    const file = ev.target.files && ev.target.files[0];
+    if (!file) return;
+    busy(async () => {
+      const text = await file.text();
+      $("#paste").value = text;
+      setStatus(`Read ${file.name} (${text.length} characters).`);
+      await analyseText(text);
+    });
+  });
+  $("#analyse").addEventListener("click", () => busy(() => analyseText($("#paste").value)));
+  $("#simulate").addEventListener("click", () => busy(async () => {
+    let text;
+    try {
+      const r = await fetch("/example-recording.json");
+      if (!r.ok) throw new Error(`${r.status} ${r.statusText}`);
+      text = await r.text();
+    } catch (err) {
+      showError(new ApiError(0, [{ loc: [], msg: `no example recording: ${err.message}` }]), "", "Simulate");
+      return;
+    }
+    $("#paste").value = text;
+    $("#file").value = "";
+    await analyseText(text);
+  }));
+  $("#same-scale").addEventListener("change", () => { if (page.report) renderPlots(page.report); });
+  const stored = new URLSearchParams(location.search).get("analysis");
+  const done = () => { document.body.dataset.ready = "1"; };
+  if (stored) busy(() => loadStored(stored)).then(done);
+  else done();
+}
+
+init();

@@ -1,0 +1,709 @@
+// pendant: the browser teach pendant. Plain ES module, no build step, no libraries.
+//
+// Every panel talks to the REST service of this origin. A refused request (422) answers
+// {"detail": [{"loc": ["body", ...field], "msg": reason}]}; showErrors() puts each msg beside
+// the element whose data-loc (or name) is that field, else in the panel's own error line.
+
+const $ = (sel, root = document) => root.querySelector(sel);
+const $$ = (sel, root = document) => [...root.querySelectorAll(sel)];
+const AXES_XYZABC = ["X", "Y", "Z", "A", "B", "C"];
+const POSE_KEYS = ["x", "y", "z", "a", "b", "c"];
+const PARAM_FIELDS = {
+  tool_no: { label: "Touching tool (tool number)", type: "int", min: 1, max: 16 },
+  reference_tool_no: { label: "Reference tool (tool number)", type: "int", min: 1, max: 16 },
+  fixed_tool_no: { label: "Fixed tool (base number)", type: "int", min: 1, max: 32 },
+  known_points_mm: { label: "Known points in the new frame (mm): x y z per line", type: "points" },
+  pose: { label: "Frame (x, y, z mm; a, b, c deg)", type: "pose" },
+};
+
+const state = {
+  cid: null, // controller id
+  controller: null,
+  robot: null,
+  methods: [],
+  session: null,
+  report: null,
+  step: null, // the step the person is on (index)
+  tools: [],
+  bases: [],
+};
+
+// Tests wait for `window.pendant.pending === 0` (no request in flight).
+const pendant = { pending: 0, state };
+window.pendant = pendant;
+
+// ------------------------------------------------------------------------------ requests
+
+class ApiError extends Error {
+  constructor(status, detail) {
+    super(typeof detail === "string" ? detail : JSON.stringify(detail));
+    this.status = status;
+    this.detail = detail;
+  }
+}
+
+async function request(method, path, body) {
+  pendant.pending += 1;
+  $("#main").setAttribute("aria-busy", "true");
+  try {
+    const init = { method, headers: {} };
+    if (body !== undefined) {
+      init.headers["Content-Type"] = "application/json";
+      init.body = JSON.stringify(body);
+    }
+    const r = await fetch(path, init);
+    const text = await r.text();
+    let data = null;
+    try { data = text ? JSON.parse(text) : null; } catch { data = text; }
+    if (!r.ok) {
+      const detail = data && data.detail !== undefined ? data.detail : `${r.status} ${r.statusText}`;
+      throw new ApiError(r.status, detail);
+    }
+    return data;
+  } finally {
+    pendant.pending -= 1;
+    if (pendant.pending === 0) $("#main").setAttribute("aria-busy", "false");
+  }
+}
+
+const ctl = (suffix = "") => `/controllers/${state.cid}${suffix}`;
+
+// ------------------------------------------------------------------------------ errors
+
+function clearErrors(scope) {
+  for (const e of $$(".err", scope)) e.textContent = "";
+  for (const e of $$("[aria-invalid]", scope)) e.removeAttribute("aria-invalid");
+}
+
+function visible(e) {
+  return !e.closest("[hidden]") && e.getClientRects().length > 0;
+}
+
+/** The visible element of `scope` that stands for API field `loc` (most specific match first). */
+function fieldFor(scope, loc) {
+  const parts = loc.filter((p, i) => !(i === 0 && ["body", "query", "path"].includes(p)));
+  const aliases = [parts];
+  if (parts[0] === "flange_poses") aliases.push(["points", ...parts.slice(1)]); // solver loc = step order
+  for (const alias of aliases) {
+    for (let n = alias.length; n > 0; n--) {
+      const key = alias.slice(0, n).join(".");
+      const found = [...scope.querySelectorAll(`[data-loc="${CSS.escape(key)}"], [name="${CSS.escape(key)}"]`)];
+      const el = found.find(visible);
+      if (el) return el;
+    }
+  }
+  return null;
+}
+
+/** The error line beside `el`: its own .err child, or the nearest ancestor's. */
+function errSlotFor(el) {
+  for (let e = el; e && e !== document.body; e = e.parentElement) {
+    const own = [...e.children].find((c) => c.classList.contains("err"));
+    if (own) return own;
+  }
+  return null;
+}
+
+function panelErr(scope) {
+  return [...scope.children].find((c) => c.classList.contains("panel-err")) || $(".panel-err", scope);
+}
+
+function showErrors(scope, err, fallback = null) {
+  const fallbackSlot = (fallback && errSlotFor(fallback)) || panelErr(scope);
+  if (!(err instanceof ApiError)) {
+    fallbackSlot.textContent = String(err && err.message ? err.message : err);
+    return;
+  }
+  const items = Array.isArray(err.detail) ? err.detail : [{ loc: [], msg: String(err.detail) }];
+  for (const item of items) {
+    const loc = item.loc || [];
+    const el = fieldFor(scope, loc);
+    const slot = el ? errSlotFor(el) : null;
+    const target = slot || fallbackSlot;
+    const text = item.msg || "refused";
+    target.textContent = target.textContent ? `${target.textContent}; ${text}` : text;
+    if (el) {
+      const input = el.matches("input, select, textarea") ? el : el.querySelector("input, select, textarea");
+      if (input) input.setAttribute("aria-invalid", "true");
+    }
+  }
+}
+
+/** Run an action of a panel: clear its errors, show any failure beside the right field
+ * (an error naming no field of the panel goes beside `fallback`, else to the panel's line). */
+async function act(scope, fn, fallback = null) {
+  clearErrors(scope);
+  try {
+    await fn();
+  } catch (err) {
+    showErrors(scope, err, fallback);
+  }
+}
+
+/** mulberry32: a small seeded generator, so a page's hand jitter repeats run after run. */
+function seeded(seed) {
+  let a = seed >>> 0;
+  return () => {
+    a = (a + 0x6d2b79f5) >>> 0;
+    let t = a;
+    t = Math.imul(t ^ (t >>> 15), t | 1);
+    t ^= t + Math.imul(t ^ (t >>> 7), t | 61);
+    return ((t ^ (t >>> 14)) >>> 0) / 4294967296;
+  };
+}
+const random = seeded(Number(new URLSearchParams(location.search).get("seed") || 1));
+
+// ------------------------------------------------------------------------------ formatting
+
+/** A pose coordinate: fixed decimals, no "-0.000". */
+function num(v, digits = 3) {
+  if (v === null || v === undefined) return "—";
+  return (Math.abs(v) < 0.5 * 10 ** -digits ? 0 : v).toFixed(digits);
+}
+
+/** A statistic: fixed decimals, or 1.2e-9 when it would read 0.000. */
+function fmt(v, digits = 3) {
+  if (v === null || v === undefined) return "—";
+  if (typeof v !== "number") return String(v);
+  if (v !== 0 && Math.abs(v) < 10 ** -digits) return v.toExponential(1);
+  return v.toFixed(digits);
+}
+
+function el(tag, attrs = {}, ...children) {
+  const e = document.createElement(tag);
+  for (const [k, v] of Object.entries(attrs)) {
+    if (v === null || v === undefined || v === false) continue;
+    if (k === "class") e.className = v;
+    else if (k === "text") e.textContent = v;
+    else if (k.startsWith("on")) e.addEventListener(k.slice(2), v);
+    else e.setAttribute(k, v === true ? "" : v);
+  }
+  for (const c of children) if (c !== null && c !== undefined) e.append(c);
+  return e;
+}
+
+function poseCells(row, pose) {
+  row.replaceChildren(...POSE_KEYS.map((k) => el("td", { text: pose ? num(pose[k], 2) : "—", title: pose ? String(pose[k]) : "" })));
+}
+
+function slotName(table, no) {
+  if (!no) return table === "tool" ? "flange" : "world";
+  const rows = table === "tool" ? state.tools : state.bases;
+  const e = rows.find((r) => r.number === no);
+  return e && e.name ? e.name : "empty";
+}
+
+// ------------------------------------------------------------------------------ controller
+
+async function loadControllers() {
+  const list = await request("GET", "/controllers");
+  const sel = $("#controller");
+  sel.replaceChildren(...list.map((c) => el("option", { value: c.id, text: `${c.name} (${c.robot_name})` })));
+  if (!list.length) {
+    panelErr($("#topbar")).textContent = "no controller: create one with POST /controllers";
+    return;
+  }
+  const keep = list.find((c) => c.id === state.cid) || list[0];
+  sel.value = String(keep.id);
+  await selectController(keep.id);
+}
+
+async function selectController(id) {
+  state.cid = Number(id);
+  state.controller = await request("GET", ctl());
+  $("#robot-name").textContent = `${state.controller.robot_name}, ${state.controller.dof} axes`;
+  state.session = null;
+  state.report = null;
+  state.cell = null;
+  await Promise.all([loadTables(), loadRobot()]);
+  renderParams();
+  for (const a of $$(".exports a")) a.href = ctl(`/export?format=${a.dataset.format}`);
+  // resume the newest unfinished session (a restart of the page loses nothing)
+  const open = (await request("GET", ctl("/sessions"))).filter((s) => s.state === "open" || s.state === "computed");
+  if (open.length) state.session = open[open.length - 1];
+  state.report = state.session ? state.session.report : null;
+  state.step = null;
+  renderSession();
+  renderJogRows();
+}
+
+// ------------------------------------------------------------------------------ robot
+
+async function loadRobot(robot) {
+  state.robot = robot || (await request("GET", ctl("/robot")));
+  renderRobot();
+}
+
+function renderRobot() {
+  const r = state.robot;
+  if (!r) return;
+  poseCells($("#tcp-pose"), r.tcp_pose);
+  poseCells($("#flange-pose"), r.flange_pose);
+  $("#tcp-caption").textContent =
+    `TCP in BASE ${r.active_base_no} (${slotName("base", r.active_base_no)}), ` +
+    `TOOL ${r.active_tool_no} (${slotName("tool", r.active_tool_no)})`;
+  $("#active-tool").value = String(r.active_tool_no);
+  $("#active-base").value = String(r.active_base_no);
+  // joint inputs follow the robot unless the person is typing into one
+  for (const inp of $$("#jog-rows input[data-joint]")) {
+    if (document.activeElement !== inp) inp.value = num(r.joints_deg[Number(inp.dataset.joint)], 3);
+  }
+  for (const out of $$("#jog-rows output[data-axis]")) {
+    out.textContent = num(r.tcp_pose[POSE_KEYS[AXES_XYZABC.indexOf(out.dataset.axis)]], 3);
+  }
+}
+
+function jogMode() {
+  return $('#jog-panel input[name="mode"]:checked').value;
+}
+
+function renderJogRows() {
+  const mode = jogMode();
+  const rows = $("#jog-rows");
+  const dof = state.controller ? state.controller.dof : 6;
+  $("#inc-unit").textContent = mode === "joint" ? "deg" : "mm / deg";
+  const make = (axis, middle, dataLoc) =>
+    el("div", { class: "field jog-row", "data-loc": dataLoc },
+      el("span", { class: "axis", text: axis }),
+      el("button", { type: "button", class: "jog", "aria-label": `Jog ${axis} minus`, "data-axis": axis, "data-sign": "-1", text: "−" }),
+      middle,
+      el("button", { type: "button", class: "jog", "aria-label": `Jog ${axis} plus`, "data-axis": axis, "data-sign": "1", text: "+" }),
+      el("span", { class: "err", role: "alert" }));
+  const list = [];
+  if (mode === "joint") {
+    for (let i = 0; i < dof; i++) {
+      const inp = el("input", { type: "number", step: "any", name: `joints_deg.${i}`, "data-joint": i,
+                                "aria-label": `A${i + 1} (deg)` });
+      list.push(make(`A${i + 1}`, inp, `joints_deg.${i}`));
+    }
+    $("#move-joints").hidden = false;
+  } else {
+    for (const axis of AXES_XYZABC) {
+      list.push(make(axis, el("output", { "data-axis": axis, "aria-label": `${axis} of the TCP` }), `axis.${axis}`));
+    }
+    $("#move-joints").hidden = true;
+  }
+  rows.replaceChildren(...list);
+  renderRobot();
+}
+
+async function jog(axis, sign) {
+  const raw = $("#increment").value.trim();
+  const increment = raw === "" ? NaN : sign * Number(raw);
+  if (!Number.isFinite(increment)) {
+    throw new ApiError(422, [{ loc: ["body", "increment"], msg: "give the increment as a number" }]);
+  }
+  const robot = await request("POST", ctl("/robot/jog"), { mode: jogMode(), axis, increment });
+  await loadRobot(robot);
+}
+
+async function moveJoints() {
+  const joints = $$("#jog-rows input[data-joint]").map((i) => Number(i.value));
+  const bad = joints.findIndex((q) => !Number.isFinite(q));
+  if (bad >= 0) throw new ApiError(422, [{ loc: ["body", "joints_deg", bad], msg: "give the joint value in degrees" }]);
+  await loadRobot(await request("PUT", ctl("/robot/joints"), { joints_deg: joints }));
+}
+
+async function setActive(which, value) {
+  const body = which === "tool" ? { tool_no: Number(value) } : { base_no: Number(value) };
+  await loadRobot(await request("PUT", ctl("/robot/active"), body));
+}
+
+// ------------------------------------------------------------------------------ tables
+
+async function loadTables() {
+  const [tools, bases] = await Promise.all([request("GET", ctl("/tools")), request("GET", ctl("/bases"))]);
+  state.tools = tools;
+  state.bases = bases;
+  renderTable($("#tool-table tbody"), tools, "tool");
+  renderTable($("#base-table tbody"), bases, "base");
+  const opts = (rows, table) => [el("option", { value: 0, text: `0 ${table === "tool" ? "flange" : "world"}` }),
+    ...rows.map((e) => el("option", { value: e.number, text: `${e.number} ${e.name || ""}`.trim() }))];
+  const at = $("#active-tool");
+  const ab = $("#active-base");
+  at.replaceChildren(...opts(tools, "tool"));
+  ab.replaceChildren(...opts(bases, "base"));
+  if (state.robot) renderRobot();
+}
+
+function renderTable(tbody, rows, table) {
+  tbody.replaceChildren(...rows.map((e) => {
+    const p = e.pose;
+    const used = e.name || POSE_KEYS.some((k) => p[k] !== 0);
+    const pv = e.provenance;
+    const prov = [];
+    if (used && pv && pv.method) {
+      prov.push(el("div", { text: pv.method }));
+      const q = [];
+      if (pv.error_max_mm !== null && pv.error_max_mm !== undefined) q.push(`max ${fmt(pv.error_max_mm)} mm`);
+      if (pv.session_id) q.push(`session ${pv.session_id}`);
+      if (q.length) prov.push(el("div", { text: q.join(" · ") }));
+      if (pv.updated_at) prov.push(el("div", { text: pv.updated_at.slice(0, 16).replace("T", " ") }));
+    }
+    const cols = (keys) => keys.map((k) => num(p[k]).padStart(9)).join("");
+    const frame = used ? [el("div", { text: cols(["x", "y", "z"]) }), el("div", { class: "abc", text: cols(["a", "b", "c"]) })] : [];
+    return el("tr", { class: used ? "used" : "unused", "data-number": e.number, "aria-label": `${table} ${e.number}` },
+      el("td", { class: "num", text: String(e.number) }),
+      el("td", { class: "name", text: e.name || "" }),
+      el("td", { text: used ? e.kind.replace("_", " ") : "" }),
+      el("td", { class: "frame" }, ...frame),
+      el("td", { class: "prov" }, ...prov));
+  }));
+}
+
+function showTab(which) {
+  for (const t of ["tool", "base"]) {
+    $(`#tab-${t}`).setAttribute("aria-selected", String(t === which));
+    $(`#${t}-wrap`).hidden = t !== which;
+  }
+}
+
+// ------------------------------------------------------------------------------ wizard
+
+async function loadMethods() {
+  state.methods = await request("GET", "/methods");
+  const sel = $("#method");
+  const groups = new Map();
+  for (const m of state.methods) {
+    if (!groups.has(m.menu)) groups.set(m.menu, el("optgroup", { label: m.menu.replace("_", " ") }));
+    groups.get(m.menu).append(el("option", { value: m.name, text: m.title }));
+  }
+  sel.replaceChildren(...groups.values());
+  renderParams();
+}
+
+function methodOf(name) {
+  return state.methods.find((m) => m.name === name);
+}
+
+function renderParams() {
+  const m = methodOf($("#method").value);
+  if (!m) return;
+  const t = $("#target_no");
+  t.max = m.table === "tool" ? 16 : 32;
+  $("#target-label").textContent = m.table === "tool" ? "Tool number" : "Base number";
+  const box = $("#params");
+  const fields = [];
+  for (const [name, help] of Object.entries(m.required_params)) {
+    const spec = PARAM_FIELDS[name] || { label: name, type: "text" };
+    let input;
+    if (spec.type === "int") {
+      input = el("input", { id: `param-${name}`, name, type: "number", min: spec.min, max: spec.max, value: 1,
+                            "aria-label": spec.label });
+    } else if (spec.type === "points") {
+      input = el("textarea", { id: `param-${name}`, name, rows: 4, "aria-label": spec.label, placeholder: "30 30 0\n220 20 0\n190 160 0" });
+    } else if (spec.type === "pose") {
+      input = el("span", { class: "pose-inputs", "data-loc": "params.pose" },
+        ...POSE_KEYS.map((k) => el("input", { name: k, "data-loc": `params.pose.${k}`, type: "number", step: "any",
+                                               value: 0, "aria-label": `pose ${k}` })));
+    } else {
+      input = el("input", { id: `param-${name}`, name, "aria-label": spec.label });
+    }
+    fields.push(el("div", { class: "field", "data-loc": `params.${name}`, title: help },
+      el("label", { for: `param-${name}`, text: spec.label }), input, el("span", { class: "err", role: "alert" })));
+  }
+  box.replaceChildren(...fields);
+  if (m.required_params.known_points_mm) prefillKnownPoints(m).catch((err) => showErrors($("#wizard"), err));
+}
+
+/** Indirect menus: start from the marked points of the cell's drawing (point_1, point_2, ...). */
+async function prefillKnownPoints(m) {
+  if (!state.cid) return;
+  const cell = state.cell || (state.cell = await request("GET", ctl("/cell")));
+  const pts = m.menu === "base" ? cell.base_points_mm : cell.workpiece_points_mm;
+  const lines = Object.entries(pts).filter(([k]) => k.startsWith("point_")).map(([, p]) => p.join(" "));
+  const area = $('#params textarea[name="known_points_mm"]');
+  if (area && !area.value) area.value = lines.join("\n");
+}
+
+function parseNumbers(text) {
+  return text.split(/[\s,;]+/).filter((s) => s !== "").map(Number);
+}
+
+function readParams(m) {
+  const params = {};
+  for (const name of Object.keys(m.required_params)) {
+    const spec = PARAM_FIELDS[name] || { type: "text" };
+    const field = $(`#params [data-loc="params.${name}"]`);
+    if (spec.type === "int") params[name] = Number($(`[name="${name}"]`, field).value);
+    else if (spec.type === "points") {
+      const lines = $("textarea", field).value.split("\n").map((l) => l.trim()).filter(Boolean);
+      params[name] = lines.map((l) => parseNumbers(l));
+      const bad = params[name].findIndex((p) => p.length !== 3 || p.some((v) => !Number.isFinite(v)));
+      if (bad >= 0) throw new ApiError(422, [{ loc: ["body", "params", name, bad], msg: `line ${bad + 1}: give x y z in mm` }]);
+    } else if (spec.type === "pose") {
+      params[name] = Object.fromEntries(POSE_KEYS.map((k) => [k, Number($(`[name="${k}"]`, field).value)]));
+    } else params[name] = $("input", field).value;
+  }
+  return params;
+}
+
+async function openSession() {
+  const m = methodOf($("#method").value);
+  const body = { method: m.name, target_no: Number($("#target_no").value), params: readParams(m) };
+  state.session = await request("POST", ctl("/sessions"), body);
+  state.report = null;
+  state.step = null;
+  renderSession();
+}
+
+function currentStep() {
+  const s = state.session;
+  if (!s) return null;
+  if (state.step !== null && s.steps.some((st) => st.index === state.step)) return s.steps.find((st) => st.index === state.step);
+  return s.steps.find((st) => st.required && !st.filled) || null;
+}
+
+function renderSession() {
+  const s = state.session;
+  const wizard = $("#wizard");
+  $("#open-form").hidden = !!s;
+  $("#session").hidden = !s;
+  renderReport();
+  if (!s) return;
+  $("#session-title").textContent = `${s.title} → ${s.target_table.toUpperCase()} ${s.target_no}`;
+  $("#session-state").textContent = s.state;
+  $("#session-params").replaceChildren(...Object.entries(s.params || {}).map(([k, v]) =>
+    el("span", { class: "field param", "data-loc": `params.${k}` },
+      el("span", { class: "param-text", text: `${k} = ${typeof v === "object" ? JSON.stringify(v) : v}` }),
+      el("span", { class: "err", role: "alert" }))));
+  const steps = $("#steps");
+  const cur = currentStep();
+  steps.replaceChildren(...s.steps.map((st) => el("li", {
+      class: `step${st.filled ? " filled" : ""}${cur && cur.index === st.index ? " current" : ""}`,
+      "data-loc": `points.${st.index}` },
+    el("button", { type: "button", class: "step-pick", "aria-label": `Step ${st.index + 1}: ${st.prompt}${st.filled ? " (taught)" : ""}`,
+                   onclick: () => { state.step = st.index; renderSession(); } },
+      el("span", { class: "tick", text: st.filled ? "✓" : String(st.index + 1) }),
+      el("span", { class: "step-text", text: st.prompt + (st.required ? "" : " (optional)") })),
+    el("span", { class: "err", role: "alert" }))));
+  const n = s.steps.filter((st) => st.required).length;
+  const done = s.steps.filter((st) => st.required && st.filled).length;
+  const lb = s.method === "tool.light_barrier";
+  $("#run-cycle").hidden = !lb;
+  $("#touch-up").hidden = lb;
+  $("#move-to").closest(".field").hidden = !(cur && cur.target);
+  $(".jitter", wizard).hidden = !(cur && cur.target);
+  if (cur) {
+    $("#step-label").textContent = `Step ${cur.index + 1} of ${Math.max(n, cur.index + 1)}` + (cur.filled ? " (taught; touch up again to re-teach)" : "");
+    $("#prompt").textContent = cur.prompt;
+  } else if (lb) {
+    $("#step-label").textContent = `${s.steps.length} beam triggers recorded`;
+    $("#prompt").textContent = "Run the measuring cycle: the robot sweeps the tool through the crossed beams, then Compute.";
+  } else {
+    $("#step-label").textContent = `All ${n} steps taught`;
+    $("#prompt").textContent = n ? (s.extra_steps_allowed ? `Compute, or touch up again for an optional step (${s.extra_steps_allowed} left).` : "Compute.")
+                                 : "No touch-up needed: Compute.";
+    $("#touch-up").hidden = !(n && s.extra_steps_allowed);
+  }
+  $("#compute").textContent = done < n ? `Compute (${done}/${n} taught)` : "Compute";
+  $("#compute").classList.toggle("primary", done >= n);
+  $("#touch-up").classList.toggle("primary", !!cur);
+}
+
+async function refreshSession(s) {
+  state.session = s || (await request("GET", ctl(`/sessions/${state.session.id}`)));
+  if (state.session.state !== "computed") state.report = null;
+  renderSession();
+}
+
+async function moveTo() {
+  const st = currentStep();
+  if (!st || !st.target) return;
+  const body = { target: st.target, tilt_deg: st.tilt_deg, around_deg: st.around_deg, spin_deg: st.spin_deg };
+  if (st.tool_point_mm) body.tool_point_mm = st.tool_point_mm;
+  const jitter = Number($("#jitter").value || 0);
+  if (!Number.isFinite(jitter) || jitter < 0) {
+    throw new ApiError(422, [{ loc: ["body", "miss_mm"], msg: "hand jitter is a distance >= 0 mm" }]);
+  }
+  if (jitter > 0) { // a sloppy touch-up: miss the mark by `jitter` mm in a (seeded) random direction
+    const v = [random() - 0.5, random() - 0.5, random() - 0.5];
+    const n = Math.hypot(...v) || 1;
+    body.miss_mm = v.map((x) => (x / n) * jitter);
+  }
+  await loadRobot(await request("POST", ctl("/robot/approach"), body));
+}
+
+async function touchUp(extraBody = {}) {
+  const st = currentStep();
+  const body = { ...extraBody };
+  if (st) body.step = st.index;
+  const s = await request("POST", ctl(`/sessions/${state.session.id}/touch-up`), body);
+  state.step = null;
+  await refreshSession(s);
+}
+
+async function touchUpJoints() {
+  const text = $("#paste-joints").value.trim();
+  const joints = parseNumbers(text);
+  if (!joints.length || joints.some((q) => !Number.isFinite(q))) {
+    throw new ApiError(422, [{ loc: ["body", "joints_deg"], msg: "paste the joint values in degrees, e.g. 0, -90, 90, 0, 90, 0" }]);
+  }
+  await touchUp({ joints_deg: joints });
+}
+
+async function runCycle() {
+  const out = await request("POST", ctl(`/sessions/${state.session.id}/run-cycle`));
+  await refreshSession(out.session);
+  await loadRobot();
+}
+
+async function compute() {
+  state.report = await request("POST", ctl(`/sessions/${state.session.id}/compute`));
+  state.session = await request("GET", ctl(`/sessions/${state.session.id}`));
+  renderSession();
+  $("#report").scrollIntoView({ block: "nearest" });
+}
+
+async function save() {
+  const entry = await request("POST", ctl(`/sessions/${state.session.id}/save`));
+  state.session = null;
+  state.report = null;
+  renderSession();
+  await loadTables();
+  showTab(entry.table);
+  await loadRobot();
+  const note = $("#wizard .panel-err");
+  note.textContent = "";
+  $("#saved-note")?.remove();
+  $("#open-form").append(el("p", { id: "saved-note", class: "saved", role: "status",
+    text: `Saved into ${entry.table.toUpperCase()} ${entry.number} (${entry.name}): ` +
+          `${num(entry.pose.x)} ${num(entry.pose.y)} ${num(entry.pose.z)} / ${num(entry.pose.a)} ${num(entry.pose.b)} ${num(entry.pose.c)}` }));
+}
+
+async function discard() {
+  await request("POST", ctl(`/sessions/${state.session.id}/discard`));
+  state.session = null;
+  state.report = null;
+  renderSession();
+}
+
+// ------------------------------------------------------------------------------ report
+
+function stat(label, value, unit = "") {
+  return el("div", { class: "stat" }, el("span", { class: "stat-label", text: label }),
+    el("span", { class: "stat-value", text: value === null || value === undefined ? "—" : `${fmt(value)}${unit ? " " + unit : ""}` }));
+}
+
+/** Residual per touch-up as bars (inline SVG); the bad point red, its threshold dashed. */
+function residualChart(r) {
+  const NS = "http://www.w3.org/2000/svg";
+  const values = r.residuals_mm || [];
+  const W = 520, H = 132, left = 64, right = 12, top = 14, bottom = 28;
+  const threshold = r.bad_point ? r.bad_point.threshold_mm : null;
+  const vmax = Math.max(...values, threshold || 0, 0.001); // exact touch-ups: a flat 1 µm scale
+  const svg = document.createElementNS(NS, "svg");
+  const s = (tag, attrs, text) => {
+    const e = document.createElementNS(NS, tag);
+    for (const [k, v] of Object.entries(attrs)) e.setAttribute(k, v);
+    if (text !== undefined) e.textContent = text;
+    return e;
+  };
+  svg.setAttribute("viewBox", `0 0 ${W} ${H}`);
+  svg.setAttribute("class", "chart");
+  svg.setAttribute("role", "img");
+  svg.setAttribute("aria-label", `Residual per touch-up, mm: ${values.map((v) => fmt(v)).join(", ")}`);
+  const ph = H - top - bottom, pw = W - left - right;
+  svg.append(s("line", { x1: left, y1: top + ph, x2: W - right, y2: top + ph, class: "axis" }));
+  svg.append(s("line", { x1: left, y1: top, x2: left, y2: top + ph, class: "axis" }));
+  for (const f of [0, 0.5, 1]) {
+    const y = top + ph - f * ph;
+    svg.append(s("text", { x: left - 6, y: y + 4, "text-anchor": "end", class: "tick-label" }, fmt(f * vmax)));
+    if (f > 0) svg.append(s("line", { x1: left, y1: y, x2: W - right, y2: y, class: "grid" }));
+  }
+  svg.append(s("text", { x: 4, y: top - 2, class: "tick-label" }, "mm"));
+  const n = Math.max(values.length, 1);
+  const slot = pw / n;
+  const bw = Math.min(48, slot * 0.6);
+  values.forEach((v, i) => {
+    const h = (v / vmax) * ph;
+    const x = left + slot * i + (slot - bw) / 2;
+    const bad = r.bad_point && r.bad_point.index === i;
+    const rect = s("rect", { x, y: top + ph - h, width: bw, height: Math.max(h, 0.5), class: bad ? "bar bad" : "bar" });
+    rect.append(s("title", {}, `touch-up ${i + 1}: ${fmt(v)} mm`));
+    svg.append(rect);
+    svg.append(s("text", { x: x + bw / 2, y: top + ph + 14, "text-anchor": "middle", class: "tick-label" }, String(i + 1)));
+  });
+  if (threshold) {
+    const y = top + ph - (threshold / vmax) * ph;
+    svg.append(s("line", { x1: left, y1: y, x2: W - right, y2: y, class: "threshold" }));
+    svg.append(s("text", { x: W - right, y: y - 3, "text-anchor": "end", class: "tick-label" }, `threshold ${fmt(threshold)} mm`));
+  }
+  svg.append(s("text", { x: left + pw / 2, y: H - 2, "text-anchor": "middle", class: "tick-label" }, "touch-up"));
+  return svg;
+}
+
+function renderReport() {
+  const r = state.report;
+  const sec = $("#report");
+  sec.hidden = !r;
+  if (!r) return;
+  const s = state.session;
+  $("#report-h").textContent = `Report: ${s ? s.title : r.method}`;
+  const f = r.frame;
+  const body = $("#report-body");
+  const frameRow = el("table", { class: "pose-table", "aria-label": "Result frame" },
+    el("caption", { text: s ? `Result for ${s.target_table.toUpperCase()} ${s.target_no}` : "Result" }),
+    el("thead", {}, el("tr", {}, ...AXES_XYZABC.map((a) => el("th", { text: a })))),
+    el("tbody", {}, el("tr", {}, ...POSE_KEYS.map((k) => el("td", { text: num(f[k]) })))));
+  const stats = el("div", { class: "stats" },
+    stat("Max", r.max_error_mm, "mm"), stat("Mean", r.mean_error_mm, "mm"), stat("RMS", r.rms_error_mm, "mm"),
+    stat("95% position", r.position_bound95_mm, "mm"),
+    ...(r.angle_bound95_deg !== null ? [stat("95% angle", r.angle_bound95_deg, "deg")] : []),
+    ...(r.max_error_deg !== null ? [stat("Max angle", r.max_error_deg, "deg")] : []),
+    ...(r.tre_mm !== null ? [stat("TRE", r.tre_mm, "mm")] : []),
+    ...(r.sigma_mm !== null ? [stat("σ touch-up", r.sigma_mm, "mm")] : []));
+  const notes = el("ul", { class: "notes", "aria-label": "Warnings" });
+  if (r.bad_point) notes.append(el("li", { class: "warning bad-point", text: `Bad point: ${r.bad_point.message}` }));
+  for (const w of r.warnings) notes.append(el("li", { class: w.severity === "error" ? "error" : "warning", text: `${w.severity}: ${w.message}` }));
+  if (!r.bad_point && !r.warnings.length) notes.append(el("li", { class: "ok", text: "No warnings." }));
+  const guidance = r.guidance ? el("p", { class: "guidance" }, el("strong", { text: "Guidance: " }), r.guidance) : null;
+  body.replaceChildren(frameRow, stats, residualChart(r), notes, ...(guidance ? [guidance] : []));
+  if (s) $("#save").textContent = `Save into ${s.target_table.toUpperCase()} ${s.target_no}`;
+}
+
+// ------------------------------------------------------------------------------ wiring
+
+function wire() {
+  const top = $("#topbar");
+  $("#controller").addEventListener("change", (e) => act(top, () => selectController(e.target.value)));
+  $("#active-tool").addEventListener("change", (e) => act(top, () => setActive("tool", e.target.value)));
+  $("#active-base").addEventListener("change", (e) => act(top, () => setActive("base", e.target.value)));
+
+  const jogPanel = $("#jog-panel");
+  for (const r of $$('input[name="mode"]', jogPanel)) r.addEventListener("change", () => { clearErrors(jogPanel); renderJogRows(); });
+  for (const b of $$("[data-inc]", jogPanel)) b.addEventListener("click", () => { $("#increment").value = b.dataset.inc; });
+  $("#jog-rows").addEventListener("click", (e) => {
+    const b = e.target.closest("button.jog");
+    if (b) act(jogPanel, () => jog(b.dataset.axis, Number(b.dataset.sign)), b.closest(".jog-row"));
+  });
+  $("#move-joints").addEventListener("click", () => act(jogPanel, moveJoints));
+  $("#home").addEventListener("click", () => act(jogPanel, async () => loadRobot(await request("POST", ctl("/robot/home")))));
+
+  const wizard = $("#wizard");
+  $("#method").addEventListener("change", () => { clearErrors(wizard); renderParams(); });
+  $("#open-session").addEventListener("click", () => { $("#saved-note")?.remove(); act(wizard, openSession); });
+  $("#move-to").addEventListener("click", () => act(wizard, moveTo, $("#move-to")));
+  $("#touch-up").addEventListener("click", () => act(wizard, () => touchUp(), $("#current")));
+  $("#touch-up-joints").addEventListener("click", () => act(wizard, touchUpJoints));
+  $("#run-cycle").addEventListener("click", () => act(wizard, runCycle));
+  $("#compute").addEventListener("click", () => act(wizard, compute, $("#compute")));
+  $("#discard").addEventListener("click", () => act(wizard, discard));
+  const report = $("#report");
+  $("#save").addEventListener("click", () => act(report, save));
+  $("#discard-report").addEventListener("click", () => act(report, discard));
+
+  $("#tab-tool").addEventListener("click", () => showTab("tool"));
+  $("#tab-base").addEventListener("click", () => showTab("base"));
+}
+
+async function main() {
+  wire();
+  await act($("#topbar"), async () => {
+    await loadMethods();
+    await loadControllers();
+  });
+  document.body.dataset.ready = "true";
+}
+
+main();
