@@ -13,6 +13,8 @@
 //
 // ?analysis=ID shows the stored report GET /analysis/ID.
 
+import { request, ApiError } from "/api.js";
+
 const $ = (sel, root = document) => root.querySelector(sel);
 const SVG = "http://www.w3.org/2000/svg";
 
@@ -46,36 +48,6 @@ const page = { pending: 0, recording: null, report: null };
 window.analysisPage = page;
 
 // ------------------------------------------------------------------------------ requests
-
-class ApiError extends Error {
-  constructor(status, detail) {
-    super(typeof detail === "string" ? detail : JSON.stringify(detail));
-    this.status = status;
-    this.detail = detail;
-  }
-}
-
-async function request(method, path, bodyText) {
-  const init = { method, headers: {} };
-  if (bodyText !== undefined) {
-    init.headers["Content-Type"] = "application/json";
-    init.body = bodyText; // as the person gave it: the service parses and judges it
-  }
-  let r;
-  try {
-    r = await fetch(path, init);
-  } catch (err) {
-    throw new ApiError(0, [{ loc: [], msg: `the service did not answer (${err.message})` }]);
-  }
-  const text = await r.text();
-  let data = null;
-  try { data = text ? JSON.parse(text) : null; } catch { data = text; }
-  if (!r.ok) {
-    const detail = data && data.detail !== undefined ? data.detail : `${r.status} ${r.statusText}`;
-    throw new ApiError(r.status, detail);
-  }
-  return data;
-}
 
 /** Run an async job, counting it in page.pending from the first synchronous moment. */
 async function busy(job) {
@@ -212,7 +184,7 @@ async function analyseText(text) {
   setStatus("Storing the recording …");
   let rec;
   try {
-    rec = await request("POST", "/recordings", text);
+    rec = await request("POST", "/recordings", { bodyText: text }); // as given: the service judges it
   } catch (err) {
     showError(err, text, "Storing the recording");
     return;

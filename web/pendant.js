@@ -4,6 +4,8 @@
 // {"detail": [{"loc": ["body", ...field], "msg": reason}]}; showErrors() puts each msg beside
 // the element whose data-loc (or name) is that field, else in the panel's own error line.
 
+import { request, ApiError } from "/api.js";
+
 const $ = (sel, root = document) => root.querySelector(sel);
 const $$ = (sel, root = document) => [...root.querySelectorAll(sel)];
 const AXES_XYZABC = ["X", "Y", "Z", "A", "B", "C"];
@@ -34,37 +36,20 @@ window.pendant = pendant;
 
 // ------------------------------------------------------------------------------ requests
 
-class ApiError extends Error {
-  constructor(status, detail) {
-    super(typeof detail === "string" ? detail : JSON.stringify(detail));
-    this.status = status;
-    this.detail = detail;
-  }
-}
-
-async function request(method, path, body) {
-  pendant.pending += 1;
-  $("#main").setAttribute("aria-busy", "true");
-  try {
-    const init = { method, headers: {} };
-    if (body !== undefined) {
-      init.headers["Content-Type"] = "application/json";
-      init.body = JSON.stringify(body);
-    }
-    const r = await fetch(path, init);
-    const text = await r.text();
-    let data = null;
-    try { data = text ? JSON.parse(text) : null; } catch { data = text; }
-    if (!r.ok) {
-      const detail = data && data.detail !== undefined ? data.detail : `${r.status} ${r.statusText}`;
-      throw new ApiError(r.status, detail);
-    }
-    return data;
-  } finally {
+/** Counts each request in pendant.pending and marks #main busy while any is in flight. */
+const inFlight = {
+  onStart() {
+    pendant.pending += 1;
+    $("#main").setAttribute("aria-busy", "true");
+  },
+  onEnd() {
     pendant.pending -= 1;
     if (pendant.pending === 0) $("#main").setAttribute("aria-busy", "false");
-  }
-}
+  },
+};
+
+/** `method` `path` with an optional JSON `body`, counted in flight (see web/api.js). */
+const api = (method, path, body) => request(method, path, { body, ...inFlight });
 
 const ctl = (suffix = "") => `/controllers/${state.cid}${suffix}`;
 
@@ -196,7 +181,7 @@ function slotName(table, no) {
 // ------------------------------------------------------------------------------ controller
 
 async function loadControllers() {
-  const list = await request("GET", "/controllers");
+  const list = await api("GET", "/controllers");
   const sel = $("#controller");
   sel.replaceChildren(...list.map((c) => el("option", { value: c.id, text: `${c.name} (${c.robot_name})` })));
   if (!list.length) {
@@ -210,7 +195,7 @@ async function loadControllers() {
 
 async function selectController(id) {
   state.cid = Number(id);
-  state.controller = await request("GET", ctl());
+  state.controller = await api("GET", ctl());
   $("#robot-name").textContent = `${state.controller.robot_name}, ${state.controller.dof} axes`;
   state.session = null;
   state.report = null;
@@ -219,7 +204,7 @@ async function selectController(id) {
   renderParams();
   for (const a of $$(".exports a")) a.href = ctl(`/export?format=${a.dataset.format}`);
   // resume the newest unfinished session (a restart of the page loses nothing)
-  const open = (await request("GET", ctl("/sessions"))).filter((s) => s.state === "open" || s.state === "computed");
+  const open = (await api("GET", ctl("/sessions"))).filter((s) => s.state === "open" || s.state === "computed");
   if (open.length) state.session = open[open.length - 1];
   state.report = state.session ? state.session.report : null;
   state.step = null;
@@ -230,7 +215,7 @@ async function selectController(id) {
 // ------------------------------------------------------------------------------ robot
 
 async function loadRobot(robot) {
-  state.robot = robot || (await request("GET", ctl("/robot")));
+  state.robot = robot || (await api("GET", ctl("/robot")));
   renderRobot();
 }
 
@@ -293,7 +278,7 @@ async function jog(axis, sign) {
   if (!Number.isFinite(increment)) {
     throw new ApiError(422, [{ loc: ["body", "increment"], msg: "give the increment as a number" }]);
   }
-  const robot = await request("POST", ctl("/robot/jog"), { mode: jogMode(), axis, increment });
+  const robot = await api("POST", ctl("/robot/jog"), { mode: jogMode(), axis, increment });
   await loadRobot(robot);
 }
 
@@ -301,18 +286,18 @@ async function moveJoints() {
   const joints = $$("#jog-rows input[data-joint]").map((i) => Number(i.value));
   const bad = joints.findIndex((q) => !Number.isFinite(q));
   if (bad >= 0) throw new ApiError(422, [{ loc: ["body", "joints_deg", bad], msg: "give the joint value in degrees" }]);
-  await loadRobot(await request("PUT", ctl("/robot/joints"), { joints_deg: joints }));
+  await loadRobot(await api("PUT", ctl("/robot/joints"), { joints_deg: joints }));
 }
 
 async function setActive(which, value) {
   const body = which === "tool" ? { tool_no: Number(value) } : { base_no: Number(value) };
-  await loadRobot(await request("PUT", ctl("/robot/active"), body));
+  await loadRobot(await api("PUT", ctl("/robot/active"), body));
 }
 
 // ------------------------------------------------------------------------------ tables
 
 async function loadTables() {
-  const [tools, bases] = await Promise.all([request("GET", ctl("/tools")), request("GET", ctl("/bases"))]);
+  const [tools, bases] = await Promise.all([api("GET", ctl("/tools")), api("GET", ctl("/bases"))]);
   state.tools = tools;
   state.bases = bases;
   renderTable($("#tool-table tbody"), tools, "tool");
@@ -361,7 +346,7 @@ function showTab(which) {
 // ------------------------------------------------------------------------------ wizard
 
 async function loadMethods() {
-  state.methods = await request("GET", "/methods");
+  state.methods = await api("GET", "/methods");
   const sel = $("#method");
   const groups = new Map();
   for (const m of state.methods) {
@@ -409,7 +394,7 @@ function renderParams() {
 /** Indirect menus: start from the marked points of the cell's drawing (point_1, point_2, ...). */
 async function prefillKnownPoints(m) {
   if (!state.cid) return;
-  const cell = state.cell || (state.cell = await request("GET", ctl("/cell")));
+  const cell = state.cell || (state.cell = await api("GET", ctl("/cell")));
   const pts = m.menu === "base" ? cell.base_points_mm : cell.workpiece_points_mm;
   const lines = Object.entries(pts).filter(([k]) => k.startsWith("point_")).map(([, p]) => p.join(" "));
   const area = $('#params textarea[name="known_points_mm"]');
@@ -441,7 +426,7 @@ function readParams(m) {
 async function openSession() {
   const m = methodOf($("#method").value);
   const body = { method: m.name, target_no: Number($("#target_no").value), params: readParams(m) };
-  state.session = await request("POST", ctl("/sessions"), body);
+  state.session = await api("POST", ctl("/sessions"), body);
   state.report = null;
   state.step = null;
   renderSession();
@@ -502,7 +487,7 @@ function renderSession() {
 }
 
 async function refreshSession(s) {
-  state.session = s || (await request("GET", ctl(`/sessions/${state.session.id}`)));
+  state.session = s || (await api("GET", ctl(`/sessions/${state.session.id}`)));
   if (state.session.state !== "computed") state.report = null;
   renderSession();
 }
@@ -521,14 +506,14 @@ async function moveTo() {
     const n = Math.hypot(...v) || 1;
     body.miss_mm = v.map((x) => (x / n) * jitter);
   }
-  await loadRobot(await request("POST", ctl("/robot/approach"), body));
+  await loadRobot(await api("POST", ctl("/robot/approach"), body));
 }
 
 async function touchUp(extraBody = {}) {
   const st = currentStep();
   const body = { ...extraBody };
   if (st) body.step = st.index;
-  const s = await request("POST", ctl(`/sessions/${state.session.id}/touch-up`), body);
+  const s = await api("POST", ctl(`/sessions/${state.session.id}/touch-up`), body);
   state.step = null;
   await refreshSession(s);
 }
@@ -543,20 +528,20 @@ async function touchUpJoints() {
 }
 
 async function runCycle() {
-  const out = await request("POST", ctl(`/sessions/${state.session.id}/run-cycle`));
+  const out = await api("POST", ctl(`/sessions/${state.session.id}/run-cycle`));
   await refreshSession(out.session);
   await loadRobot();
 }
 
 async function compute() {
-  state.report = await request("POST", ctl(`/sessions/${state.session.id}/compute`));
-  state.session = await request("GET", ctl(`/sessions/${state.session.id}`));
+  state.report = await api("POST", ctl(`/sessions/${state.session.id}/compute`));
+  state.session = await api("GET", ctl(`/sessions/${state.session.id}`));
   renderSession();
   $("#report").scrollIntoView({ block: "nearest" });
 }
 
 async function save() {
-  const entry = await request("POST", ctl(`/sessions/${state.session.id}/save`));
+  const entry = await api("POST", ctl(`/sessions/${state.session.id}/save`));
   state.session = null;
   state.report = null;
   renderSession();
@@ -572,7 +557,7 @@ async function save() {
 }
 
 async function discard() {
-  await request("POST", ctl(`/sessions/${state.session.id}/discard`));
+  await api("POST", ctl(`/sessions/${state.session.id}/discard`));
   state.session = null;
   state.report = null;
   renderSession();
@@ -678,7 +663,7 @@ function wire() {
     if (b) act(jogPanel, () => jog(b.dataset.axis, Number(b.dataset.sign)), b.closest(".jog-row"));
   });
   $("#move-joints").addEventListener("click", () => act(jogPanel, moveJoints));
-  $("#home").addEventListener("click", () => act(jogPanel, async () => loadRobot(await request("POST", ctl("/robot/home")))));
+  $("#home").addEventListener("click", () => act(jogPanel, async () => loadRobot(await api("POST", ctl("/robot/home")))));
 
   const wizard = $("#wizard");
   $("#method").addEventListener("change", () => { clearErrors(wizard); renderParams(); });

@@ -1,0 +1,55 @@
+// pendant: the request layer both pages share (the teach pendant and the analysis page).
+// Plain ES module, no build step, no libraries.
+//
+// A refused request answers {"detail": [{"loc": ["body", ...field], "msg": reason}]}; request()
+// throws it as an ApiError carrying that detail, so each page can show every msg beside its field.
+
+/** A request the service refused (status, the response's `detail`), or did not answer (status 0). */
+export class ApiError extends Error {
+  constructor(status, detail) {
+    super(typeof detail === "string" ? detail : JSON.stringify(detail));
+    this.status = status;
+    this.detail = detail;
+  }
+}
+
+/**
+ * `method` `path` on this origin; resolves to the parsed JSON answer (null when empty).
+ *
+ * Options:
+ * - `body`: a value sent as JSON (JSON.stringify);
+ * - `bodyText`: a JSON text sent unchanged (what a person pasted: the service judges it);
+ * - `onStart`, `onEnd`: called synchronously when the request starts and once when it settles
+ *   (success or failure), e.g. to count requests in flight.
+ *
+ * Throws ApiError(status, detail) for a non-2xx answer, and ApiError(0, [{loc: [], msg}]) when
+ * the service did not answer at all (network failure).
+ */
+export async function request(method, path, { body, bodyText, onStart, onEnd } = {}) {
+  if (body !== undefined && bodyText !== undefined) throw new TypeError("request: give body or bodyText, not both");
+  onStart?.();
+  try {
+    const init = { method, headers: {} };
+    const text = body !== undefined ? JSON.stringify(body) : bodyText;
+    if (text !== undefined) {
+      init.headers["Content-Type"] = "application/json";
+      init.body = text;
+    }
+    let r;
+    try {
+      r = await fetch(path, init);
+    } catch (err) {
+      throw new ApiError(0, [{ loc: [], msg: `the service did not answer (${err.message})` }]);
+    }
+    const answer = await r.text();
+    let data = null;
+    try { data = answer ? JSON.parse(answer) : null; } catch { data = answer; }
+    if (!r.ok) {
+      const detail = data && data.detail !== undefined ? data.detail : `${r.status} ${r.statusText}`;
+      throw new ApiError(r.status, detail);
+    }
+    return data;
+  } finally {
+    onEnd?.();
+  }
+}
