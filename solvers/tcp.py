@@ -52,6 +52,22 @@ _F95_3 = 3.0 * stats.f.ppf(0.95, 3, np.arange(1, 1001))
 #: smallest eigenvalue of M = I - R̄ᵀR̄ that still determines the TCP: sin²(2 deg / 2)
 _MIN_LAMBDA = math.sin(math.radians(DEGENERATE_TILT_DEG) / 2.0) ** 2
 
+try:  # the LAPACK gufunc behind np.linalg.eigh, without its ~4 µs of Python checks
+    from numpy.linalg import _umath_linalg
+
+    _eigh_lo = _umath_linalg.eigh_lo
+except (ImportError, AttributeError):  # pragma: no cover - other numpy layouts
+    _eigh_lo = np.linalg.eigh
+
+
+def _eigh(M: FloatArray) -> tuple[FloatArray, FloatArray]:
+    """``np.linalg.eigh(M)`` of a finite symmetric 3x3 (the same LAPACK call, the same numbers)."""
+    w, V = _eigh_lo(M)
+    if not w[0] == w[0]:  # no convergence (not for a finite 3x3): numpy's own LinAlgError
+        return np.linalg.eigh(M)
+    return w, V
+
+
 _AXES = np.eye(3)
 _AXIS_NAMES = ("x", "y", "z")
 
@@ -70,11 +86,15 @@ def _candidate_tilts() -> tuple[FloatArray, FloatArray, FloatArray]:
 
 
 _TILT_R, _TILT_DEG, _TILT_AXIS = _candidate_tilts()
+_TILT_LIST = list(_TILT_R)  # the same rotations, indexed without a view per call
 _EYE3 = np.eye(3)
-_LAST_ROW = np.array([0.0, 0.0, 0.0, 1.0])
+_EYE4 = np.eye(4)
+_dot = np.dot  # for 2-D operands: the same BLAS call as ``@``, with less overhead per call
+_LAST_ROW_BYTES = np.array([0.0, 0.0, 0.0, 1.0]).tobytes()
 _COS_10 = float(np.cos(np.radians(10.0)))
 #: entries (00, 11, 22, 01, 02, 12) of a symmetric 3x3, as flat indices
 _SYM6 = np.array([0, 4, 8, 1, 2, 5])
+_SYM6_COLUMN = _SYM6[:, None]
 
 
 def _symmetric_weights() -> FloatArray:
@@ -112,18 +132,32 @@ def _perpendicular_axes_words(v: FloatArray) -> str:
     return f"flange {_AXIS_NAMES[order[0]]} or {_AXIS_NAMES[order[1]]}"
 
 
-def _as_flange_poses(value: object, min_count: int) -> FloatArray:
-    """``as_transforms`` without its loop over poses: one vectorised check on the fast path,
-    the per-pose search (same messages) only when something is wrong."""
-    T = as_array(value, "flange_poses", (None, 4, 4))
-    if len(T) < min_count:
-        raise CalibrationError(("flange_poses",), f"needs at least {min_count} poses, got {len(T)}")
+def _flange_poses_gram(value: object,
+                       min_count: int) -> tuple[FloatArray, FloatArray, FloatArray, list[float]]:
+    """``as_transforms(value, "flange_poses", min_count)`` (same errors), the rotations R (N, 3, 3),
+    their Gram matrix ``G_ij = trace(R_iᵀ R_j)`` and G's entries as a flat list.
+
+    Fast path, for a float (N, 4, 4) array, last rows exactly [0, 0, 0, 1], all finite (Σ T² by
+    BLAS): G is needed anyway, and ``G_kk = |R_k|²_F = Σ σ_i²`` within 1e-13 of 3 with
+    ``det R_k`` within 1e-13 of 1 certifies R_k: with ``s_i = σ_i²``,
+    ``Σ (s_i - 1)² / (2 max(s_i, 1)²) <= Σ (s_i - 1 - ln s_i) = Σ s_i - 3 - ln det² < 3e-13``,
+    so ``|R_k R_kᵀ - I| <= max |s_i - 1| < 8e-7``, inside as_transforms' 1e-6, and det > 0.
+    Anything else goes through as_transforms, which names the pose and the reason.
+    """
+    fast = (type(value) is np.ndarray and value.dtype == np.float64 and value.ndim == 3
+            and value.shape[1:] == (4, 4) and len(value) >= max(min_count, 1)
+            and value[:, 3].tobytes() == _LAST_ROW_BYTES * len(value)
+            and math.isfinite(np.vdot(value, value)))
+    T = value if fast else as_transforms(value, "flange_poses", min_count)
+    n = len(T)
     R = T[:, :3, :3]
-    if len(T) and (np.abs(R @ R.transpose(0, 2, 1) - _EYE3).max() <= 1e-6
-                   and np.abs(T[:, 3] - _LAST_ROW).max() <= 1e-6
-                   and np.linalg.det(R).min() > 0):
-        return T
-    return as_transforms(T, "flange_poses", min_count)
+    G = _dot(Rf := R.reshape(n, 9), Rf.T)
+    Gl = G.ravel().tolist()
+    if fast and not (all(abs(Gl[k] - 3.0) <= 1e-13 for k in range(0, n * n, n + 1))
+                     and all(abs(a * (e * i - f * h) - b * (d * i - f * g) + c * (d * h - e * g)
+                                 - 1.0) <= 1e-13 for a, b, c, d, e, f, g, h, i in Rf.tolist())):
+        as_transforms(T, "flange_poses", min_count)  # raises, or accepts a nearly rigid T
+    return T, R, G, Gl
 
 
 def _pivot_normal(X: FloatArray) -> tuple[FloatArray, FloatArray, FloatArray, FloatArray]:
@@ -145,7 +179,7 @@ def _pivot_fit(X: FloatArray) -> tuple[FloatArray, FloatArray, FloatArray, Float
     """Least-squares (t, s, eigenvalues, eigenvectors of M) from ``X = [R_k | p_k]`` (N, 3, 4);
     raises ValueError when singular."""
     Rbar, pbar, M, rhs = _pivot_normal(X)
-    w, V = np.linalg.eigh(M)
+    w, V = _eigh(M)
     if w[0] < _MIN_LAMBDA:
         raise ValueError("orientations do not determine the TCP")
     t = V @ ((V.T @ rhs) / w)
@@ -222,17 +256,26 @@ def _best_tilt(R: FloatArray, Rbar: FloatArray,
     if G is None:
         Rf = R.reshape(n, 9)
         G = Rf @ Rf.T
-    j = int(np.argmax(G.sum(axis=0)))  # max trace(R̄ᵀ R_j)
+    j = int(G.sum(axis=0).argmax())  # max trace(R̄ᵀ R_j)
+    Rj = R[j]
     A = Rbar * (n / (n + 1.0))
-    const = (1.0 + 1e-9 - 1.0 / (n + 1.0) ** 2) * _EYE3 - A.T @ A
-    K = (A.T @ R[j]) * (1.0 / (n + 1.0))
-    a, b, c, d, e, f = (const.ravel()[_SYM6, None] - (K.ravel() @ _SYMW).reshape(6, -1))
+    At = A.T
+    const = (1.0 + 1e-9 - 1.0 / (n + 1.0) ** 2) * _EYE3 - _dot(At, A)
+    K = _dot(At, Rj) * (1.0 / (n + 1.0))
+    x = const.take(_SYM6_COLUMN) - _dot(K.ravel(), _SYMW).reshape(6, -1)
+    a = x[0]
+    b = x[1]
+    c = x[2]
+    d = x[3]
+    e = x[4]
+    f = x[5]
     m0 = b * c - f * f
-    dd, ee = d * d, e * e
+    dd = d * d
+    ee = e * e
     det = a * m0 - b * ee - c * dd + 2.0 * d * e * f
     tr = (m0 + a * (b + c) - dd - ee) / ((n + 1.0) * det)
-    best = int(np.argmin(tr))
-    return best, j, R[j] @ _TILT_R[best], tr
+    best = int(tr.argmin())
+    return best, j, _dot(Rj, _TILT_LIST[best]), tr
 
 
 def _guidance_text(R: FloatArray, Rbar: FloatArray, sigma_mm: float | None,
@@ -355,24 +398,30 @@ def tcp_xyz_4point(flange_poses: FloatArray) -> CalibrationResult:
     >>> res.report.max_error_mm < 1e-9
     True
     """
-    T = _as_flange_poses(flange_poses, 4)
-    R = T[:, :3, :3]
-    p = T[:, :3, 3]
+    # checked poses; G_ij = trace(R_iᵀ R_j) = 1 + 2 cos(angle_ij) for all pairs at once
+    T, R, G, Gl = _flange_poses_gram(flange_poses, 4)
     n = len(T)
+    X = T[:, :3, :]  # [R_k | p_k]
 
-    # orientation spread: angle of R_iᵀR_j from its trace, all pairs at once
-    Rf = R.reshape(n, 9)
-    G = Rf @ Rf.T  # G_ij = trace(R_iᵀ R_j) = 1 + 2 cos(angle_ij)
-    spread = math.degrees(math.acos(min(max((float(G.min()) - 1.0) / 2.0, -1.0), 1.0)))
+    # orientation spread: the largest angle between two touch-up orientations
+    spread = math.degrees(math.acos(min(max((min(Gl) - 1.0) / 2.0, -1.0), 1.0)))
     if spread < MIN_SPREAD_DEG:
         raise CalibrationError(("flange_poses",), (
             f"orientations too alike: all {n} touch-ups within {spread:.1f} deg of each other, "
             f"so the TCP cannot be told from the touched point; touch up from orientations "
             f"tilted 30-45 deg apart"))
 
-    Rbar, pbar, M, rhs = _pivot_normal(T[:, :3, :])
-    w, V = np.linalg.eigh(M)
-    tilt0 = math.degrees(2.0 * math.asin(math.sqrt(min(max(float(w[0]), 0.0), 1.0))))
+    # the reduced normal equations of _pivot_normal, keeping the centred rows D for the residual
+    Xbar = X.sum(axis=0) * (1.0 / n)  # [R̄ | p̄]
+    D = (X - Xbar).reshape(3 * n, 4)  # [R_k - R̄ | p_k - p̄], stacked
+    C = _dot(D.T, D) * (1.0 / n)  # [[M, -rhs], [-rhsᵀ, .]]
+    Rbar = Xbar[:, :3]
+    w, V = _eigh_lo(C[:3, :3])  # np.linalg.eigh's LAPACK call
+    wl = w.tolist()
+    if not wl[0] == wl[0]:  # no convergence (not for a finite 3x3): numpy's own error
+        w, V = np.linalg.eigh(C[:3, :3])
+    tilt_deg = [math.degrees(2.0 * math.asin(math.sqrt(min(max(x, 0.0), 1.0)))) for x in wl]
+    tilt0 = tilt_deg[0]
     if tilt0 < DEGENERATE_TILT_DEG:
         v = V[:, 0]
         text, _ = _guidance_text(R, Rbar, None, G)
@@ -382,17 +431,54 @@ def tcp_xyz_4point(flange_poses: FloatArray) -> CalibrationResult:
             f"about perpendicular axes only {tilt0:.1f} deg); the rotation about "
             f"{_perpendicular_axes_words(v)} is missing -- {text}"))
 
-    t = V @ ((V.T @ rhs) / w)
-    s = Rbar @ t + pbar
-    r = R @ t + (p - s)
-    res = np.sqrt((r * r).sum(axis=1))
-    sigma = residual_sigma(r, 6, SIGMA_FLOOR_MM)
-    Minv = (V / w) @ V.T
+    # M t = rhs = -C[:3, 3] through the eigendecomposition: t = V diag(1/w) Vᵀ rhs (floats)
+    (v00, v01, v02), (v10, v11, v12), (v20, v21, v22) = V.tolist()
+    c0, c1, c2 = C[:3, 3].tolist()
+    w0, w1, w2 = wl
+    y0 = -(v00 * c0 + v10 * c1 + v20 * c2) / w0
+    y1 = -(v01 * c0 + v11 * c1 + v21 * c2) / w1
+    y2 = -(v02 * c0 + v12 * c1 + v22 * c2) / w2
+    tx = v00 * y0 + v01 * y1 + v02 * y2
+    ty = v10 * y0 + v11 * y1 + v12 * y2
+    tz = v20 * y0 + v21 * y1 + v22 * y2
+    frame = _EYE4.copy()
+    t1 = frame[:, 3]  # (t, 1)
+    t1[:3] = tx, ty, tz
+    s = _dot(Xbar, t1)  # touched point R̄ t + p̄
+    rf = _dot(D, t1)  # R_k t + p_k - s = (R_k - R̄) t + (p_k - p̄), stacked
+    it = iter(rf.tolist())
+    r2 = [x * x + y * y + z * z for x, y, z in zip(it, it, it)]  # |r_k|², Python floats
+    res = np.sqrt(r2)
+    # residual_sigma(r, 6, SIGMA_FLOOR_MM): 3N - 6 >= 6 degrees of freedom here
+    sigma = max(math.sqrt(math.fsum(r2) / (3 * n - 6)), SIGMA_FLOOR_MM)
     var = sigma * sigma / n
-    cov = var * Minv
-    cov_s = var * (_EYE3 + Rbar @ Minv @ Rbar.T)
+    # Cov(t) = sigma²/N · M^-1 = V diag(var/w) Vᵀ from the eigendecomposition in hand, and
+    # Cov(s) = sigma²/N · (I + R̄ M^-1 R̄ᵀ) = var I + R̄ Cov(t) R̄ᵀ; 3x3s in floats (no numpy calls)
+    q0, q1, q2 = var / w0, var / w1, var / w2
+    a0, a1, a2 = v00 * q0, v01 * q1, v02 * q2
+    b0, b1, b2 = v10 * q0, v11 * q1, v12 * q2
+    k00 = a0 * v00 + a1 * v01 + a2 * v02
+    k01 = a0 * v10 + a1 * v11 + a2 * v12
+    k02 = a0 * v20 + a1 * v21 + a2 * v22
+    k11 = b0 * v10 + b1 * v11 + b2 * v12
+    k12 = b0 * v20 + b1 * v21 + b2 * v22
+    k22 = v20 * q0 * v20 + v21 * q1 * v21 + v22 * q2 * v22
+    cov = np.array(((k00, k01, k02), (k01, k11, k12), (k02, k12, k22)))
+    (r00, r01, r02, _), (r10, r11, r12, _), (r20, r21, r22, _) = Xbar.tolist()
+    p00, p01, p02 = (r00 * k00 + r01 * k01 + r02 * k02, r00 * k01 + r01 * k11 + r02 * k12,
+                     r00 * k02 + r01 * k12 + r02 * k22)  # rows of R̄ Cov(t)
+    p10, p11, p12 = (r10 * k00 + r11 * k01 + r12 * k02, r10 * k01 + r11 * k11 + r12 * k12,
+                     r10 * k02 + r11 * k12 + r12 * k22)
+    p20, p21, p22 = (r20 * k00 + r21 * k01 + r22 * k02, r20 * k01 + r21 * k11 + r22 * k12,
+                     r20 * k02 + r21 * k12 + r22 * k22)
+    s01 = p00 * r10 + p01 * r11 + p02 * r12
+    s02 = p00 * r20 + p01 * r21 + p02 * r22
+    s12 = p10 * r20 + p11 * r21 + p12 * r22
+    cov_s = np.array(((var + p00 * r00 + p01 * r01 + p02 * r02, s01, s02),
+                      (s01, var + p10 * r10 + p11 * r11 + p12 * r12, s12),
+                      (s02, s12, var + p20 * r20 + p21 * r21 + p22 * r22)))
     # bound95 from the eigenvalues in hand: the largest of Cov(t) is sigma²/(N w_min)
-    b95 = math.sqrt(_scale95(3 * n - 6, sigma) * var / float(w[0]))
+    b95 = math.sqrt(_scale95(3 * n - 6, sigma) * var / w0)
 
     findings: list[Finding] = []
     if tilt0 < WEAK_TILT_DEG:
@@ -403,7 +489,8 @@ def tcp_xyz_4point(flange_poses: FloatArray) -> CalibrationResult:
             f"only {tilt0:.1f} deg about axes perpendicular to it (rotation about "
             f"{_perpendicular_axes_words(v)} is missing); +-{along95:.3f} mm (95%) along it"),
             ("flange_poses",)))
-    if np.count_nonzero(G > _TRACE_HALF_DEG) > n:  # some pair within 0.5 deg (rare path)
+    if sum(g > _TRACE_HALF_DEG for g in Gl) > n:  # some pair within 0.5 deg (rare path)
+        p = X[:, :, 3]
         for i, j in np.argwhere(np.triu(G > _TRACE_HALF_DEG, 1)):
             if np.linalg.norm(p[i] - p[j]) < 0.5:
                 findings.append(Finding("duplicate_touch_up", (
@@ -415,12 +502,12 @@ def tcp_xyz_4point(flange_poses: FloatArray) -> CalibrationResult:
             f"the touch-ups disagree: residual scatter {sigma:.2f} mm per coordinate (RMS "
             f"distance {float(np.sqrt(res @ res / n)):.2f} mm); is the tool loose or the "
             f"reference tip moving?"), ("flange_poses",)))
-    tcp_len = math.sqrt(float(t @ t))
+    tcp_len = math.sqrt(tx * tx + ty * ty + tz * tz)
     if tcp_len > MAX_TCP_MM:
         findings.append(Finding("implausible_tcp", f"TCP {tcp_len:.0f} mm from the flange: "
                                 f"check the touch-ups", ("flange_poses",)))
 
-    bad = _bad_point_pivot(R, p) if n >= 5 else None
+    bad = _bad_point_pivot(R, X[:, :, 3]) if n >= 5 else None
     if bad is not None:
         findings.append(Finding("bad_point", bad.message() + (
             " (TCP without it: {:.3f}, {:.3f}, {:.3f} mm)".format(*bad.refit_frame[:3, 3])),
@@ -432,10 +519,8 @@ def tcp_xyz_4point(flange_poses: FloatArray) -> CalibrationResult:
         sigma_mm=sigma, position_bound95_mm=b95, bad_point=bad,
         warnings=tuple(findings), guidance=text, next_orientation=Rnew,
         extras={"point_mm": s, "point_covariance_mm2": cov_s, "spread_deg": spread,
-                "tilt_deg": [math.degrees(2.0 * math.asin(math.sqrt(min(max(x, 0.0), 1.0))))
-                             for x in w.tolist()],
-                "eigenvectors_flange": V})
-    return CalibrationResult("tool.xyz_4point", _tcp_frame(t), report)
+                "tilt_deg": tilt_deg, "eigenvectors_flange": V})
+    return CalibrationResult("tool.xyz_4point", frame, report)
 
 
 # --------------------------------------------------------------------------- XYZ reference
