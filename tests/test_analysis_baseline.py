@@ -115,3 +115,21 @@ def test_exact_data_one_effect_one_finding(kind: str, n: int) -> None:
     assert [(f["effect"], f["joint"]) for f in rep["findings"]] == [("joint_offset", 3)]
     assert rep["findings"][0]["parameters"]["offset_deg"] == pytest.approx(0.02, abs=1e-8)
     assert rep["verdict"] == "explained" and rep["final"]["rms_mm"] < 1e-6
+
+
+def test_tip_constraint_is_the_plane_through_the_beam_line() -> None:
+    """A tip descent tilted towards the beam direction: a TCP anywhere on the beam line meets
+    the tip condition, wherever the sensor block puts the beam's reference point."""
+    from solvers.analysis.baseline import _beam_constraint
+
+    b = np.array([[600.0, 0.0, 200.0]])
+    v = np.array([[1.0, 0.0, 0.0]])
+    w = np.array([[np.sin(np.radians(10.0)), 0.0, -np.cos(np.radians(10.0))]])  # tilted descent
+    u = np.array([[0.0, 0.0, -1.0]])
+    for along_mm in (0.0, 50.0, -120.0):
+        c = b + along_mm * v
+        g = _beam_constraint(c, u, b, v, w, np.array([2]), 3.0)
+        assert abs(g[0]) < 1e-12, (along_mm, g)
+    # and 1 mm off the line, across the beam in the descent's own plane, it is 1 mm off
+    c = b + np.array([[0.0, 0.0, 1.0]])
+    assert abs(_beam_constraint(c, u, b, v, w, np.array([2]), 3.0)[0]) == pytest.approx(1.0)

@@ -189,7 +189,10 @@ def _beam_constraint(c, u, b, v, w, edge, radius):
     s = np.sign(np.sum(n * w, axis=1))
     s[s == 0] = 1.0
     dist = s * np.sum((c - b) * n, axis=1)
-    wn = w / np.maximum(np.linalg.norm(w, axis=1, keepdims=True), 1e-12)
+    # tip: the TCP on the plane through the beam LINE perpendicular to the motion; its normal
+    # is the motion without its component along the beam (as solvers/light_barrier.py, eq. 3)
+    wp = w - np.sum(w * v, axis=1, keepdims=True) * v
+    wn = wp / np.maximum(np.linalg.norm(wp, axis=1, keepdims=True), 1e-12)
     tip = np.sum((c - b) * wn, axis=1)
     return np.where(edge == 0, dist + radius, np.where(edge == 1, dist - radius, tip))
 
