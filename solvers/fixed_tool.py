@@ -19,6 +19,8 @@ from __future__ import annotations
 
 from typing import Literal
 
+import math
+
 import numpy as np
 from scipy.spatial.transform import Rotation
 
@@ -32,28 +34,32 @@ R_FLANGE_FIXEDTOOL = Rotation.from_euler("x", 180.0, degrees=True).as_matrix()
 TOUCH_SPREAD_WARN_MM = 0.5  # extra touches farther apart than this: the robot tool's TCP is off
 
 
-def minimal_twist_rotation(z_axis: FloatArray) -> FloatArray:
-    """Rotation whose z column is ``z_axis`` and that is the smallest rotation from world.
+def axis_frame_5d(z_axis: FloatArray) -> FloatArray:
+    """Rotation whose z column is ``z_axis``; X is world +X projected across the axis.
 
-    The 5D convention: only the tool axis is measured, so X and Y are chosen by turning world
-    +Z onto the axis about ``e_z × z`` (``Rotation.align_vectors`` with one vector pair
-    returns this shortest rotation). Straight down (``z = -e_z``) is the 180° turn about
-    world X, so X stays along world +X. The frame then never spins about its axis as the
-    axis moves.
+    The 5D convention: only the tool axis is measured, so X is chosen as the projection of
+    world +X onto the plane perpendicular to the axis, ``x = unit(e_x - (e_x . z) z)``, and
+    ``y = z × x``. Within 1 deg of world ±X that projection vanishes and world -Z is
+    projected instead. No rule is continuous for every axis direction (a hairy-ball fact):
+    this one puts its seam where fixed tools rarely point (along world ±X), so an axis
+    straight down (``z = -e_z``, the 180 deg turn about world X) and every tilt around it give
+    an X that moves smoothly with the axis.
 
     Examples
     --------
-    >>> minimal_twist_rotation([0, 0, -1]).round(6).tolist()
+    >>> axis_frame_5d([0, 0, -1]).round(6).tolist()
     [[1.0, 0.0, 0.0], [0.0, -1.0, 0.0], [0.0, 0.0, -1.0]]
-    >>> minimal_twist_rotation([1, 0, 0]).round(6).tolist()  # tilted about world Y
+    >>> axis_frame_5d([1, 0, 0]).round(6).tolist()  # along world X: X from world -Z
     [[0.0, 0.0, 1.0], [0.0, 1.0, 0.0], [-1.0, 0.0, 0.0]]
     """
     z = np.asarray(z_axis, dtype=float)
     z = z / np.linalg.norm(z)
-    if z[2] < -1 + 1e-12:
-        return R_FLANGE_FIXEDTOOL.copy()
-    rot, _ = Rotation.align_vectors(z, [0.0, 0.0, 1.0])
-    return rot.as_matrix()
+    ref = np.array([1.0, 0.0, 0.0])
+    if abs(z @ ref) > math.cos(math.radians(1.0)):
+        ref = np.array([0.0, 0.0, -1.0])
+    x = ref - (ref @ z) * z
+    x /= np.linalg.norm(x)
+    return np.column_stack([x, np.cross(z, x), z])
 
 
 def _fixed_tool(mode: Literal["5d", "6d"], touch_flange_pose: object, tool_tcp_mm: object,
@@ -71,7 +77,7 @@ def _fixed_tool(mode: Literal["5d", "6d"], touch_flange_pose: object, tool_tcp_m
 
     R6 = T2[:3, :3] @ R_FLANGE_FIXEDTOOL  # the lecture's B_Q_E = B_Q_F F_Q_E
     z_axis = R6[:, 2]  # = -Z of the aligned flange
-    R = R6 if mode == "6d" else minimal_twist_rotation(z_axis)
+    R = R6 if mode == "6d" else axis_frame_5d(z_axis)
     frame = np.eye(4)
     frame[:3, :3] = R
     frame[:3, 3] = r
@@ -113,8 +119,7 @@ def fixed_tool_5d(touch_flange_pose: object, tool_tcp_mm: object, align_flange_p
     """Fixed tool > 5D: position of an external TCP and the direction of its axis.
 
     ``r = R_F1 t + f_1``; tool axis ``z_E = R_world_F2 Rx(180°) e_z = -z_F2`` [1]_; X and Y by
-    the minimal-twist convention (:func:`minimal_twist_rotation`): the smallest rotation that
-    turns world +Z onto z_E. Use 5D when the rotation about the tool axis does not matter
+    :func:`axis_frame_5d` (X = world +X projected across the axis). Use 5D when the rotation about the tool axis does not matter
     (glue nozzle, spindle with a round tool).
 
     Parameters
@@ -196,4 +201,4 @@ def fixed_tool_6d(touch_flange_pose: object, tool_tcp_mm: object, align_flange_p
     return _fixed_tool("6d", touch_flange_pose, tool_tcp_mm, align_flange_pose, extra_touch_poses)
 
 
-__all__ = ["fixed_tool_5d", "fixed_tool_6d", "minimal_twist_rotation", "R_FLANGE_FIXEDTOOL"]
+__all__ = ["fixed_tool_5d", "fixed_tool_6d", "axis_frame_5d", "R_FLANGE_FIXEDTOOL"]

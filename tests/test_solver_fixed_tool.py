@@ -8,7 +8,7 @@ from scipy.spatial.transform import Rotation
 
 from solvers import dh
 from solvers.errors import CalibrationError, KinematicsError
-from solvers.fixed_tool import R_FLANGE_FIXEDTOOL, fixed_tool_5d, fixed_tool_6d, minimal_twist_rotation
+from solvers.fixed_tool import R_FLANGE_FIXEDTOOL, fixed_tool_5d, fixed_tool_6d, axis_frame_5d
 from solvers.frames import Pose, angle_between_deg, axis_angle_deg
 from test_solver_base import TOOL, TOOL_TCP_MM, random_q
 
@@ -49,16 +49,16 @@ def test_fixed_tool_6d_touch_then_align_then_frame(robot, rng):
 
 
 def test_fixed_tool_5d_touch_then_align_axis_then_frame(robot, rng):
-    """Fixed tool > 5D: only the tool axis is taken; X, Y follow the minimal-twist rule."""
+    """Fixed tool > 5D: only the tool axis is taken; X is world X projected across it."""
     T_E, T1, T2 = fixed_tool_scene(robot, rng)
     res = fixed_tool_5d(T1, TOOL_TCP_MM, T2)
     assert res.method == "fixed_tool.5d"
     assert np.linalg.norm(res.frame[:3, 3] - T_E[:3, 3]) < 1e-6
     assert axis_angle_deg(res.frame[:3, 2], T_E[:3, 2]) < 1e-4
-    assert np.allclose(res.frame[:3, :3], minimal_twist_rotation(T_E[:3, 2]), atol=1e-9)
-    # the minimal twist: the rotation from world is the tilt of the axis, nothing more
-    tilt = axis_angle_deg(T_E[:3, 2], [0, 0, 1])
-    assert angle_between_deg(np.eye(3), res.frame[:3, :3]) == pytest.approx(tilt, abs=1e-6)
+    assert np.allclose(res.frame[:3, :3], axis_frame_5d(T_E[:3, 2]), atol=1e-9)
+    # X lies in the plane of world X and the axis, on world X's side
+    x, z = res.frame[:3, 0], res.frame[:3, 2]
+    assert abs(np.cross(z, [1, 0, 0]) @ x) < 1e-9 and x[0] > 0
 
 
 def test_fixed_tool_5d_ignores_flange_spin_about_the_axis(rng):
@@ -84,9 +84,21 @@ def test_fixed_tool_alignment_is_rx180_of_the_lecture():
     assert np.allclose(R_FLANGE_FIXEDTOOL, RX180)
 
 
-def test_minimal_twist_straight_down_keeps_world_x():
-    assert np.allclose(minimal_twist_rotation([0, 0, -1]), np.diag([1, -1, -1.0]))
-    assert np.allclose(minimal_twist_rotation([0, 0, 5]), np.eye(3))
+def test_5d_frame_straight_down_keeps_world_x():
+    assert np.allclose(axis_frame_5d([0, 0, -1]), np.diag([1, -1, -1.0]))
+    assert np.allclose(axis_frame_5d([0, 0, 5]), np.eye(3))
+
+
+@pytest.mark.parametrize("z", [[0, 0, -1], [0, 0, 1], [0, 1, 0], [0.3, -0.5, -0.8]])
+def test_5d_frame_moves_smoothly_as_the_axis_tilts(z):
+    """A 0.01 deg change of the axis turns X by about as much, never by 180 deg (a fixed
+    nozzle pointing straight down used to flip its X between readings)."""
+    z = np.asarray(z, float) / np.linalg.norm(z)
+    for axis in ([1, 0, 0], [0, 1, 0], [0, 0, 1]):
+        if np.linalg.norm(np.cross(z, axis)) < 1e-9:
+            continue
+        z2 = Rotation.from_rotvec(np.radians(0.01) * np.cross(z, axis) / np.linalg.norm(np.cross(z, axis))).apply(z)
+        assert angle_between_deg(axis_frame_5d(z), axis_frame_5d(z2)) < 0.05
 
 
 def test_fixed_tool_extra_touches_average_and_report_scatter(rng):
