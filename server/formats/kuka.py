@@ -86,6 +86,12 @@ def _name(name: str) -> str:
     return f'"{clean or " "}"'
 
 
+# pendant's tool frames have their working direction along tool Z; KSS's default machine
+# datum is $TOOL_DIRECTION=#X. Said in the file so the controller can be set to match.
+TOOL_DIRECTION_NOTE = ("; pendant: tool working direction is TOOL Z -- set $TOOL_DIRECTION=#Z "
+                       "(KSS default #X) or tool-direction jogging will differ")
+
+
 def export_kuka(entries: Iterable[FrameEntry], tool_slots: int = 16, base_slots: int = 32) -> str:
     """The tool and base section of a KR C4 ``$config.dat``, every slot written.
 
@@ -141,7 +147,7 @@ def export_kuka(entries: Iterable[FrameEntry], tool_slots: int = 16, base_slots:
         return table[n].pose if n in table else None
 
     lines = ["; TOOL AND BASE DATA", ";----------------------------------",
-             f"INT MAX_TOOL={tool_slots}"]
+             TOOL_DIRECTION_NOTE, f"INT MAX_TOOL={tool_slots}"]
     lines.append(f"DECL FRAME TOOL_DATA[{tool_slots}]")
     lines += [f"TOOL_DATA[{n}]={_frame(pose(tools, n))}" for n in t_range]
     lines += ["", f"DECL CHAR TOOL_NAME[{tool_slots},{NAME_CHARS}]"]
