@@ -156,3 +156,19 @@ def test_refused_inputs_show_the_reason_beside_the_field(page, site):
     w.get_by_role("button", name="Discard session").click()
     idle(page)
     assert api(page, site, f"/controllers/{cid}/robot")["joints_deg"] == before
+
+
+def test_optional_touch_up_after_the_required_steps_is_labelled_once(page, site):
+    """Tool > XYZ 4-point: after the four orientations a fifth touch-up is optional; the
+    wizard counts it and says "optional" once, not twice."""
+    open_pendant(page, site)
+    w = wizard(page)
+    open_menu(page, "tool.xyz_4point", 3)
+    walk_steps(page, 4)
+    assert w.locator("#step-label").text_content() == "All 4 steps taught"
+    w.get_by_role("button", name="Touch up", exact=True).click()
+    idle(page)
+    assert w.locator("#step-label").text_content() == "All 4 steps taught, 1 optional"
+    steps = w.locator("#steps").text_content()
+    assert "(optional) (optional)" not in steps and "optional) (optional" not in steps
+    assert steps.count("optional") == 1, steps

@@ -460,7 +460,8 @@ function renderSession() {
     el("button", { type: "button", class: "step-pick", "aria-label": `Step ${st.index + 1}: ${st.prompt}${st.filled ? " (taught)" : ""}`,
                    onclick: () => { state.step = st.index; renderSession(); } },
       el("span", { class: "tick", text: st.filled ? "✓" : String(st.index + 1) }),
-      el("span", { class: "step-text", text: st.prompt + (st.required ? "" : " (optional)") })),
+      // the service's prompts for optional steps already say "optional"
+      el("span", { class: "step-text", text: st.prompt + (st.required || /optional/i.test(st.prompt) ? "" : " (optional)") })),
     el("span", { class: "err", role: "alert" }))));
   const n = s.steps.filter((st) => st.required).length;
   const done = s.steps.filter((st) => st.required && st.filled).length;
@@ -476,7 +477,8 @@ function renderSession() {
     $("#step-label").textContent = `${s.steps.length} beam triggers recorded`;
     $("#prompt").textContent = "Run the measuring cycle: the robot sweeps the tool through the crossed beams, then Compute.";
   } else {
-    $("#step-label").textContent = `All ${n} steps taught`;
+    const taught = s.steps.filter((st) => st.filled).length;
+    $("#step-label").textContent = taught > n ? `All ${n} steps taught, ${taught - n} optional` : `All ${n} steps taught`;
     $("#prompt").textContent = n ? (s.extra_steps_allowed ? `Compute, or touch up again for an optional step (${s.extra_steps_allowed} left).` : "Compute.")
                                  : "No touch-up needed: Compute.";
     $("#touch-up").hidden = !(n && s.extra_steps_allowed);
