@@ -17,9 +17,10 @@ quats = st.lists(st.floats(-1, 1, allow_nan=False), min_size=4, max_size=4).filt
     lambda q: np.linalg.norm(q) > 0.1)
 
 
-# Within ~1e-9 rad of gimbal lock (B = +-90 deg) SciPy fixes C = 0; the round trip is then
-# exact to ~2e-9 in the matrix entries, hence 1e-8 rather than machine precision.
-GIMBAL_ATOL = 1e-8
+# Within ~1e-7 rad of gimbal lock (B = +-90 deg) SciPy's as_euler treats the rotation as
+# locked and sets the third angle to 0; the round trip is then exact only to about that
+# angle (seen: 6e-8), hence 2e-7 (0.2 um at a 1 m lever) rather than machine precision.
+GIMBAL_ATOL = 2e-7
 
 
 def _T(q, t):
