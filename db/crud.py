@@ -17,6 +17,7 @@ from db.models import (BASE_SLOTS, TOOL_SLOTS, CalibSession, Controller, EntryHi
                        StoredDocument, TaughtPoint, utcnow)
 
 SLOTS = {"tool": TOOL_SLOTS, "base": BASE_SLOTS}
+MAX_ID = 2**63 - 1  # SQLite INTEGER: a larger id cannot be a row (and would overflow the driver)
 DEFAULT_KIND = {"tool": "tool", "base": "base"}
 KINDS_OF_TABLE = {"tool": ("tool", "workpiece"), "base": ("base", "fixed_tool")}
 
@@ -56,8 +57,18 @@ def create_controller(db: Session, name: str, robot_key: str | None, custom_robo
     return c
 
 
+def _row_id(value: int) -> int | None:
+    """``value`` if it can be a row id, else None (not found, not an overflow in the driver)."""
+    return value if -MAX_ID <= value <= MAX_ID else None
+
+
+def _get(db: Session, model: type, row_id: int) -> Any:
+    rid = _row_id(row_id)
+    return None if rid is None else db.get(model, rid)
+
+
 def get_controller(db: Session, controller_id: int) -> Controller:
-    c = db.get(Controller, controller_id)
+    c = _get(db, Controller, controller_id)
     if c is None:
         raise NotFound(("controller_id",), f"no controller {controller_id}")
     return c
@@ -66,7 +77,7 @@ def get_controller(db: Session, controller_id: int) -> Controller:
 def find_controller(db: Session, name_or_id: str) -> Controller:
     c = db.scalar(select(Controller).where(Controller.name == name_or_id))
     if c is None and name_or_id.isdigit():
-        c = db.get(Controller, int(name_or_id))
+        c = _get(db, Controller, int(name_or_id))
     if c is None:
         raise NotFound(("controller",), f"no controller named {name_or_id!r}")
     return c
@@ -85,6 +96,8 @@ def delete_controller(db: Session, controller: Controller) -> None:
 def get_entry(db: Session, controller_id: int, table: str, number: int) -> FrameEntry:
     if not 1 <= number <= SLOTS[table]:
         raise NotFound(("number",), f"{table} slots are numbered 1..{SLOTS[table]}, got {number}")
+    if _row_id(controller_id) is None:
+        raise NotFound(("controller_id",), f"no controller {controller_id}")
     e = db.scalar(select(FrameEntry).where(FrameEntry.controller_id == controller_id,
                                            FrameEntry.entry_table == table,
                                            FrameEntry.number == number))
@@ -155,7 +168,7 @@ def history(db: Session, controller_id: int, table: str | None = None,
 
 def restore_entry(db: Session, e: FrameEntry, history_id: int) -> EntryHistory:
     """Put the slot back to the state *before* history row ``history_id`` (recorded as a change)."""
-    h = db.get(EntryHistory, history_id)
+    h = _get(db, EntryHistory, history_id)
     slot = (e.controller_id, e.entry_table, e.number)
     if h is None or (h.controller_id, h.entry_table, h.number) != slot:
         raise NotFound(("history_id",),
@@ -176,7 +189,7 @@ def open_session(db: Session, controller: Controller, method: str, target_table:
 
 
 def get_session(db: Session, controller_id: int, session_id: int) -> CalibSession:
-    s = db.get(CalibSession, session_id)
+    s = _get(db, CalibSession, session_id)
     if s is None or s.controller_id != controller_id:
         raise NotFound(("session_id",), f"no session {session_id} on controller {controller_id}")
     return s
@@ -370,7 +383,7 @@ def store_document(db: Session, collection: str, doc: dict[str, Any]) -> int:
 
 def load_document(db: Session, collection: str, doc_id: int, loc: str) -> dict[str, Any]:
     """The document ``doc_id`` of ``collection``; NotFound naming ``loc`` if absent."""
-    row = db.get(StoredDocument, doc_id)
+    row = _get(db, StoredDocument, doc_id)
     if row is None or row.collection != collection:
         raise NotFound((loc,), f"no {collection[:-1]} {doc_id}")
     return row.doc

@@ -1,4 +1,4 @@
-"""Errors as 422/404/409 shaped like pydantic's: ``{"detail": [{"loc": [...], "msg": ...}]}``.
+"""Errors as 422/404/409 (and the framework's 404/405) shaped like pydantic's: ``{"detail": [{"loc": [...], "msg": ...}]}``.
 
 A solver's :class:`CalibrationError` names its field (``("flange_poses", 3)``); here it
 becomes ``{"loc": ["body", "flange_poses", 3], "msg": reason, "type": "calibration"}``. No
@@ -12,6 +12,7 @@ import logging
 from fastapi import FastAPI, Request
 from fastapi.exceptions import RequestValidationError
 from fastapi.responses import JSONResponse
+from starlette.exceptions import HTTPException
 
 from db.crud import NotFound, StateConflict
 from solvers.errors import CalibrationError, KinematicsError
@@ -41,6 +42,26 @@ def install(app: FastAPI) -> None:
         items = [{"loc": list(e.get("loc", ())), "msg": str(e.get("msg", "")),
                   "type": str(e.get("type", ""))} for e in exc.errors()]
         return JSONResponse(status_code=422, content={"detail": items})
+
+    @app.exception_handler(HTTPException)
+    async def _http(request: Request, exc: HTTPException) -> JSONResponse:
+        # the framework's own refusals (a body that is not JSON text, an unknown route, a
+        # method the route does not have) in the same shape as every other error
+        status, msg, loc = exc.status_code, str(exc.detail), ()
+        if status == 400 and "parsing the body" in msg:
+            status, loc = 422, ("body",)
+            msg = "is not JSON text the API can read (UTF-8 JSON expected)"
+            kind = "json_invalid"
+        elif status == 404:
+            loc, msg = ("path",), f"no route {request.method} {request.url.path}"
+            kind = "not_found"
+        elif status == 405:
+            msg = f"{request.method} is not a method of {request.url.path}"
+            kind = "method_not_allowed"
+        else:
+            kind = "http"
+        return JSONResponse(status_code=status, content=detail(loc, msg, kind),
+                            headers=getattr(exc, "headers", None))
 
     @app.exception_handler(NotFound)
     async def _not_found(_: Request, exc: NotFound) -> JSONResponse:

@@ -303,6 +303,6 @@ PARAM_HELP: dict[str, str] = {
     "tool_no": "the calibrated robot tool (tool table number) that touches the points",
     "reference_tool_no": "the calibrated reference tool (tool table number)",
     "fixed_tool_no": "the calibrated fixed tool (base table number, type fixed_tool)",
-    "known_points_mm": "the points' coordinates in the frame being calibrated (mm), at least 3",
+    "known_points_mm": "the points' coordinates in the frame being calibrated (mm), at least 4",
     "pose": "the frame as x, y, z (mm), a, b, c (deg)",
 }

@@ -42,8 +42,25 @@ class RecordingError(CalibrationError):
     """
 
 
+MAX_MAGNITUDE = 1e9
+"""No number of a recording is larger (mm, deg, s, kg, mm/s): a larger one is a wrong unit or
+a corrupt file, and the analysis would overflow to inf/NaN on it."""
+
+
+def _bounded(v: Any) -> Any:
+    """``v`` (a number or a list of numbers) if every number is within :data:`MAX_MAGNITUDE`."""
+    values = v if isinstance(v, list) else [v]
+    for x in values:
+        if isinstance(x, float) and abs(x) > MAX_MAGNITUDE:
+            raise ValueError(f"{x:g} is out of range: no value of a recording exceeds "
+                             f"{MAX_MAGNITUDE:g} (mm, deg, s, kg) in magnitude; a wrong unit?")
+    return v
+
+
 class _Model(BaseModel):
     model_config = ConfigDict(extra="forbid", allow_inf_nan=False, strict=True)
+
+    _check_magnitude = field_validator("*")(_bounded)
 
 
 Vec3 = Annotated[list[float], Field(min_length=3, max_length=3)]

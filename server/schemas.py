@@ -10,16 +10,24 @@ from datetime import datetime
 from typing import Annotated, Any, Literal
 
 import numpy as np
-from pydantic import BaseModel, ConfigDict, Field
+from pydantic import BaseModel, ConfigDict, Field, model_validator
 
 from server.methods import METHODS
 from solvers.frames import Pose
 from solvers.report import CalibrationResult
 
+# Magnitudes no cell has: beyond them a number is a typo or the wrong unit (and the kinematics
+# would overflow to inf/NaN), so the request is refused naming the field.
+MAX_MM = 1e6  # 1 km
+MAX_DEG = 1e4
+Mm = Annotated[float, Field(ge=-MAX_MM, le=MAX_MM)]
+Deg = Annotated[float, Field(ge=-MAX_DEG, le=MAX_DEG)]
+Physical = Annotated[float, Field(ge=-1e3, le=1e3)]  # an imperfection of the emulated arm
+
 MethodName = Literal[tuple(METHODS)]  # type: ignore[valid-type]
 EntryKind = Literal["tool", "workpiece", "base", "fixed_tool"]
 TableName = Literal["tool", "base"]
-Vec3 = Annotated[list[float], Field(min_length=3, max_length=3)]
+Vec3 = Annotated[list[Mm], Field(min_length=3, max_length=3)]
 ExportFormat = Literal["kuka", "abb", "fanuc", "ur", "json"]
 ImportFormat = Literal["kuka", "abb", "json"]
 
@@ -37,12 +45,12 @@ class Out(BaseModel):
 class PoseIn(In):
     """x, y, z (mm), a, b, c (deg), KUKA ``R = Rz(a) Ry(b) Rx(c)``."""
 
-    x: float = 0.0
-    y: float = 0.0
-    z: float = 0.0
-    a: float = 0.0
-    b: float = 0.0
-    c: float = 0.0
+    x: Mm = 0.0
+    y: Mm = 0.0
+    z: Mm = 0.0
+    a: Deg = 0.0
+    b: Deg = 0.0
+    c: Deg = 0.0
 
     def to_pose(self) -> Pose:
         return Pose(self.x, self.y, self.z, self.a, self.b, self.c)
@@ -70,13 +78,20 @@ class PoseOut(Out):
 # ------------------------------------------------------------------------------ controllers
 
 class DHJointIn(In):
-    a_mm: float
-    alpha_deg: float
-    d_mm: float
-    offset_deg: float = 0.0
+    a_mm: Mm
+    alpha_deg: Deg
+    d_mm: Mm
+    offset_deg: Deg = 0.0
     direction: Literal[1, -1] = 1
-    q_min_deg: float = -360.0
-    q_max_deg: float = 360.0
+    q_min_deg: Deg = -360.0
+    q_max_deg: Deg = 360.0
+
+    @model_validator(mode="after")
+    def _limits_ordered(self) -> "DHJointIn":
+        if not self.q_min_deg < self.q_max_deg:
+            raise ValueError(f"q_min_deg ({self.q_min_deg:g}) must be below q_max_deg "
+                             f"({self.q_max_deg:g})")
+        return self
 
 
 class RobotIn(In):
@@ -87,7 +102,7 @@ class RobotIn(In):
     joints: list[DHJointIn] = Field(min_length=1, max_length=7)
     base_pose: PoseIn | None = None
     flange_pose: PoseIn | None = None
-    reach_mm: float | None = Field(None, gt=0)
+    reach_mm: float | None = Field(None, gt=0, le=MAX_MM)
 
 
 class ControllerIn(In):
@@ -95,7 +110,8 @@ class ControllerIn(In):
     robot: str | None = Field("kuka_kr6_r900_sixx",
                               description="library key of solvers.robots.ROBOTS")
     custom_robot: RobotIn | None = None
-    cell_seed: int = Field(1, ge=0, description="seed of the emulated cell's hidden truth")
+    cell_seed: int = Field(1, ge=0, le=2**32 - 1,
+                           description="seed of the emulated cell's hidden truth")
 
 
 class ControllerOut(Out):
@@ -122,7 +138,7 @@ class RobotStateOut(Out):
 
 
 class JointsIn(In):
-    joints_deg: list[float] = Field(min_length=1, max_length=7)
+    joints_deg: list[Deg] = Field(min_length=1, max_length=7)
 
 
 class JogIn(In):
@@ -143,8 +159,8 @@ class ApproachIn(In):
     target: str = Field(min_length=1, max_length=64)
     tilt_deg: float = Field(0.0, ge=0.0, le=80.0,
                             description="tool axis tilt from the target's normal")
-    around_deg: float = Field(0.0, description="azimuth of the tilt about the target's normal")
-    spin_deg: float = Field(0.0, description="rotation of the tool about its own axis")
+    around_deg: Deg = Field(0.0, description="azimuth of the tilt about the target's normal")
+    spin_deg: Deg = Field(0.0, description="rotation of the tool about its own axis")
     tool_point_mm: Vec3 | None = Field(None,
                                        description="another point of the held body (its frame)")
     miss_mm: Vec3 | None = Field(None, description="miss the target by this vector (world, mm)")
@@ -159,7 +175,7 @@ class CellOut(Out):
 
 
 
-CyclicError = Annotated[list[float], Field(min_length=2, max_length=2,
+CyclicError = Annotated[list[Physical], Field(min_length=2, max_length=2,
                                            description="[amplitude_deg, periods_per_rev]")]
 
 
@@ -167,20 +183,22 @@ class PhysicsIn(In):
     """The emulated arm's hidden imperfections (``solvers.physics.Imperfections``); an omitted
     field is no such effect, ``{}`` the rigid arm. Per-joint lists have one value per joint."""
 
-    joint_offset_deg: list[float] | None = Field(None, description="true minus shown, per joint")
-    dh_delta: dict[str, float] = Field(default_factory=dict,
+    joint_offset_deg: list[Physical] | None = Field(None,
+                                                    description="true minus shown, per joint")
+    dh_delta: dict[str, Physical] = Field(default_factory=dict,
                                        description='true minus nominal DH, {"a_mm:2": 0.3}; '
                                                    "a_mm, d_mm or alpha_deg of joint 1..n")
-    compliance_deg_per_Nm: list[float] | None = Field(None, description="joint yield per torque")
-    backlash_deg: list[float] | None = Field(None, description="full lost motion per joint")
-    thermal_drift_mm: float = Field(0.0, description="base shift reached after the warm-up hour")
+    compliance_deg_per_Nm: list[Physical] | None = Field(None,
+                                                         description="joint yield per torque")
+    backlash_deg: list[Physical] | None = Field(None, description="full lost motion per joint")
+    thermal_drift_mm: Physical = Field(0.0, description="base shift reached after the warm-up hour")
     thermal_direction: Vec3 = Field([0.0, 0.0, 1.0], description="direction of the drift")
-    trigger_latency_ms: float = Field(0.0, description="light barrier: recorded this much later")
-    tool_deflection_mm_per_N: float = Field(0.0, description="tool tip bending per N of payload "
+    trigger_latency_ms: Physical = Field(0.0, description="light barrier: recorded this much later")
+    tool_deflection_mm_per_N: Physical = Field(0.0, description="tool tip bending per N of payload "
                                                              "weight across the tool axis")
     cyclic_error: dict[str, CyclicError] = Field(default_factory=dict,
                                                  description='{"3": [0.02, 4]} gear ripple')
-    noise_mm: float = Field(0.0, description="operator's aim / trigger jitter, std per axis")
+    noise_mm: Physical = Field(0.0, description="operator's aim / trigger jitter, std per axis")
 
 
 class PhysicsOut(Out):
@@ -208,7 +226,7 @@ class ClockOut(Out):
 # ------------------------------------------------------------------------------------ tables
 
 class LoadIn(In):
-    mass_kg: float = Field(ge=0.0)
+    mass_kg: float = Field(ge=0.0, le=1e4)
     com_mm: Vec3 = [0.0, 0.0, 0.0]
     inertia_kgm2: Vec3 = [0.0, 0.0, 0.0]
 
@@ -269,13 +287,13 @@ class SessionParamsIn(In):
     tool_no: int | None = Field(None, ge=1, le=16)
     reference_tool_no: int | None = Field(None, ge=1, le=16)
     fixed_tool_no: int | None = Field(None, ge=1, le=32)
-    known_points_mm: list[Vec3] | None = Field(None, min_length=3, max_length=64)
+    known_points_mm: list[Vec3] | None = Field(None, min_length=4, max_length=64)
     pose: PoseIn | None = None
     beams: list[BeamIn] | None = Field(None, min_length=1)
-    tool_diameter_mm: float | None = Field(None, gt=0)
+    tool_diameter_mm: float | None = Field(None, gt=0, le=MAX_MM)
     nominal_tool: PoseIn | None = Field(None,
                                         description="light barrier: nominal TCP for the cycle")
-    heights_mm: list[float] | None = Field(None, min_length=2, max_length=4)
+    heights_mm: list[Mm] | None = Field(None, min_length=2, max_length=4)
 
 
 class SessionIn(In):
@@ -289,7 +307,7 @@ class TouchUpIn(In):
     recorded on a real controller. ``step`` defaults to the first empty step."""
 
     step: int | None = Field(None, ge=0)
-    joints_deg: list[float] | None = Field(None, min_length=1, max_length=7)
+    joints_deg: list[Deg] | None = Field(None, min_length=1, max_length=7)
     flange_pose: PoseIn | None = None
 
 

@@ -65,7 +65,8 @@ def _write(request: Request, collection: str, doc: dict[str, Any]) -> int:
 async def analyze_recording(request: Request, recording_id: int,
                             folds: int = Query(5, ge=2, le=20,
                                                description="K of the K-fold cross-validation"),
-                            seed: int = Query(0, description="seed of the fold assignment")
+                            seed: int = Query(0, ge=0, le=2**32 - 1,
+                                              description="seed of the fold assignment")
                             ) -> dict[str, Any]:
     """Compare the recording with the rigid model; returns the ``analysis-report/1`` (+ ``id``)."""
     doc = await run_in_threadpool(_read, request, "recordings", recording_id, "recording_id")

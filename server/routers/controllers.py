@@ -37,6 +37,9 @@ def create_controller(body: ControllerIn, db: SessionDep) -> ControllerOut:
     """A new controller with a library arm (``robot``) or a custom DH table (``custom_robot``)."""
     custom = body.custom_robot.model_dump() if body.custom_robot else None
     key = None if custom else body.robot
+    if custom is None and key is None:
+        raise CalibrationError(("robot",), "give robot (a library key) or custom_robot (a DH "
+                               "table); both are null")
     if key is not None and key not in ROBOTS:
         library = ", ".join(sorted(ROBOTS))
         raise CalibrationError(("robot",), f"unknown robot {key!r}; the library has {library}")

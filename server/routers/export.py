@@ -79,13 +79,22 @@ def import_tables(controller_id: int, body: ImportIn, db: SessionDep) -> ImportO
     JSON backup replaces the tables, history and sessions of this controller."""
     c = crud.get_controller(db, controller_id)
     if body.format == "json":
-        try:
-            doc = json.loads(body.text)
-        except json.JSONDecodeError as err:
-            raise CalibrationError(("text",), f"not JSON: {err.msg} at line {err.lineno}") from None
-        if not isinstance(doc, dict) or doc.get("format") != "pendant-backup/1":
-            raise CalibrationError(("text", "format"), "must be a pendant-backup/1 document "
-                                   "(GET .../export?format=json)")
+        from server.backup import parse_backup
+        from server.routers.common import robot_of
+        from solvers.dh import check_joint_limits
+
+        doc = parse_backup(body.text)  # checked: nothing a later read cannot handle is stored
+        joints = (doc.get("controller") or {}).get("joints_deg")
+        if joints is not None:
+            robot = robot_of(c)
+            loc = ("text", "controller", "joints_deg")
+            if len(joints) != robot.dof:
+                raise CalibrationError(loc, f"has {len(joints)} values; this controller's robot "
+                                       f"has {robot.dof} joints")
+            try:
+                check_joint_limits(robot, joints)
+            except CalibrationError as err:
+                raise CalibrationError(loc + tuple(err.loc[1:]), err.reason) from None
         try:
             n, h = crud.restore_backup(db, c, doc)
         except (KeyError, TypeError, ValueError) as err:

@@ -1,0 +1,229 @@
+"""The ``pendant-backup/1`` JSON document (``GET .../export?format=json``), checked before restore.
+
+:func:`parse_backup` reads the text of an import and returns the document as plain JSON values
+that :func:`db.crud.restore_backup` can store as they are, or raises
+:class:`~solvers.errors.CalibrationError` naming the field, e.g.
+``("text", "sessions", 0, "points", 2, "pose")``. Nothing that a later read, compute, export or
+restore cannot handle gets into the DB: unknown fields, NaN and Infinity, numbers out of range,
+an unknown method or kind, a slot number the table does not have, a session result without
+its report.
+"""
+
+from __future__ import annotations
+
+import json
+from datetime import datetime
+from typing import Annotated, Any, Literal
+
+from pydantic import BaseModel, ConfigDict, Field, ValidationError, field_validator, model_validator
+
+from db.crud import MAX_ID, SLOTS, KINDS_OF_TABLE
+from server.methods import METHODS
+from server.schemas import (Deg, EntryKind, MethodName, Mm, ReportOut, SessionParamsIn,
+                            TableName)
+from solvers.errors import CalibrationError
+
+FORMAT = "pendant-backup/1"
+RowId = Annotated[int, Field(ge=1, le=MAX_ID)]
+Amount = Annotated[float, Field(ge=-1e6, le=1e6)]  # kg, kg m^2, mm of an error
+
+
+class _Doc(BaseModel):
+    model_config = ConfigDict(extra="forbid", allow_inf_nan=False)
+
+
+def _iso(v: str | None) -> str | None:
+    if v is not None:
+        try:
+            datetime.fromisoformat(v)
+        except ValueError:
+            raise ValueError(f"must be an ISO 8601 time, got {v!r}") from None
+    return v
+
+
+def _checked(model: type[BaseModel], value: dict[str, Any]) -> BaseModel:
+    """``model`` of ``value``; its first error as a ValueError naming the inner field."""
+    try:
+        return model.model_validate(value)
+    except ValidationError as exc:
+        err = exc.errors(include_url=False)[0]
+        where = ".".join(str(k) for k in err["loc"])
+        raise ValueError(f"{where}: {err['msg']}" if where else str(err["msg"])) from None
+
+
+class SnapshotIn(_Doc):
+    """A slot's values (the history's before/after; an entry without table and number)."""
+
+    name: str = Field(max_length=64)
+    kind: EntryKind
+    x_mm: Mm
+    y_mm: Mm
+    z_mm: Mm
+    a_deg: Deg
+    b_deg: Deg
+    c_deg: Deg
+    mass_kg: float | None = Field(None, ge=0.0, le=1e4)
+    com_x_mm: Mm | None = None
+    com_y_mm: Mm | None = None
+    com_z_mm: Mm | None = None
+    inertia_x_kgm2: Amount | None = None
+    inertia_y_kgm2: Amount | None = None
+    inertia_z_kgm2: Amount | None = None
+    method: str | None = Field(None, max_length=32)
+    session_id: RowId | None = None
+    error_max_mm: Amount | None = None
+    error_rms_mm: Amount | None = None
+    updated_at: str | None = None
+
+    _check_time = field_validator("updated_at")(_iso)
+
+
+def _kind_fits(table: str, kind: str) -> None:
+    if kind not in KINDS_OF_TABLE[table]:
+        raise ValueError(f"a {table} slot holds {' or '.join(KINDS_OF_TABLE[table])}, "
+                         f"not {kind!r}")
+
+
+def _number_fits(table: str, number: int) -> None:
+    if not 1 <= number <= SLOTS[table]:
+        raise ValueError(f"{table} slots are numbered 1..{SLOTS[table]}, got {number}")
+
+
+class EntryIn(SnapshotIn):
+    table: TableName
+    number: int
+
+    @model_validator(mode="after")
+    def _fits(self) -> "EntryIn":
+        _number_fits(self.table, self.number)
+        _kind_fits(self.table, self.kind)
+        return self
+
+
+class HistoryIn(_Doc):
+    id: int | None = None
+    table: TableName
+    number: int
+    reason: str = Field(max_length=16)
+    session_id: RowId | None = None
+    changed_at: str | None = None
+    before: SnapshotIn
+    after: SnapshotIn
+
+    _check_time = field_validator("changed_at")(_iso)
+
+    @model_validator(mode="after")
+    def _fits(self) -> "HistoryIn":
+        _number_fits(self.table, self.number)
+        _kind_fits(self.table, self.before.kind)
+        _kind_fits(self.table, self.after.kind)
+        return self
+
+
+class PointIn(_Doc):
+    step: int = Field(ge=0, le=1000)
+    source: Literal["touch_up", "joints", "flange_pose", "beam"]
+    pose: Annotated[list[Annotated[float, Field(ge=-1e6, le=1e6)]],
+                    Field(min_length=6, max_length=6)]
+    joints_deg: list[Deg] | None = Field(None, min_length=1, max_length=7)
+    beam_id: str | None = Field(None, min_length=1, max_length=32)
+    edge: Literal["enter", "leave", "tip"] | None = None
+    velocity_mm_s: Annotated[list[Mm], Field(min_length=3, max_length=3)] | None = None
+    t_s: float | None = Field(None, ge=0.0, le=1e12)
+    motion_sign: list[Annotated[float, Field(ge=-1.0, le=1.0)]] | None = Field(
+        None, min_length=1, max_length=7)
+
+
+class SessionIn(_Doc):
+    id: RowId
+    method: MethodName
+    target_table: TableName
+    target_no: int
+    params: dict[str, Any] = Field(default_factory=dict)
+    state: Literal["open", "computed", "saved", "discarded"]
+    created_at: str | None = None
+    result: Annotated[list[Annotated[float, Field(ge=-1e6, le=1e6)]],
+                      Field(min_length=6, max_length=6)] | None = None
+    report: dict[str, Any] | None = None
+    points: list[PointIn] = Field(default_factory=list)
+
+    _check_time = field_validator("created_at")(_iso)
+
+    @field_validator("params")
+    @classmethod
+    def _params(cls, v: dict[str, Any]) -> dict[str, Any]:
+        return _checked(SessionParamsIn, v).model_dump(mode="json", exclude_none=True)
+
+    @field_validator("report")
+    @classmethod
+    def _report(cls, v: dict[str, Any] | None) -> dict[str, Any] | None:
+        return None if v is None else _checked(ReportOut, v).model_dump(mode="json")
+
+    @model_validator(mode="after")
+    def _consistent(self) -> "SessionIn":
+        spec = METHODS[self.method]
+        if self.target_table != spec.table:
+            raise ValueError(f"{self.method} writes the {spec.table} table, not "
+                             f"{self.target_table!r}")
+        _number_fits(self.target_table, self.target_no)
+        if (self.result is None) != (self.report is None):
+            raise ValueError("result and report come together (both or neither)")
+        if self.state == "computed" and self.result is None:
+            raise ValueError("a computed session needs its result and report")
+        steps = [p.step for p in self.points]
+        if len(set(steps)) != len(steps):
+            raise ValueError("two points of the session have the same step")
+        return self
+
+
+class ControllerIn(_Doc):
+    name: str | None = None
+    robot: str | None = None
+    custom_robot: dict[str, Any] | None = None
+    cell_seed: int | None = None
+    joints_deg: list[Deg] | None = Field(None, min_length=1, max_length=7)
+    active_tool_no: int = Field(0, ge=0, le=SLOTS["tool"])
+    active_base_no: int = Field(0, ge=0, le=SLOTS["base"])
+
+
+class BackupIn(_Doc):
+    format: Literal["pendant-backup/1"]
+    controller: ControllerIn | None = None
+    entries: list[EntryIn]
+    history: list[HistoryIn] = Field(default_factory=list)
+    sessions: list[SessionIn] = Field(default_factory=list)
+
+    @model_validator(mode="after")
+    def _unique_sessions(self) -> "BackupIn":
+        ids = [s.id for s in self.sessions]
+        if len(set(ids)) != len(ids):
+            raise ValueError("two sessions have the same id")
+        return self
+
+
+def _no_constant(name: str) -> None:
+    raise CalibrationError(("text",), f"{name} is not a number: a backup holds finite numbers only")
+
+
+def parse_backup(text: str) -> dict[str, Any]:
+    """The checked ``pendant-backup/1`` document of ``text`` as plain JSON values.
+
+    Raises CalibrationError with ``loc = ("text", ...path)``: not JSON, NaN/Infinity, not a
+    backup, or the first field that breaks the format, with the reason.
+    """
+    try:
+        doc = json.loads(text, parse_constant=_no_constant)
+    except json.JSONDecodeError as err:
+        raise CalibrationError(("text",), f"not JSON: {err.msg} at line {err.lineno}") from None
+    if not isinstance(doc, dict) or doc.get("format") != FORMAT:
+        raise CalibrationError(("text", "format"), f"must be a {FORMAT} document "
+                               "(GET .../export?format=json)")
+    try:
+        backup = BackupIn.model_validate(doc)
+    except ValidationError as exc:
+        err = exc.errors(include_url=False)[0]
+        msg = str(err["msg"])
+        if msg.startswith("Value error, "):
+            msg = msg[len("Value error, "):]
+        raise CalibrationError(("text", *err["loc"]), msg) from None
+    return backup.model_dump(mode="json", exclude_unset=True)
