@@ -15,6 +15,7 @@ Regenerate the committed JSON Schema with::
 from __future__ import annotations
 
 import json
+import re
 from datetime import datetime
 from typing import Annotated, Any, Literal, Union
 
@@ -180,6 +181,8 @@ class _RecordingBase(_Model):
     def _iso_time(cls, v: str | None) -> str | None:
         if v is not None:
             try:
+                if not re.match(r"^\d{4}-\d{2}-\d{2}[T ]\d{2}:\d{2}", v):
+                    raise ValueError("no time of day")
                 datetime.fromisoformat(v)
             except ValueError:
                 raise ValueError("must be an ISO 8601 time like 2026-11-02T08:15:00Z, "
@@ -280,6 +283,18 @@ def _error_from(exc: ValidationError) -> RecordingError:
     return RecordingError(loc, reason)
 
 
+def _refuse_null(value: object, loc: tuple[str | int, ...]) -> None:
+    """The format has no null: an optional field is left out, never written as null."""
+    if value is None:
+        raise RecordingError(loc, "must be left out or given a value; the format has no null")
+    if isinstance(value, dict):
+        for key, item in value.items():
+            _refuse_null(item, loc + (key,))
+    elif isinstance(value, list):
+        for i, item in enumerate(value):
+            _refuse_null(item, loc + (i,))
+
+
 def validate_document(doc: dict | str | bytes
                       ) -> TouchRecordingIn | TrackerRecordingIn | BeamRecordingIn:
     """The validated pydantic model of a document (dict, or JSON text / bytes).
@@ -299,6 +314,7 @@ def validate_document(doc: dict | str | bytes
                                  f"column {exc.colno}") from None
     if not isinstance(doc, dict):
         raise RecordingError((), f"a recording must be a JSON object, got {type(doc).__name__}")
+    _refuse_null(doc, ())
     try:
         return RECORDING_ADAPTER.validate_python(doc)
     except ValidationError as exc:
@@ -388,6 +404,27 @@ def to_document(rec: RecordingData) -> dict:
     return doc
 
 
+def _without_null(node: object) -> object:
+    """pydantic writes an optional field as ``anyOf: [X, null]`` with ``default: null``; the
+    format has no null (an optional field is left out), so the schema says just X."""
+    if isinstance(node, list):
+        return [_without_null(x) for x in node]
+    if not isinstance(node, dict):
+        return node
+    out = {k: _without_null(v) for k, v in node.items()}
+    if "anyOf" in out:
+        kept = [x for x in out["anyOf"] if x != {"type": "null"}]
+        if len(kept) != len(out["anyOf"]):
+            if "default" in out and out["default"] is None:
+                del out["default"]
+            if len(kept) == 1:
+                del out["anyOf"]
+                out = {**kept[0], **out}
+            else:
+                out["anyOf"] = kept
+    return out
+
+
 def recording_json_schema() -> dict:
     """JSON Schema (draft 2020-12) of ``robot-recording/1``, as committed in
     ``docs/robot-recording-1.schema.json``.
@@ -396,7 +433,7 @@ def recording_json_schema() -> dict:
     cross-field rules (joint count per sample, beam ids, time order, minimum sample count,
     non-zero directions, finite numbers) are :func:`parse_recording`'s.
     """
-    schema = RECORDING_ADAPTER.json_schema()
+    schema = _without_null(RECORDING_ADAPTER.json_schema())
     return {"$schema": "https://json-schema.org/draft/2020-12/schema", "$id": SCHEMA_ID,
             "title": FORMAT,
             "description": "A robot recording: the joint values a controller logged while the "

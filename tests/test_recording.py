@@ -14,7 +14,7 @@ from server.recording import (RecordingError, parse_recording, recording_json_sc
 from solvers.errors import CalibrationError
 from solvers.recording import last_motion_sign, motion_signs
 
-REAL = Path("/work/shared/data/ur10-laser-tracker/recording-series-d.json")
+REAL = Path(__file__).parent / "data" / "ur10-laser-tracker" / "recording-series-d.json"
 SCHEMA_FILE = Path(__file__).resolve().parents[1] / "docs" / "robot-recording-1.schema.json"
 
 POSE0 = {"x": 0, "y": 0, "z": 0, "a": 0, "b": 0, "c": 0}
@@ -168,3 +168,21 @@ def test_the_documented_example_is_a_valid_recording():
     example = re.findall(r"```json\n(.*?)```", text, re.S)[1]
     rec = parse_recording(example)
     assert rec.kind == "tracker" and rec.n_samples == 4 and rec.payload_mass_kg == 2.0
+
+
+@pytest.mark.parametrize("path, value, reason", [
+    (("robot", "base_pose"), None, "no null"),
+    (("payload",), None, "no null"),
+    (("samples", 3, "joints_deg", 2), None, "no null"),
+    (("recorded_at",), "2026-11-02", "ISO 8601 time"),
+])
+def test_null_fields_and_a_date_without_time_are_refused_by_path(path, value, reason):
+    """The format defines no null (optional fields are left out) and recorded_at is a time."""
+    doc = json.loads(REAL.read_text())
+    target = doc
+    for key in path[:-1]:
+        target = target[key]
+    target[path[-1]] = value
+    with pytest.raises(RecordingError) as e:
+        parse_recording(doc)
+    assert e.value.loc == path and reason in e.value.reason
