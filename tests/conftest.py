@@ -1,4 +1,5 @@
-"""Shared fixtures: the robot library and a seeded random generator."""
+"""Shared fixtures: the robot library, a seeded random generator, and for the browser
+tests a live service on a temporary SQLite file with Debian's Chromium."""
 
 from __future__ import annotations
 
@@ -17,3 +18,22 @@ def rng() -> np.random.Generator:
 def robot(request):
     """Every arm of the library in turn."""
     return ROBOTS[request.param]
+
+
+@pytest.fixture(scope="module")
+def site(tmp_path_factory: pytest.TempPathFactory):  # noqa: ANN201
+    """The real service (uvicorn, loopback, free port) on a fresh SQLite file per module."""
+    from browser_helpers import serve
+
+    db = tmp_path_factory.mktemp("site") / "pendant.db"
+    with serve(f"sqlite:///{db}") as url:
+        yield url
+
+
+@pytest.fixture(scope="module")
+def chromium():  # noqa: ANN201
+    """Headless Debian Chromium under Playwright (never a downloaded browser)."""
+    from browser_helpers import browser
+
+    with browser() as b:
+        yield b

@@ -18,7 +18,7 @@ from pathlib import Path
 
 import pytest
 
-from browser_helpers import VIEWPORT, browser, serve
+from browser_helpers import VIEWPORT
 from solvers.physics import Imperfections
 from solvers.simulate import simulate_recording
 
@@ -29,19 +29,6 @@ def compliant_ur10() -> dict:
     """UR10 tracker run, 5 kg payload, joint 2 yields 5e-4 deg/Nm, 0.02 mm noise."""
     imp = Imperfections(noise_mm=0.02, compliance_deg_per_Nm=(0, 5e-4, 0, 0, 0, 0))
     return simulate_recording("tracker", "ur10", imp, N, seed=5, payload=(5.0, [0, 0, 50]))
-
-
-@pytest.fixture(scope="module")
-def site(tmp_path_factory: pytest.TempPathFactory) -> str:
-    db = tmp_path_factory.mktemp("analysis-page") / "pendant.db"
-    with serve(f"sqlite:///{db}") as url:
-        yield url
-
-
-@pytest.fixture(scope="module")
-def chromium():  # noqa: ANN201
-    with browser() as b:
-        yield b
 
 
 @pytest.fixture

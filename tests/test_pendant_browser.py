@@ -15,26 +15,13 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from browser_helpers import (VIEWPORT, browser, compute, idle, kuka_frame, open_menu, open_pendant, save, serve,
-                             walk_steps, wizard)
+from browser_helpers import (VIEWPORT, compute, idle, kuka_frame, open_menu, open_pendant, save, walk_steps,
+                             wizard)
 from server.emulator import cell_for
 from solvers.robots import ROBOTS
 
 CELL = cell_for(ROBOTS["kuka_kr6_r900_sixx"], 1)  # the demo cell's hidden truth, for the asserts only
 JITTER_MM = 0.2  # the person's hand: each Move to misses the mark by this much (seeded direction)
-
-
-@pytest.fixture(scope="module")
-def site(tmp_path_factory: pytest.TempPathFactory) -> str:
-    db = tmp_path_factory.mktemp("pendant") / "pendant.db"
-    with serve(f"sqlite:///{db}") as url:
-        yield url
-
-
-@pytest.fixture(scope="module")
-def chromium():  # noqa: ANN201
-    with browser() as b:
-        yield b
 
 
 @pytest.fixture
