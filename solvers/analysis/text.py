@@ -14,24 +14,24 @@ WHAT = {
 }
 
 
+# parameter -> (its std's key, format of "value (± std)") for the plain-words value
+_VALUE_FORMATS = (
+    ("offset_deg", "offset_deg_std", "{v:+.4f} deg (± {s:.4f})"),
+    ("delta_mm", "delta_mm_std", "{v:+.3f} mm (± {s:.3f})"),
+    ("delta_alpha_deg", "delta_alpha_deg_std", "{v:+.4f} deg (± {s:.4f})"),
+    ("compliance_deg_per_Nm", "compliance_deg_per_Nm_std", "{v:.3g} deg/Nm (± {s:.2g})"),
+    ("backlash_deg", "backlash_std_deg", "{v:.4f} deg (± {s:.4f})"),
+    ("drift_mm", "drift_std_mm", "{v:.3f} mm over the recording (± {s:.3f})"),
+    ("latency_ms", "latency_ms_std", "{v:+.2f} ms (± {s:.2f})"),
+    ("deflection_mm_per_N", "deflection_mm_per_N_std", "{v:.4g} mm/N (± {s:.2g})"),
+)
+
+
 def _value(f: dict) -> str:
     p = f["parameters"]
-    if "offset_deg" in p:
-        return f"{p['offset_deg']:+.4f} deg (± {p['offset_deg_std']:.4f})"
-    if "delta_mm" in p:
-        return f"{p['delta_mm']:+.3f} mm (± {p['delta_mm_std']:.3f})"
-    if "delta_alpha_deg" in p:
-        return f"{p['delta_alpha_deg']:+.4f} deg (± {p['delta_alpha_deg_std']:.4f})"
-    if "compliance_deg_per_Nm" in p:
-        return f"{p['compliance_deg_per_Nm']:.3g} deg/Nm (± {p['compliance_deg_per_Nm_std']:.2g})"
-    if "backlash_deg" in p:
-        return f"{p['backlash_deg']:.4f} deg (± {p['backlash_std_deg']:.4f})"
-    if "drift_mm" in p:
-        return f"{p['drift_mm']:.3f} mm over the recording (± {p['drift_std_mm']:.3f})"
-    if "latency_ms" in p:
-        return f"{p['latency_ms']:+.2f} ms (± {p['latency_ms_std']:.2f})"
-    if "deflection_mm_per_N" in p:
-        return f"{p['deflection_mm_per_N']:.4g} mm/N (± {p['deflection_mm_per_N_std']:.2g})"
+    for key, std, fmt in _VALUE_FORMATS:
+        if key in p:
+            return fmt.format(v=p[key], s=p[std])
     return ""
 
 
