@@ -172,7 +172,9 @@ def test_workpiece_indirect_coplanar_points_singular_for_lecture_fine_for_lsq(rn
     assert np.allclose(res.frame, T_fw, atol=1e-4)
 
 
-def test_workpiece_indirect_noisy_within_bounds(rng):
+def noisy_brushes(rng):  # noqa: ANN001, ANN201
+    """The 8 SPREAD8 points of a random workpiece brushed on a fixed TCP r from orientations
+    tilted up to 20 deg, with 0.05 mm touch noise: (T_flange_workpiece, r, poses)."""
     T_fw = random_workpiece(rng)
     r = np.array([650.0, 120.0, 300.0])
     poses = []
@@ -181,8 +183,14 @@ def test_workpiece_indirect_noisy_within_bounds(rng):
         T[:3, :3] = random_rotation(rng, 20)
         T[:3, 3] = r - T[:3, :3] @ ck + rng.normal(0, 0.05, 3)
         poses.append(T)
-    rep = workpiece_indirect(r, np.array(poses), SPREAD8, target_mm=[100, 75, 0]).report
-    dp, da = frame_errors(T_fw, workpiece_indirect(r, np.array(poses), SPREAD8).frame)
+    return T_fw, r, poses
+
+
+def test_workpiece_indirect_noisy_within_bounds(rng):
+    T_fw, r, poses = noisy_brushes(rng)
+    res = workpiece_indirect(r, np.array(poses), SPREAD8, target_mm=[100, 75, 0])
+    rep = res.report
+    dp, da = frame_errors(T_fw, res.frame)  # the frame does not depend on target_mm
     assert dp < 2 * rep.position_bound95_mm and da < 2 * rep.angle_bound95_deg
     assert rep.tre_mm == rep.extras["tre_target_mm"] < rep.extras["tre_farthest_mm"]
     assert 0.02 < rep.sigma_mm < 0.09
@@ -190,14 +198,7 @@ def test_workpiece_indirect_noisy_within_bounds(rng):
 
 def test_workpiece_indirect_names_a_3mm_bad_point_among_8(rng):
     """One of 8 touches is 3 mm off the fixed TCP: the report names that pose."""
-    T_fw = random_workpiece(rng)
-    r = np.array([650.0, 120.0, 300.0])
-    poses = []
-    for ck in apply(T_fw, SPREAD8):
-        T = np.eye(4)
-        T[:3, :3] = random_rotation(rng, 20)
-        T[:3, 3] = r - T[:3, :3] @ ck + rng.normal(0, 0.05, 3)
-        poses.append(T)
+    T_fw, r, poses = noisy_brushes(rng)
     poses[2][:3, 3] += [0.0, 3.0, 0.0]
     rep = workpiece_indirect(r, np.array(poses), SPREAD8).report
     assert rep.bad_point is not None and rep.bad_point.index == 2
