@@ -188,9 +188,9 @@ def mahalanobis_bound95(n_parameters: int, dof: int | None = None) -> float:
     >>> round(mahalanobis_bound95(3), 4), round(mahalanobis_bound95(3, dof=6), 4)
     (2.7955, 3.7777)
     """
-    if dof is None:
-        return float(np.sqrt(stats.chi2.ppf(0.95, n_parameters)))
-    return float(np.sqrt(n_parameters * stats.f.ppf(0.95, n_parameters, dof)))
+    if dof is None:  # scipy.special's chdtri / fdtri: stats.chi2.ppf / stats.f.ppf without overhead
+        return math.sqrt(float(special.chdtri(n_parameters, 0.05)))
+    return math.sqrt(n_parameters * float(special.fdtri(n_parameters, dof, 0.95)))
 
 
 def mahalanobis_distance(error: FloatArray, covariance: FloatArray) -> float:
