@@ -125,7 +125,7 @@ def main() -> str:
 
 
 COVERAGE_TRIALS = 1000
-LB_TOOLS, LB_DRAWS = 100, 5
+LB_TOOLS, LB_DRAWS = 60, 20
 
 
 def coverage_table() -> str:

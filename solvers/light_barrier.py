@@ -717,11 +717,15 @@ def tcp_light_barrier(flange_poses: object, beam_ids: object, edges: object, bea
     CalibrationResult
         ``frame`` = T_flange_tcp: origin the TCP, z the fitted tool axis, x the flange x axis
         projected normal to it (:func:`tool_frame`). ``report``: ``residuals_mm`` |r_k|,
-        covariance of ``PARAMETER_NAMES`` (mm, deg), 95% bounds of TCP position and axis
-        angle, a bad trigger if one disagrees, ``extras`` runout_deg (tool axis vs flange z),
-        offset_mm (TCP's distance from the flange axis), theta_x/y_deg, theta/phi_deg (the
-        paper's R = Ry(theta) Rx(phi)), tool_height_mm, tcp_mm, axis_flange,
-        signed_residuals_mm.
+        covariance of ``PARAMETER_NAMES`` (mm, deg), ``sigma_mm`` with ``dof = N - 5``, 95%
+        bounds of the TCP position, the axis angle and the Mahalanobis distance (F quantiles
+        of N - 5 dof), a bad trigger if one disagrees, findings ``diameter_mismatch`` (the
+        triggers imply another shaft diameter) and ``one_way_passes`` (sweeps or tip searches
+        one way only: latency unseen); ``extras`` runout_deg (tool axis vs flange z),
+        offset_mm (TCP's distance from the flange axis), theta_x/y_deg, theta/phi_deg,
+        tool_height_mm, tcp_mm, axis_flange, signed_residuals_mm, diameter_measured_mm,
+        diameter_standard_error_mm and the paper's terms (``paper_*``, ``base_point_mm``;
+        see :func:`_extras`).
 
     Raises
     ------
