@@ -10,8 +10,13 @@ The CRLB of the TCP is computed independently of the solver: the Fisher informat
 ``CRLB_t`` is the top-left 3x3 block of ``F^-1``. Reported: RMS TCP error / sqrt(trace CRLB_t)
 (1.00 = efficient) for ``solvers.tcp.tcp_xyz_4point`` and scikit-surgerycalibration's
 algebraic one-step pivot calibration on the same data, plus the coverage of the reported
-95% bound, and median times per solve (time.perf_counter, many repetitions). The last line is
-``crlb_ratio_max=<worst ratio over N> solve_us_median=<4-point solve, µs>``.
+95% bound, and median times per solve (time.perf_counter, many repetitions). That table's last
+line is ``crlb_ratio_max=<worst ratio over N> solve_us_median=<4-point solve, µs>``.
+
+Then :func:`coverage_table`: the coverage of every method's reported 95 % bounds (position,
+angle, Mahalanobis) by seeded Monte Carlo (``benchmarks/bounds_coverage.py``: ``COVERAGE_TRIALS``
+trials per row, the light barrier ``LB_TOOLS`` tools x ``LB_DRAWS`` noise draws), ending with
+``coverage_min=<lowest> coverage_max=<highest>`` over all rows and bounds.
 """
 
 from __future__ import annotations
@@ -119,5 +124,36 @@ def main() -> str:
     return line
 
 
+COVERAGE_TRIALS = 1000
+LB_TOOLS, LB_DRAWS = 60, 20
+
+
+def coverage_table() -> str:
+    """Print the coverage of the 95 % bounds of every method; returns the machine line."""
+    from bounds_coverage import LB_SIGMA_MM, SCENES, SIGMA_MM, coverage, light_barrier_coverage
+
+    rows = [coverage(name, COVERAGE_TRIALS, seed=20261124) for name, _ in SCENES]
+    rows.append(light_barrier_coverage(LB_TOOLS, LB_DRAWS, seed=20261124))
+    print()
+    print(f"Coverage of the reported 95 % bounds (seeded Monte Carlo; touch noise {SIGMA_MM} mm, "
+          f"light-barrier trigger noise {LB_SIGMA_MM} mm, per coordinate)")
+    print(f"{'method':26s} {'trials':>6s} {'position':>9s} {'angle':>7s} {'Mahalanobis':>12s} "
+          f"{'sigma':>9s}")
+    values = []
+    for r in rows:
+        cells = []
+        for v, width in ((r.position, 9), (r.angle, 7), (r.mahalanobis, 12)):
+            cells.append(f"{'-':>{width}s}" if v is None else f"{100 * v:{width}.1f}")
+            if v is not None:
+                values.append(v)
+        print(f"{r.name:26s} {r.trials:6d} {' '.join(cells)} {r.sigma_source:>9s}")
+    print("sigma: residual = estimated from the residuals (F quantiles with their degrees of "
+          "freedom), assumed = the documented nominal sigma (chi-square quantiles)")
+    line = f"coverage_min={100 * min(values):.1f} coverage_max={100 * max(values):.1f}"
+    print(line)
+    return line
+
+
 if __name__ == "__main__":
     main()
+    coverage_table()

@@ -131,9 +131,14 @@ def format_report(report: ReportOut) -> str:
                      f"rms {report.rms_error_mm:.4f} mm")
     for name, v, unit in (("95% position bound", report.position_bound95_mm, "mm"),
                           ("95% angle bound", report.angle_bound95_deg, "deg"),
+                          ("95% Mahalanobis", report.mahalanobis_bound95, ""),
                           ("TRE", report.tre_mm, "mm")):
         if v is not None:
-            lines.append(f"{name:20s}{v:.4f} {unit}")
+            lines.append(f"{name:20s}{v:.4f} {unit}".rstrip())
+    if report.sigma_mm is not None and report.sigma_source is not None:
+        source = (f"from the residuals, {report.dof} dof" if report.sigma_source == "residual"
+                  else "assumed, not measured")
+        lines.append(f"{'sigma':20s}{report.sigma_mm:.4f} mm ({source})")
     if report.bad_point:
         lines.append(f"bad point   {report.bad_point.message}")
     lines += [f"{w.severity:8s}    {w.message}" for w in report.warnings]

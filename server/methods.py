@@ -279,12 +279,14 @@ METHODS: dict[str, MethodSpec] = {m.name: m for m in (
           required=("pose",)),
     _spec("fixed_tool.5d", "Fixed tool > External TCP 5D", "base", "fixed_tool", "frame",
           [Step(_TOUCH_FIXED, "fixed_tool", tilt_deg=10.0),
-           Step("Align the flange with the fixed tool: flange -Z along the fixed tool's +Z axis",
+           Step("Align the flange with the fixed tool: flange +Z pointing into the fixed tool, "
+                "i.e. flange -Z along the fixed tool's +Z (its working direction, out of its tip)",
                 "fixed_tool_align")],
           _fixed_tool("5d"), extra_steps=4, extra_prompt=_MORE_FIXED, required=("tool_no",)),
     _spec("fixed_tool.6d", "Fixed tool > External TCP 6D", "base", "fixed_tool", "frame",
           [Step(_TOUCH_FIXED, "fixed_tool", tilt_deg=10.0),
-           Step("Align the flange with the fixed tool: flange -Z along its +Z, flange +X along "
+           Step("Align the flange with the fixed tool: flange +Z pointing into the fixed tool "
+                "(flange -Z along its +Z, its working direction out of its tip), flange +X along "
                 "its +X, flange +Y along its -Y", "fixed_tool_align")],
           _fixed_tool("6d"), extra_steps=4, extra_prompt=_MORE_FIXED, required=("tool_no",)),
     _spec("workpiece.direct", "Workpiece > Direct", "tool", "workpiece", "frame",

@@ -364,8 +364,11 @@ class ReportOut(Out):
     parameter_names: list[str]
     covariance: list[list[float]] | None
     sigma_mm: float | None
+    sigma_source: Literal["residual", "assumed"] | None
+    dof: int | None
     position_bound95_mm: float | None
     angle_bound95_deg: float | None
+    mahalanobis_bound95: float | None
     tre_mm: float | None
     bad_point: BadPointOut | None
     warnings: list[FindingOut]
@@ -385,8 +388,10 @@ class ReportOut(Out):
             max_error_deg=r.max_error_deg, worst_point=r.worst_point,
             parameter_names=list(r.parameter_names),
             covariance=None if r.covariance is None else jsonable(r.covariance),
-            sigma_mm=_opt(r.sigma_mm), position_bound95_mm=_opt(r.position_bound95_mm),
-            angle_bound95_deg=_opt(r.angle_bound95_deg), tre_mm=_opt(r.tre_mm),
+            sigma_mm=_opt(r.sigma_mm), sigma_source=r.sigma_source, dof=r.dof,
+            position_bound95_mm=_opt(r.position_bound95_mm),
+            angle_bound95_deg=_opt(r.angle_bound95_deg),
+            mahalanobis_bound95=_opt(r.mahalanobis_bound95), tre_mm=_opt(r.tre_mm),
             bad_point=None if bp is None else BadPointOut(
                 index=bp.index, residual_mm=float(bp.residual_mm),
                 threshold_mm=float(bp.threshold_mm),

@@ -23,8 +23,8 @@ from scipy.spatial.transform import Rotation
 
 from solvers.errors import CalibrationError
 from solvers.frames import Pose
-from solvers.report import (CalibrationResult, Finding, QualityReport, bound95,
-                            leave_one_out_bad_point, residual_sigma)
+from solvers.report import (CalibrationResult, Finding, QualityReport, bounds95,
+                            leave_one_out_bad_point, residual_sigma, sigma_dof)
 from solvers.validate import FloatArray, as_array, as_points, as_transforms
 
 POSE_PARAMETERS = ("x_mm", "y_mm", "z_mm", "rx_deg", "ry_deg", "rz_deg")
@@ -131,7 +131,9 @@ def three_point_report(points_mm: FloatArray, locs: Sequence[Loc], touch_sigma_m
     (:data:`POSE_PARAMETERS`) with respect to the 9 touched coordinates (central differences)
     and s = ``touch_sigma_mm`` per coordinate. Roughly ``sigma(rz) = sigma(ry) = sqrt(2) s / L``
     with L = |P2 - P1| and ``sigma(rx) ~ s sqrt(1 + ...) / d`` with d the distance of P3
-    from the X line: the lever arms, reported in ``extras``.
+    from the X line: the lever arms, reported in ``extras``. The bounds therefore rest on the
+    assumed s (``sigma_source="assumed"``, chi-square quantiles, an ``assumed_sigma`` info
+    finding): they hold when the touch-ups really scatter by s.
 
     Examples
     --------
@@ -162,19 +164,23 @@ def three_point_report(points_mm: FloatArray, locs: Sequence[Loc], touch_sigma_m
         warnings.append(Finding("short_lever", f"the XY point is only {xy_lever:.0f} mm off the X "
                                 f"line: {SHORT_LEVER_MM:g} mm or more keeps the tilt about X "
                                 f"steadier", tuple(locs[2])))
+    warnings.append(Finding("assumed_sigma", f"three points leave no residual to measure the "
+                            f"touch scatter: the bounds assume {touch_sigma_mm:g} mm per "
+                            f"coordinate (touch_sigma_mm)", (), "info"))
     angle_sigma = np.sqrt(np.diag(cov)[3:])
     return QualityReport(
         residuals_mm=np.zeros(3),
         parameter_names=POSE_PARAMETERS,
         covariance=cov,
         sigma_mm=float(touch_sigma_mm),
-        position_bound95_mm=bound95(cov[:3, :3]),
-        angle_bound95_deg=bound95(cov[3:, 3:]),
+        **bounds95(cov, None, position=slice(0, 3), angle=slice(3, 6)),
         warnings=tuple(warnings),
         extras={"touch_sigma_mm": float(touch_sigma_mm), "angle_sigma_deg": angle_sigma,
                 "x_lever_mm": x_lever, "xy_lever_mm": xy_lever,
                 "note": "3 points fix the frame exactly: residuals are zero by construction; "
-                        "the covariance is the touch noise propagated through the geometry"},
+                        "the covariance and the 95% bounds rest on the assumed touch noise "
+                        f"touch_sigma_mm = {touch_sigma_mm:g} mm (chi-square quantiles), not on "
+                        "a measured scatter"},
     )
 
 
@@ -385,7 +391,8 @@ def register_points(measured_mm: object, known_mm: object, *, measured_loc: str 
 
     Residual ``e_i = T k_i - m_i``; ``sigma = sqrt(sum |e_i|² / (3N - 6))`` (at least
     ``sigma_floor_mm``); covariance of the 6 pose parameters from :func:`rigid_fit_covariance`;
-    TRE by :func:`fitzpatrick_tre_mm` with ``FLE = sqrt(3) sigma``; the bad point by
+    95% bounds with the F quantiles of ``3N - 6`` degrees of freedom (chi-square, and
+    ``sigma_source="assumed"``, when the floor is used; :func:`~solvers.report.bounds95`); TRE by :func:`fitzpatrick_tre_mm` with ``FLE = sqrt(3) sigma``; the bad point by
     leave-one-out when N >= 5.
 
     Parameters
@@ -456,8 +463,8 @@ def register_points(measured_mm: object, known_mm: object, *, measured_loc: str 
         parameter_names=POSE_PARAMETERS,
         covariance=cov,
         sigma_mm=sigma,
-        position_bound95_mm=bound95(cov[:3, :3]),
-        angle_bound95_deg=bound95(cov[3:, 3:]),
+        **bounds95(cov, sigma_dof(sigma, 3 * n - 6, sigma_floor_mm), position=slice(0, 3),
+                   angle=slice(3, 6)),
         tre_mm=tre,
         bad_point=bad,
         warnings=tuple(warnings),

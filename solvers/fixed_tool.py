@@ -26,12 +26,18 @@ from scipy.spatial.transform import Rotation
 
 from solvers.base import as_transform
 from solvers.frames import angle_between_deg
-from solvers.report import CalibrationResult, Finding, QualityReport, bound95, residual_sigma
+from solvers.report import (CalibrationResult, Finding, QualityReport, bounds95, residual_sigma,
+                            sigma_dof)
 from solvers.validate import FloatArray, as_array, as_transforms
 
 # Flange frame F relative to the fixed tool frame E at alignment: 180 deg about X.
 R_FLANGE_FIXEDTOOL = Rotation.from_euler("x", 180.0, degrees=True).as_matrix()
 TOUCH_SPREAD_WARN_MM = 0.5  # extra touches farther apart than this: the robot tool's TCP is off
+#: The flange stands on the fixed tool's +Z side (above its tip) at a correct touch and
+#: alignment; every flange position this far (deg) below the plane across the axis through
+#: the fixed TCP means the alignment was done the other way round.
+FLIP_ELEVATION_DEG = -30.0
+FLIP_MIN_DISTANCE_MM = 10.0  # flange positions closer than this to r tell nothing
 
 
 def axis_frame_5d(z_axis: FloatArray) -> FloatArray:
@@ -62,6 +68,28 @@ def axis_frame_5d(z_axis: FloatArray) -> FloatArray:
     return np.column_stack([x, np.cross(z, x), z])
 
 
+def flange_elevation_deg(flange_positions_mm: FloatArray, fixed_tcp_mm: FloatArray,
+                         z_axis: FloatArray) -> FloatArray:
+    """Elevation (deg) of each flange position above the plane through the fixed TCP across
+    its axis: ``asin((f_k - r) . z_E / |f_k - r|)``; NaN within ``FLIP_MIN_DISTANCE_MM`` of r.
+
+    A robot reaches a fixed tool from the side its tip faces: touching the fixed TCP with a
+    pointer and aligning with flange +Z pointing into the fixed tool, the flange stands on the
+    +Z_E side (elevation > 0; about 0 for a touch from the side). Elevations all well below 0
+    mean z_E points into the fixed tool: the alignment was done the other way round.
+
+    Examples
+    --------
+    >>> flange_elevation_deg([[600, 0, 400], [700, 0, 300]], [600, 0, 300], [0, 0, 1]).round(6).tolist()
+    [90.0, 0.0]
+    """
+    d = np.asarray(flange_positions_mm, dtype=float) - np.asarray(fixed_tcp_mm, dtype=float)
+    dist = np.linalg.norm(d, axis=1)
+    with np.errstate(invalid="ignore", divide="ignore"):
+        sin = np.clip(d @ np.asarray(z_axis, dtype=float) / dist, -1.0, 1.0)
+    return np.where(dist < FLIP_MIN_DISTANCE_MM, np.nan, np.degrees(np.arcsin(sin)))
+
+
 def _fixed_tool(mode: Literal["5d", "6d"], touch_flange_pose: object, tool_tcp_mm: object,
                 align_flange_pose: object, extra_touch_poses: object) -> CalibrationResult:
     T1 = as_transform(touch_flange_pose, "touch_flange_pose")
@@ -87,29 +115,39 @@ def _fixed_tool(mode: Literal["5d", "6d"], touch_flange_pose: object, tool_tcp_m
         warnings.append(Finding("tcp_at_flange", "tool_tcp_mm is the flange centre: touch with a "
                                 "calibrated tool, not the bare flange", ("tool_tcp_mm",), "info"))
     n = len(tips)
-    cov = sigma = pos95 = None
+    cov = sigma = None
+    bounds: dict = {}
     if n > 1:
         sigma = residual_sigma(tips - r, 3)
         cov = np.eye(3) * sigma**2 / n
-        pos95 = bound95(cov)
+        bounds = bounds95(cov, sigma_dof(sigma, 3 * (n - 1)))
         worst = int(np.argmax(residuals))
         if residuals[worst] > TOUCH_SPREAD_WARN_MM:
             loc = ("touch_flange_pose",) if worst == 0 else ("extra_touch_poses", worst - 1)
             warnings.append(Finding("touch_spread", f"touch {worst + 1} is {residuals[worst]:.2f} "
                                     f"mm from the mean of the touches: re-check the robot tool's "
                                     f"TCP (tool_tcp_mm) or re-teach that touch", loc))
+    elevation = flange_elevation_deg(np.concatenate([touches, T2[None]])[:, :3, 3], r, z_axis)
+    known = elevation[~np.isnan(elevation)]
+    if known.size and known.max() < FLIP_ELEVATION_DEG:
+        warnings.append(Finding("alignment_flipped", (
+            f"the flange stood {-known.max():.0f} deg or more below the fixed TCP's plane at every "
+            f"touch and at the alignment, i.e. behind the fixed tool: the alignment was probably "
+            f"done with flange +Z along the fixed tool's +Z, which reverses the axis (180 deg). "
+            f"Align again with flange -Z along the fixed tool's +Z (flange +Z pointing into the "
+            f"fixed tool)"), ("align_flange_pose",)))
     tilt_deg = float(angle_between_deg(T1[:3, :3], T2[:3, :3]))
     twist_deg = float(angle_between_deg(R, R6))  # rotation about z the 5D convention discards
     extras = {"fixed_tcp_mm": r, "tool_axis": z_axis, "touch_tips_mm": tips,
               "align_distance_mm": float(np.linalg.norm(T2[:3, 3] - r)),
-              "touch_to_align_deg": tilt_deg, "mode": mode}
+              "touch_to_align_deg": tilt_deg, "flange_elevation_deg": elevation, "mode": mode}
     if mode == "5d":
         extras["twist_discarded_deg"] = twist_deg
     names = ("x_mm", "y_mm", "z_mm") if cov is not None else ()
     guidance = None if n > 1 else ("touch the fixed TCP again from another orientation "
                                    "(extra_touch_poses) to check the robot tool's TCP")
     report = QualityReport(residuals_mm=residuals, parameter_names=names, covariance=cov,
-                           sigma_mm=sigma, position_bound95_mm=pos95, warnings=tuple(warnings),
+                           sigma_mm=sigma, **bounds, warnings=tuple(warnings),
                            guidance=guidance, extras=extras)
     return CalibrationResult(f"fixed_tool.{mode}", frame, report)
 

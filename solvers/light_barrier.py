@@ -43,7 +43,7 @@ from scipy.spatial.transform import Rotation
 from solvers.beam_cycle import EDGES, cross3, as_beams
 from solvers.errors import CalibrationError
 from solvers.frames import angle_between_deg, axis_angle_deg, rotation_matrix
-from solvers.report import (CalibrationResult, Finding, QualityReport, bound95,
+from solvers.report import (CalibrationResult, Finding, QualityReport, bounds95,
                             leave_one_out_bad_point, residual_sigma)
 from solvers.validate import FloatArray, as_array, as_transforms
 
@@ -51,6 +51,9 @@ METHOD = "tool.light_barrier"
 # axis tilts: of the tool axis towards the tool frame's x and y axes (see tool_frame)
 PARAMETER_NAMES = ("tcp_x_mm", "tcp_y_mm", "tcp_z_mm", "axis_tilt_x_deg", "axis_tilt_y_deg")
 MIN_HEIGHT_SPREAD_MM = 1.0  # enter/leave heights along the axis closer than this = one height
+#: A measured shaft diameter this far (mm) from tool_diameter_mm is flagged ``diameter_mismatch``
+#: (when it is also beyond 4 standard errors of the measurement).
+DIAMETER_TOL_MM = 0.05
 
 
 @dataclass(frozen=True)
@@ -297,8 +300,8 @@ def _shaft_axis(tr: _Triggers, orientation_tol_deg: float, level_tol_deg: float)
                                "sweep the shaft across the beams")
     used = sorted({i for pr in pairs for i in pr})
     R0 = tr.R[used[0]]
-    for k in used:
-        ang = float(angle_between_deg(R0, tr.R[k]))
+    angles = angle_between_deg(R0, tr.R[used])  # one batched call
+    for k, ang in zip(used, angles.tolist()):
         if ang > orientation_tol_deg:
             raise CalibrationError(("flange_poses", k),
                                    f"orientation differs from pose {used[0]} by {ang:.3f} deg; the "
@@ -490,21 +493,95 @@ def light_barrier_two_heights(flange_poses: object, beam_ids: object, edges: obj
         "base_point_mm": s, "tool_height_mm": z_h, "planes": ax.planes,
         "diameter_measured_mm": ax.diameter_mm, "closed_form": True}
     warnings = []
-    if abs(ax.diameter_mm - 2 * tr.r_mm) > 0.05:
-        warnings.append(Finding(
-            "diameter_mismatch", f"the enter/leave chords imply a {ax.diameter_mm:.3f} mm shaft, "
-            f"not {2 * tr.r_mm:.3f} mm: check tool_diameter_mm or trigger latency",
-            ("tool_diameter_mm",)))
+    if abs(ax.diameter_mm - 2 * tr.r_mm) > DIAMETER_TOL_MM:
+        warnings.append(_diameter_finding(ax.diameter_mm, 2 * tr.r_mm, "the enter/leave chords"))
+    warnings += _one_way_findings(tr, a)
     report = QualityReport(residuals_mm=np.abs(res), warnings=tuple(warnings), extras=extras)
     return CalibrationResult(METHOD, tool_frame(t, a), report)
 
 
 def _extras(t: FloatArray, a: FloatArray, res: FloatArray) -> dict:
+    """The report's extras: pendant's own quantities and, beside them, the paper's [1]_.
+
+    pendant: ``runout_deg``, ``offset_mm`` (the TCP's distance from the flange z axis),
+    ``theta_x_deg``/``theta_y_deg`` (projection angles ``atan(a_x/a_z)``, ``atan(a_y/a_z)``),
+    ``theta_deg``/``phi_deg`` (``R = Ry(theta) Rx(phi)``), ``tcp_mm``, ``axis_flange``.
+    The paper (flange frame, right-handed, angles counter-clockwise about +X / +Y):
+    ``base_point_mm`` = ``S = t - (t_z / a_z) a``, where the tool axis pierces the flange
+    plane (the tool's base); ``paper_offset_x_mm``/``paper_offset_y_mm`` = ``(δX, δY)`` = S's
+    x, y: the offset, the TCP's displacement with the rotation removed (0 for pure runout);
+    ``paper_offset_mm`` = ``|S|``; ``paper_tool_height_mm`` = ``Z_h = t_z / a_z`` (S to TCP);
+    ``paper_theta_x_deg``/``paper_theta_y_deg`` = ``θx``/``θy`` of the paper's
+    ``R = Ry(θy) Rx(θx)`` with ``R e_z = a``: ``θy = atan(a_x / a_z)`` (pendant's
+    ``theta_x_deg``), ``θx = -asin(a_y)`` (pendant's ``phi_deg``); ``paper_runout_deg`` the
+    angle between the axis and flange z.
+    """
     ang = runout_angles_deg(a)
+    z_h = float(t[2] / a[2]) if abs(a[2]) > 1e-12 else float("nan")
+    S = t - z_h * a if np.isfinite(z_h) else np.full(3, np.nan)
+    S[2] = 0.0
     return {"runout_deg": ang["runout_deg"], "offset_mm": float(np.hypot(t[0], t[1])),
             "theta_x_deg": ang["theta_x_deg"], "theta_y_deg": ang["theta_y_deg"],
             "theta_deg": ang["theta_deg"], "phi_deg": ang["phi_deg"], "axis_flange": a.copy(),
-            "tcp_mm": t.copy(), "signed_residuals_mm": res.copy()}
+            "tcp_mm": t.copy(), "signed_residuals_mm": res.copy(), "base_point_mm": S,
+            "paper_runout_deg": ang["runout_deg"], "paper_theta_x_deg": ang["phi_deg"],
+            "paper_theta_y_deg": ang["theta_deg"], "paper_offset_x_mm": float(S[0]),
+            "paper_offset_y_mm": float(S[1]), "paper_offset_mm": float(np.hypot(S[0], S[1])),
+            "paper_tool_height_mm": z_h}
+
+
+def _diameter_finding(measured_mm: float, given_mm: float, source: str) -> Finding:
+    return Finding("diameter_mismatch", (
+        f"{source} imply a {measured_mm:.3f} mm shaft, not the {given_mm:.3f} mm given: check "
+        f"tool_diameter_mm (a wrong diameter inflates the residuals and biases the TCP)"),
+        ("tool_diameter_mm",))
+
+
+def _diameter_fit(tr: _Triggers, res: FloatArray, J: FloatArray) -> tuple[float, float]:
+    """The shaft diameter the triggers imply and its standard error (mm), at the fit.
+
+    With the radius free, ``r_k`` gains ``-side_k δr`` (enter -1, leave +1, tip 0): the
+    least-squares ``δr`` beside the 5 tool parameters is ``gᵀ res / |g_perp|²`` with
+    ``g = side`` and ``g_perp`` its part orthogonal to J's columns (``res`` is already), its
+    standard error ``σ' / |g_perp|`` with ``σ'² = (SSR - (gᵀres)²/|g_perp|²) / (N - 6)``.
+    Returns (nan, nan) without enter/leave pairs to tell the diameter from the position.
+    """
+    g = np.array([0.0 if e == "tip" else (-1.0 if e == "enter" else 1.0) for e in tr.edges])
+    Q, _ = np.linalg.qr(J)
+    g_perp = g - Q @ (Q.T @ g)
+    gg = float(g_perp @ g_perp)
+    if gg < 1e-9 * max(float(g @ g), 1e-300) or tr.n <= 6:
+        return float("nan"), float("nan")
+    dr = float(g @ res) / gg
+    ssr = max(float(res @ res) - dr * dr * gg, 0.0)
+    return 2.0 * (tr.r_mm + dr), 2.0 * float(np.sqrt(ssr / (tr.n - 6) / gg))
+
+
+def _one_way_findings(tr: _Triggers, a: FloatArray) -> list[Finding]:
+    """``one_way_passes`` when a kind of pass ran in one direction only, so that a trigger
+    latency (a trigger recorded late by a fixed distance along the motion) shifts the result
+    unseen: sweeps when every beam was crossed one way only (the TCP across the beams), tip
+    searches when all moved the same way along the tool axis (the TCP along the axis; without
+    velocities every tip search is taken to move towards the tip). Passes both ways put the
+    latency into the residuals, where it shows."""
+    kinds = []
+    seen: dict[str, set[bool]] = {}
+    for k in np.flatnonzero(tr.sweep):
+        nvec = cross3(tr.R[k] @ a, tr.U[k])
+        seen.setdefault(tr.beam_ids[k], set()).add(bool(nvec @ tr.V[k] >= 0))
+    if seen and all(len(v) == 1 for v in seen.values()):
+        kinds.append("every beam was crossed in one direction only (the TCP across the beams)")
+    tips = np.flatnonzero(tr.tip)
+    ways = {bool(np.all(np.isfinite(tr.V[k])) and (tr.R[k] @ a) @ tr.V[k] < 0) for k in tips}
+    if len(tips) and len(ways) == 1:
+        way = "out of the beam (back along the axis)" if ways.pop() else "towards the tip"
+        kinds.append(f"every tip search moved {way} (the TCP along the tool axis)")
+    if not kinds:
+        return []
+    return [Finding("one_way_passes", (
+        "; ".join(kinds) + ": a trigger latency shifts the result there unseen (0.2 mm late "
+        "moves it 0.2 mm); passes both ways would show it in the residuals"),
+        ("velocities_mm_s",))]
 
 
 # ----------------------------------------------------------------------------- least squares
@@ -603,8 +680,8 @@ def _initial(tr: _Triggers) -> tuple[FloatArray, FloatArray, bool]:
 
 
 def tcp_light_barrier(flange_poses: object, beam_ids: object, edges: object, beams: object,
-                      tool_diameter_mm: float, velocities_mm_s: object | None = None
-                      ) -> CalibrationResult:
+                      tool_diameter_mm: float, velocities_mm_s: object | None = None, *,
+                      find_bad_point: bool = True) -> CalibrationResult:
     """Tool > Light barrier: TCP and tool axis in flange from all beam triggers at once.
 
     Minimises ``sum_k r_k^2`` over the TCP ``t`` (3, mm) and the axis ``a`` (2 tilt angles),
@@ -630,17 +707,25 @@ def tcp_light_barrier(flange_poses: object, beam_ids: object, edges: object, bea
         Commanded TCP velocity (base) per trigger: gives the approach side of enter/leave and
         the tip plane. Without it the side is inferred from the enter -> leave motion of the
         same beam, and a tip search is assumed to move exactly along the tool axis.
+    find_bad_point : bool, keyword-only
+        Search for the one trigger that disagrees (leave one out: one refit per trigger, most
+        of the solve time). False skips it (batch and Monte Carlo runs); the frame, the
+        covariance and the bounds do not depend on it.
 
     Returns
     -------
     CalibrationResult
         ``frame`` = T_flange_tcp: origin the TCP, z the fitted tool axis, x the flange x axis
         projected normal to it (:func:`tool_frame`). ``report``: ``residuals_mm`` |r_k|,
-        covariance of ``PARAMETER_NAMES`` (mm, deg), 95% bounds of TCP position and axis
-        angle, a bad trigger if one disagrees, ``extras`` runout_deg (tool axis vs flange z),
-        offset_mm (TCP's distance from the flange axis), theta_x/y_deg, theta/phi_deg (the
-        paper's R = Ry(theta) Rx(phi)), tool_height_mm, tcp_mm, axis_flange,
-        signed_residuals_mm.
+        covariance of ``PARAMETER_NAMES`` (mm, deg), ``sigma_mm`` with ``dof = N - 5``, 95%
+        bounds of the TCP position, the axis angle and the Mahalanobis distance (F quantiles
+        of N - 5 dof), a bad trigger if one disagrees, findings ``diameter_mismatch`` (the
+        triggers imply another shaft diameter) and ``one_way_passes`` (sweeps or tip searches
+        one way only: latency unseen); ``extras`` runout_deg (tool axis vs flange z),
+        offset_mm (TCP's distance from the flange axis), theta_x/y_deg, theta/phi_deg,
+        tool_height_mm, tcp_mm, axis_flange, signed_residuals_mm, diameter_measured_mm,
+        diameter_standard_error_mm and the paper's terms (``paper_*``, ``base_point_mm``;
+        see :func:`_extras`).
 
     Raises
     ------
@@ -676,6 +761,7 @@ def tcp_light_barrier(flange_poses: object, beam_ids: object, edges: object, bea
     sigma = residual_sigma(res, 5)
     scale = np.array([1.0, 1.0, 1.0, np.degrees(1.0), np.degrees(1.0)])  # rad -> deg for the tilts
     cov = np.linalg.inv(J.T @ J) * sigma**2 * np.outer(scale, scale)
+    diameter, diameter_se = _diameter_fit(tr, res, J)
 
     def fit(indices: Sequence[int]):
         sub = _subset(tr, indices)
@@ -687,27 +773,24 @@ def tcp_light_barrier(flange_poses: object, beam_ids: object, edges: object, bea
         full = _residuals(tr, ts, as_)
         return tool_frame(ts, as_), lambda i: float(abs(full[i]))
 
-    bad = leave_one_out_bad_point(tr.n, fit, 5, floor_mm=0.02, k_sigma=4.0, min_points=10)
+    bad = (leave_one_out_bad_point(tr.n, fit, 5, floor_mm=0.02, k_sigma=4.0, min_points=10)
+           if find_bad_point else None)
     warnings = []
-    seen = {}
-    for k in np.flatnonzero(tr.sweep):
-        nvec = cross3(tr.R[k] @ a, tr.U[k])
-        seen.setdefault(tr.beam_ids[k], set()).add(bool(nvec @ tr.V[k] >= 0))
-    if all(len(v) == 1 for v in seen.values()):
-        warnings.append(Finding(
-            "one_way_passes", "every beam was crossed in one direction only: the geometry is "
-            "fine, but a trigger latency shifts the result unseen; reverse passes would reveal it",
-            ("velocities_mm_s",), severity="info"))
+    if abs(diameter - 2 * tr.r_mm) > max(DIAMETER_TOL_MM, 4.0 * diameter_se):
+        warnings.append(_diameter_finding(diameter, 2 * tr.r_mm, "the enter/leave triggers"))
+    warnings += _one_way_findings(tr, a)
     if not tr.has_velocity:
         warnings.append(Finding(
             "no_velocities", "no TCP velocities: approach sides inferred from the motion, tip "
             "searches assumed to move exactly along the tool axis", ("velocities_mm_s",),
             severity="info"))
     height = float(t[2] / a[2]) if abs(a[2]) > 1e-12 else None
-    extras = _extras(t, a, res) | {"tool_height_mm": height, "closed_form_start": closed}
+    extras = _extras(t, a, res) | {"tool_height_mm": height, "closed_form_start": closed,
+                                   "diameter_measured_mm": diameter,
+                                   "diameter_standard_error_mm": diameter_se}
     report = QualityReport(
         residuals_mm=np.abs(res), parameter_names=PARAMETER_NAMES, covariance=cov, sigma_mm=sigma,
-        position_bound95_mm=bound95(cov[:3, :3]), angle_bound95_deg=bound95(cov[3:, 3:]),
+        **bounds95(cov, tr.n - 5, position=slice(0, 3), angle=slice(3, 5)),
         bad_point=bad, warnings=tuple(warnings),
         guidance=None if bad is None else bad.message(), extras=extras)
     return CalibrationResult(METHOD, tool_frame(t, a), report)

@@ -19,13 +19,13 @@ import math
 from typing import Literal
 
 import numpy as np
-from scipy import stats
 from scipy.spatial.transform import Rotation
 
 from solvers.errors import CalibrationError
 from solvers.frames import Pose
-from solvers.report import (CHI2_95, BadPoint, CalibrationResult, Finding, QualityReport, bound95,
-                            leave_one_out_bad_point, residual_sigma)
+from solvers.report import (BadPoint, CalibrationResult, Finding, QualityReport, bound95,
+                            bound95_of_eigenvalues, leave_one_out_bad_point, mahalanobis_bound95,
+                            residual_sigma, sigma_dof)
 from solvers.validate import FloatArray, as_array, as_transforms
 
 #: Touch-up noise floor (mm): the sigma used when the residual is smaller or has no dof.
@@ -44,10 +44,6 @@ MAX_TCP_MM = 5000.0
 LARGE_SIGMA_MM = 0.5
 #: Shortest usable lever (mm) between TCP and the ABC 2-point axis / plane points.
 MIN_LEVER_MM = 5.0
-
-#: 3 F(3, nu; 0.95): the 95% joint-confidence scale of 3 parameters when sigma is estimated
-#: from nu residual degrees of freedom (it tends to chi2(3; 0.95) = 7.81 as nu grows).
-_F95_3 = 3.0 * stats.f.ppf(0.95, 3, np.arange(1, 1001))
 
 #: smallest eigenvalue of M = I - R̄ᵀR̄ that still determines the TCP: sin²(2 deg / 2)
 _MIN_LAMBDA = math.sin(math.radians(DEGENERATE_TILT_DEG) / 2.0) ** 2
@@ -187,12 +183,10 @@ def _pivot_fit(X: FloatArray) -> tuple[FloatArray, FloatArray, FloatArray, Float
     return t, s, w, V
 
 
-def _scale95(dof: int, sigma: float) -> float:
-    """Squared 95% radius factor for 3 parameters: 3 F(3, dof) when sigma was estimated from
-    dof residual degrees of freedom, chi2(3) when it is the floor (taken as known)."""
-    if sigma <= SIGMA_FLOOR_MM or dof <= 0 or dof > len(_F95_3):
-        return CHI2_95[3]
-    return float(_F95_3[dof - 1])
+def _dof(dof: int, sigma: float) -> int | None:
+    """Degrees of freedom behind sigma: ``dof`` when sigma was estimated from the residual,
+    None when it is the floor (``SIGMA_FLOOR_MM``, taken as known: chi-square bounds)."""
+    return sigma_dof(sigma, dof, SIGMA_FLOOR_MM)
 
 
 def _bad_point_pivot(R: FloatArray, p: FloatArray) -> BadPoint | None:
@@ -345,10 +339,11 @@ def tcp_xyz_4point(flange_poses: FloatArray) -> CalibrationResult:
     The estimate is then unbiased and efficient; its covariance is the inverse Fisher
     information ``sigma² (Σ [R_k, -I]ᵀ[R_k, -I])^-1``, whose t block is exactly
     ``Cov(t) = sigma²/N · M^-1`` (the Cramér–Rao bound). sigma is estimated from the
-    residual with 6 parameters, floored at ``SIGMA_FLOOR_MM``. ``position_bound95_mm`` is
-    the largest radius of the 95% confidence ellipsoid of t: ``sqrt(k lambda_max(Cov(t)))``
-    with ``k = 3 F(3, 3N-6; 0.95)`` (sigma estimated; Student-type widening for small N) or
-    ``k = chi2(3; 0.95)`` when the floor is used.
+    residual with 6 parameters, floored at ``SIGMA_FLOOR_MM``. ``position_bound95_mm`` bounds
+    the length of the TCP error at 95 % (:func:`~solvers.report.bound95` of ``Cov(t)`` with
+    the F quantile of ``3N - 6`` degrees of freedom; chi-square when the floor is used, the
+    report's ``sigma_source`` then says ``"assumed"``); ``mahalanobis_bound95`` is
+    ``sqrt(3 F(3, 3N-6; 0.95))``.
 
     Observability: an eigenvalue lambda of M with eigenvector v (flange frame) is
     ``sin²(theta/2)`` for two poses tilted by theta about an axis perpendicular to v, so
@@ -477,13 +472,14 @@ def tcp_xyz_4point(flange_poses: FloatArray) -> CalibrationResult:
     cov_s = np.array(((var + p00 * r00 + p01 * r01 + p02 * r02, s01, s02),
                       (s01, var + p10 * r10 + p11 * r11 + p12 * r12, s12),
                       (s02, s12, var + p20 * r20 + p21 * r21 + p22 * r22)))
-    # bound95 from the eigenvalues in hand: the largest of Cov(t) is sigma²/(N w_min)
-    b95 = math.sqrt(_scale95(3 * n - 6, sigma) * var / w0)
+    # bound95 from the eigenvalues in hand: those of Cov(t) are sigma²/(N w_i)
+    dof = _dof(3 * n - 6, sigma)
+    b95 = bound95_of_eigenvalues((q0, q1, q2), dof)
 
     findings: list[Finding] = []
     if tilt0 < WEAK_TILT_DEG:
         v = V[:, 0]
-        along95 = float(np.sqrt(CHI2_95[1] * (v @ cov @ v)))
+        along95 = bound95_of_eigenvalues((float(v @ cov @ v),), dof)
         findings.append(Finding("weak_observability", (
             f"the TCP along {_direction_words(v)} is weakly determined: the orientations tilt "
             f"only {tilt0:.1f} deg about axes perpendicular to it (rotation about "
@@ -516,7 +512,8 @@ def tcp_xyz_4point(flange_poses: FloatArray) -> CalibrationResult:
     text, Rnew = _guidance_text(R, Rbar, sigma, G)
     report = QualityReport(
         residuals_mm=res, parameter_names=("x_mm", "y_mm", "z_mm"), covariance=cov,
-        sigma_mm=sigma, position_bound95_mm=b95, bad_point=bad,
+        sigma_mm=sigma, sigma_source="assumed" if dof is None else "residual", dof=dof,
+        position_bound95_mm=b95, mahalanobis_bound95=mahalanobis_bound95(3, dof), bad_point=bad,
         warnings=tuple(findings), guidance=text, next_orientation=Rnew,
         extras={"point_mm": s, "point_covariance_mm2": cov_s, "spread_deg": spread,
                 "tilt_deg": tilt_deg, "eigenvectors_flange": V})
@@ -582,7 +579,8 @@ def tcp_xyz_reference(reference_point_mm: FloatArray,
     res = np.linalg.norm(d, axis=1)
     sigma = residual_sigma(d, 3, SIGMA_FLOOR_MM)
     cov = (sigma**2 / n) * np.eye(3)
-    b95 = math.sqrt(_scale95(3 * n - 3, sigma) * sigma**2 / n)
+    dof = _dof(3 * n - 3, sigma)
+    b95 = bound95_of_eigenvalues([sigma**2 / n] * 3, dof)
     findings: list[Finding] = []
     if np.linalg.norm(t) > MAX_TCP_MM:
         raise CalibrationError(("flange_poses",), (
@@ -609,7 +607,8 @@ def tcp_xyz_reference(reference_point_mm: FloatArray,
             findings.append(Finding("bad_point", bad.message(), ("flange_poses", bad.index)))
     report = QualityReport(
         residuals_mm=res, parameter_names=("x_mm", "y_mm", "z_mm"), covariance=cov,
-        sigma_mm=sigma, position_bound95_mm=b95, bad_point=bad,
+        sigma_mm=sigma, sigma_source="assumed" if dof is None else "residual", dof=dof,
+        position_bound95_mm=b95, mahalanobis_bound95=mahalanobis_bound95(3, dof), bad_point=bad,
         warnings=tuple(findings), extras={"point_mm": s})
     return CalibrationResult("tool.xyz_reference", _tcp_frame(t), report)
 
@@ -824,7 +823,8 @@ def tool_abc_2point(tcp_mm: FloatArray, flange_poses: FloatArray) -> Calibration
             "the TCP (between TCP and flange)?"), ("flange_poses", 1)))
     report = QualityReport(residuals_mm=np.zeros(0), parameter_names=("rx_deg", "ry_deg", "rz_deg"),
                            covariance=cov, sigma_mm=NOMINAL_TOUCH_SIGMA_MM,
-                           angle_bound95_deg=bound95(cov), warnings=tuple(findings),
+                           sigma_source="assumed", angle_bound95_deg=bound95(cov),
+                           mahalanobis_bound95=mahalanobis_bound95(3), warnings=tuple(findings),
                            extras={"lever_mm": lever, "radius_mm": radius})
     return CalibrationResult("tool.abc_2point", _tcp_frame(t, Rft), report)
 

@@ -5,7 +5,7 @@ from __future__ import annotations
 import pytest
 
 from api_helpers import *  # noqa: F403
-from api_helpers import C, CELL, angle_deg, calibrate, calibrated_pointer, ok, pose_matrix
+from api_helpers import C, CELL, angle_deg, calibrate, calibrated_pointer, ok, open_session, pose_matrix
 
 T_TRUE = CELL.T_world_fixedtool
 
@@ -23,3 +23,15 @@ def test_fixed_tool(client, mode):
         assert angle_deg(T[:3, :3], T_TRUE[:3, :3]) < 1e-4
     listed = ok(client.get(f"{C}/fixed-tools"))
     assert [e["number"] for e in listed] == [4]
+
+
+@pytest.mark.parametrize("mode", ["5d", "6d"])
+def test_fixed_tool_align_prompt_says_which_way(client, mode):
+    """The lecture's "align Z with Z" has no sign; the pendant's prompt gives it (a flange
+    aligned the other way round gives an axis 180 deg off)."""
+    calibrated_pointer(client, 1)
+    url = open_session(client, f"fixed_tool.{mode}", 4, tool_no=1)
+    align = ok(client.get(url))["steps"][1]
+    assert align["target"] == "fixed_tool_align"
+    assert "flange +Z pointing into the fixed tool" in align["prompt"]
+    assert "flange -Z along" in align["prompt"]

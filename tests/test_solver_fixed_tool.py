@@ -101,6 +101,45 @@ def test_5d_frame_moves_smoothly_as_the_axis_tilts(z):
         assert angle_between_deg(axis_frame_5d(z), axis_frame_5d(z2)) < 0.05
 
 
+@pytest.mark.parametrize("fn", [fixed_tool_5d, fixed_tool_6d])
+def test_fixed_tool_alignment_done_the_other_way_round_is_flagged(robot, rng, fn):
+    """Flange +Z along the fixed tool's +Z (not -Z) at the alignment, flange 150 mm above the
+    tip: the axis comes out 180 deg off, and the touch-ups tell: the flange stood behind the
+    fixed TCP at the touch and at the alignment. The right alignment raises nothing."""
+    T_E, _, T2 = fixed_tool_scene(robot, rng)
+    T1 = np.eye(4)  # the pointer onto the fixed TCP from its working side, tilted up to 40 deg
+    v = np.r_[rng.normal(size=2), 0.0]
+    tilt = Rotation.from_rotvec(np.radians(rng.uniform(0, 40)) * v / np.linalg.norm(v))
+    T1[:3, :3] = T_E[:3, :3] @ RX180 @ tilt.as_matrix()
+    T1[:3, 3] = T_E[:3, 3] - T1[:3, :3] @ TOOL_TCP_MM
+    right = fn(T1, TOOL_TCP_MM, T2)
+    assert "alignment_flipped" not in {w.code for w in right.report.warnings}
+    assert np.nanmin(right.report.extras["flange_elevation_deg"]) > 0
+    flipped_pose = T2.copy()
+    flipped_pose[:3, :3] = T_E[:3, :3]  # flange z = +Z_E
+    flipped = fn(T1, TOOL_TCP_MM, flipped_pose)
+    assert axis_angle_deg(flipped.frame[:3, 2], T_E[:3, 2]) == pytest.approx(180.0, abs=1e-4)
+    (w,) = [f for f in flipped.report.warnings if f.code == "alignment_flipped"]
+    assert w.loc == ("align_flange_pose",) and "flange -Z along the fixed tool's +Z" in w.message
+    assert np.nanmax(flipped.report.extras["flange_elevation_deg"]) < -30
+
+
+def test_fixed_tool_alignment_from_the_side_cannot_tell():
+    """Touch and alignment from the side (flange level with the fixed TCP): no verdict; the
+    menu's prompt says which way to align."""
+    r = np.array([800.0, 0.0, 300.0])
+    side = Rotation.from_euler("y", -90, degrees=True).as_matrix()  # flange z along world -X
+    T1 = np.eye(4)
+    T1[:3, :3], T1[:3, 3] = side, r - side @ TOOL_TCP_MM
+    for z_flange in (1.0, -1.0):
+        T2 = np.eye(4)
+        T2[:3, :3] = np.diag([1.0, z_flange, z_flange])  # flange z up or down
+        T2[:3, 3] = r + [150.0, 0, 0]
+        rep = fixed_tool_5d(T1, TOOL_TCP_MM, T2).report
+        assert "alignment_flipped" not in {w.code for w in rep.warnings}
+        assert np.abs(rep.extras["flange_elevation_deg"]).max() < 1e-6
+
+
 def test_fixed_tool_extra_touches_average_and_report_scatter(rng):
     """Extra touches from other orientations: r is their mean, their scatter the residual."""
     r = np.array([800.0, 100.0, 200.0])

@@ -7,6 +7,8 @@ reached by two (four) library robots, and solved back.
 
 from __future__ import annotations
 
+import dataclasses
+
 import numpy as np
 import pytest
 from scipy.spatial.transform import Rotation
@@ -16,7 +18,7 @@ from solvers.dh import forward_kinematics
 from solvers.errors import CalibrationError
 from solvers.frames import axis_angle_deg
 from solvers.light_barrier import (light_barrier_two_heights, runout_angles_deg,
-                                   shaft_axis_from_sweeps, tcp_light_barrier)
+                                   shaft_axis_from_sweeps, tcp_light_barrier, tool_frame)
 from solvers.robots import ROBOTS
 
 D_MM = 6.0
@@ -219,14 +221,112 @@ def test_fit_handles_tilted_skew_beams(rng):
         assert pos_mm < 1e-6 and ang_deg < 1e-6
 
 
-def test_one_way_passes_are_fine_but_noted(rng):
+def test_one_way_passes_name_every_kind_of_one_way_pass(rng):
+    """Exact either way; one_way_passes names the sweeps when every beam was crossed one way,
+    and the tip search when it ran one way (the standard cycle's single search down)."""
     tcp, a = random_tool(rng)
     for both_ways in (False, True):
         flange_poses, ids, edges, vel, beams = measure(CONFIGS[3], tcp, a, both_ways=both_ways)
         result = tcp_light_barrier(flange_poses, ids, edges, beams, D_MM, vel)
         assert errors(result, tcp, a)[0] < 1e-6
-        codes = {f.code: f.severity for f in result.report.warnings}
-        assert codes == ({"one_way_passes": "info"} if not both_ways else {})
+        (w,) = result.report.warnings
+        assert w.code == "one_way_passes" and w.severity == "warning"
+        assert "tip search" in w.message
+        assert ("every beam was crossed in one direction" in w.message) == (not both_ways)
+
+
+def late(flange_poses, vel, mm):
+    """Every trigger recorded ``mm`` late: the flange moved on along the TCP velocity (the
+    flange orientation is constant during each pass, so it moves as the TCP does)."""
+    out = flange_poses.copy()
+    out[:, :3, 3] += mm * vel / np.linalg.norm(vel, axis=1, keepdims=True)
+    return out
+
+
+def with_tip_back(passes):
+    """The passes plus the last one (the tip search) run backwards: up, out of the beam."""
+    tip = passes[-1]
+    return list(passes) + [dataclasses.replace(tip, start_flange=tip.end_flange,
+                                               end_flange=tip.start_flange)]
+
+
+def test_late_triggers_with_a_one_way_tip_search_are_flagged(rng):
+    """All triggers 0.2 mm late, sweeps both ways: a tip search one way moves the TCP 0.2 mm
+    along the axis unseen (one_way_passes names it); searching back up as well reveals the
+    latency in the residuals and puts the TCP back."""
+    tcp, a = random_tool(rng)
+    robot, q = CONFIGS[1]
+    T = forward_kinematics(ROBOTS[robot], q)
+    nominal = np.eye(4)
+    nominal[2, 3] = round(float(np.linalg.norm(tcp)) / 10.0) * 10.0
+    center = T[:3, :3] @ nominal[:3, 3] + T[:3, 3] + np.array([0.0, 0.0, 25.0])
+    beams = sensor(center)
+    plan = plan_cycle(beams, D_MM, center, (10.0, 40.0), flange_rotation=T[:3, :3],
+                      nominal_tool=nominal, tip_axis_flange=(tcp, a))
+    flange_poses, ids, edges, vel = run(plan, tcp, a, beams)
+    rep = tcp_light_barrier(late(flange_poses, vel, 0.2), ids, edges, beams, D_MM, vel)
+    along = tool_frame(tcp, a)[:3, :3].T @ (rep.frame[:3, 3] - tcp)  # in the tool frame
+    assert abs(along[2]) == pytest.approx(0.2, abs=0.01) and np.hypot(*along[:2]) < 0.01
+    (w,) = rep.report.warnings
+    assert w.code == "one_way_passes" and "every tip search moved towards the tip" in w.message
+    flange_poses, ids, edges, vel = run(with_tip_back(plan), tcp, a, beams)
+    assert edges.count("tip") == 2
+    both = tcp_light_barrier(late(flange_poses, vel, 0.2), ids, edges, beams, D_MM, vel)
+    assert both.report.warnings == ()
+    assert errors(both, tcp, a)[0] < 0.01  # the two searches bracket the latency
+    assert both.report.sigma_mm > 0.15  # and the residuals show it
+
+
+def test_wrong_shaft_diameter_is_flagged_by_the_fit(rng):
+    """6.2 mm given for a 6.0 mm shaft: the fit measures the diameter from the enter/leave
+    triggers and names tool_diameter_mm; the right diameter raises nothing."""
+    tcp, a = random_tool(rng)
+    flange_poses, ids, edges, vel, beams = measure(CONFIGS[0], tcp, a)
+    noisy = flange_poses.copy()
+    noisy[:, :3, 3] += rng.normal(0.0, 0.005, (len(noisy), 3))
+    for velocities in (vel, None):
+        wrong = tcp_light_barrier(noisy, ids, edges, beams, 6.2, velocities).report
+        assert wrong.extras["diameter_measured_mm"] == pytest.approx(D_MM, abs=0.01)
+        (w,) = [f for f in wrong.warnings if f.code == "diameter_mismatch"]
+        assert w.loc == ("tool_diameter_mm",) and "6.200 mm given" in w.message
+        right = tcp_light_barrier(noisy, ids, edges, beams, D_MM, velocities).report
+        assert "diameter_mismatch" not in {f.code for f in right.warnings}
+        assert right.extras["diameter_standard_error_mm"] < 0.01
+    closed = light_barrier_two_heights(noisy, ids, edges, beams, 6.2, vel).report
+    assert "diameter_mismatch" in {f.code for f in closed.warnings}
+
+
+@pytest.mark.parametrize("solve", [tcp_light_barrier, light_barrier_two_heights])
+def test_paper_offset_and_runout_of_hand_built_tools(solve):
+    """The paper's terms: pure runout (1.5 deg about flange +Y, L 150: the axis through the
+    flange centre) has offset 0, where pendant's offset_mm is 150 sin 1.5 deg = 3.93 mm;
+    pure offset (0.8, -0.5) mm parallel to flange z has runout 0; runout about flange +X
+    (counter-clockwise) tilts the axis towards flange -y and is the paper's θx."""
+    runout = Rotation.from_euler("y", 1.5, degrees=True).apply([0.0, 0.0, 1.0])
+    tools = {"runout": (150.0 * runout, runout),
+             "offset": (np.array([0.8, -0.5, 150.0]), np.array([0.0, 0.0, 1.0])),
+             "runout_x": (150.0 * Rotation.from_euler("x", 1.2, degrees=True).apply([0, 0, 1.0]),
+                          Rotation.from_euler("x", 1.2, degrees=True).apply([0, 0, 1.0]))}
+    ex = {}
+    for name, (tcp, a) in tools.items():
+        flange_poses, ids, edges, vel, beams = measure(CONFIGS[0], tcp, a)
+        ex[name] = solve(flange_poses, ids, edges, beams, D_MM, vel).report.extras
+    r, o, rx = ex["runout"], ex["offset"], ex["runout_x"]
+    assert r["paper_offset_mm"] == pytest.approx(0.0, abs=1e-6)
+    assert r["offset_mm"] == pytest.approx(150 * np.sin(np.radians(1.5)), abs=1e-6)  # 3.93
+    assert r["paper_runout_deg"] == pytest.approx(1.5, abs=1e-6)
+    assert r["paper_theta_y_deg"] == pytest.approx(1.5, abs=1e-6)  # pendant's theta_x_deg
+    assert r["theta_x_deg"] == pytest.approx(1.5, abs=1e-6)
+    assert r["paper_theta_x_deg"] == pytest.approx(0.0, abs=1e-6)
+    assert r["paper_tool_height_mm"] == pytest.approx(150.0, abs=1e-6)
+    assert [o["paper_offset_x_mm"], o["paper_offset_y_mm"]] == pytest.approx([0.8, -0.5], abs=1e-6)
+    assert o["paper_offset_mm"] == pytest.approx(np.hypot(0.8, 0.5), abs=1e-6)
+    assert o["paper_runout_deg"] == pytest.approx(0.0, abs=1e-6)
+    assert o["paper_theta_x_deg"] == pytest.approx(0.0, abs=1e-6)
+    assert o["paper_theta_y_deg"] == pytest.approx(0.0, abs=1e-6)
+    assert rx["paper_theta_x_deg"] == pytest.approx(1.2, abs=1e-6)
+    assert rx["axis_flange"][1] < 0 and rx["paper_theta_y_deg"] == pytest.approx(0.0, abs=1e-6)
+    assert rx["paper_offset_mm"] == pytest.approx(0.0, abs=1e-6)
 
 
 # ------------------------------------------------------------------ noise, bounds, bad trigger
