@@ -11,8 +11,8 @@ import numpy as np
 from scipy.spatial.transform import Rotation
 
 from solvers.base import (BASE_3POINT_LOCS, POSE_PARAMETERS, as_transform, frame_from_three_points,
-                          pose_difference, three_point_report)
-from solvers.external.common import TOUCH_SIGMA_MM, propagate, rz, scale95
+                          three_point_report)
+from solvers.external.common import TOUCH_SIGMA_MM, rz, scale95
 from solvers.frames import Pose
 from solvers.report import CalibrationResult, Finding, QualityReport, bound95
 from solvers.validate import FloatArray, as_array
@@ -24,6 +24,30 @@ def _perturbed(T: FloatArray, d: FloatArray) -> FloatArray:
     Tp[:3, 3] += d[:3]
     Tp[:3, :3] = T[:3, :3] @ Rotation.from_rotvec(d[3:], degrees=True).as_matrix()
     return Tp
+
+
+def root_jacobian(T_root: FloatArray, T_base_wb: FloatArray, theta_deg: float) -> FloatArray:
+    """d(pose parameters of T)/d(pose parameters of T_root) for ``T = Rz(θ)⁻¹ T_root⁻¹ W``.
+
+    With ``T_root' = (t_r + δt, R_r Exp(ω))`` and ``q = R_rᵀ (t_W - t_r)``: the result's
+    rotation about its own axes moves by ``-(R_Wᵀ R_r) ω`` and its origin by
+    ``R_zᵀ ([q]× ω - R_rᵀ δt)`` (first order; translations mm, rotations deg).
+
+    Examples
+    --------
+    >>> J = root_jacobian(np.eye(4), np.eye(4), 0.0)
+    >>> np.diag(J).tolist()
+    [-1.0, -1.0, -1.0, -1.0, -1.0, -1.0]
+    """
+    Rr, tr = T_root[:3, :3], T_root[:3, 3]
+    Rz = rz([theta_deg])[0][:3, :3]
+    q = Rr.T @ (T_base_wb[:3, 3] - tr)
+    qx = np.array([[0.0, -q[2], q[1]], [q[2], 0.0, -q[0]], [-q[1], q[0], 0.0]])
+    J = np.zeros((6, 6))
+    J[:3, :3] = -Rz.T @ Rr.T
+    J[:3, 3:] = Rz.T @ qx * (np.pi / 180.0)
+    J[3:, 3:] = -(T_base_wb[:3, :3].T @ Rr)
+    return J
 
 
 def offset(origin_mm: object, x_point_mm: object, xy_point_mm: object, axis_value_deg: float,
@@ -41,7 +65,7 @@ def offset(origin_mm: object, x_point_mm: object, xy_point_mm: object, axis_valu
     which stays fixed while the axis turns. The covariance adds the touch noise through the
     three points (``three_point_report``, origin turned into the flange frame) and, when given,
     the root frame's covariance carried through ``T_root⁻¹`` to first order,
-    ``C = J₃ C_3pt J₃ᵀ + J_r C_root J_rᵀ`` (J_r by central differences), all in
+    ``C = J₃ C_3pt J₃ᵀ + J_r C_root J_rᵀ`` (J_r from :func:`root_jacobian`), all in
     :data:`~solvers.base.POSE_PARAMETERS`.
 
     Parameters
@@ -101,12 +125,8 @@ def offset(origin_mm: object, x_point_mm: object, xy_point_mm: object, axis_valu
     warnings = list(rep3.warnings)
     if root_covariance is not None:
         C_root = as_array(root_covariance, "root_covariance", (6, 6))
-        Z_inv = np.linalg.inv(rz([theta])[0])
-
-        def moved(d: FloatArray) -> FloatArray:
-            return pose_difference(T, Z_inv @ np.linalg.inv(_perturbed(T_root, d)) @ T_base_wb)
-
-        _, C_add = propagate(moved, np.zeros(6), C_root, np.r_[1e-3, 1e-3, 1e-3, 1e-4, 1e-4, 1e-4])
+        J_root = root_jacobian(T_root, T_base_wb, theta)
+        C_add = J_root @ C_root @ J_root.T
         # a root sigma estimated from few residuals: widen its share like its own bounds are
         widen = scale95(3, int(root_dof), root_dof > 0) / scale95(3, 0, False)
         cov = cov + widen * C_add

@@ -19,9 +19,8 @@ from __future__ import annotations
 import numpy as np
 from scipy.spatial.transform import Rotation
 
-from solvers.base import POSE_PARAMETERS, pose_difference
-from solvers.external.common import (TOUCH_SIGMA_MM, cross, line_distance, propagate, rz, scale95,
-                                     unit)
+from solvers.base import POSE_PARAMETERS
+from solvers.external.common import TOUCH_SIGMA_MM, cross, line_distance, rz, scale95, unit
 from solvers.external.offset import _perturbed
 from solvers.external.root_point import root_point
 from solvers.report import CalibrationResult, Finding, QualityReport, bound95
@@ -51,6 +50,26 @@ def _axes_geometry(T_tilt: FloatArray, T_turn: FloatArray, tau_deg: float) -> tu
         L, _, _ = line_distance(np.zeros(3), np.array([0.0, 0.0, 1.0]), X[:3, 3], X[:3, 2])
     angle = float(np.degrees(np.arccos(np.clip(X[2, 2], -1.0, 1.0))))
     return X, L, angle
+
+
+def _geometry_covariance(T_tilt: FloatArray, T_turn: FloatArray, tau_deg: float, X: FloatArray,
+                         C: FloatArray) -> FloatArray:
+    """Covariance of (signed common normal, angle, pose parameters of X) from the 12 pose
+    parameters of the two roots (covariance C), to first order by central differences; the
+    24 relative rotations go through one ``Rotation.from_matrix`` call."""
+    h = np.r_[_STEPS, _STEPS]
+    rows, Xs = [], []
+    for i in range(12):
+        for sgn in (1.0, -1.0):
+            d = np.zeros(12)
+            d[i] = sgn * h[i]
+            Xd, Ld, ad = _axes_geometry(_perturbed(T_tilt, d[:6]), _perturbed(T_turn, d[6:]), tau_deg)
+            rows.append([Ld, ad, *(Xd[:3, 3] - X[:3, 3])])
+            Xs.append(X[:3, :3].T @ Xd[:3, :3])
+    rot = Rotation.from_matrix(np.array(Xs)).as_rotvec(degrees=True)
+    G = np.c_[np.array(rows), rot].reshape(12, 2, 8)
+    J = ((G[:, 0] - G[:, 1]) / (2 * h[:, None])).T
+    return J @ C @ J.T
 
 
 def _common_normal_frame(X: FloatArray) -> FloatArray:
@@ -104,9 +123,10 @@ def positioner_2axis(tilt_points_mm: object, tilt_values_deg: object, turn_point
     Returns
     -------
     CalibrationResult
-        ``method="ext.positioner_2axis"``, ``frame = T_tiltflange_turnroot`` with its origin
-        moved along the turn axis to the foot of the common normal and x along the common
-        normal. ``extras``: ``tilt`` and ``turn`` (the two ``root_point`` results, turn in the
+        ``method="ext.positioner_2axis"``, ``frame = T_tiltflange_turnroot`` (the turn axis'
+        root frame as ``root_point`` defines it, in the tilt flange frame); ``covariance`` is
+        its own. ``extras``: ``common_normal_frame`` (that frame moved along the turn axis to
+        the foot of the common normal, x along the normal), ``tilt`` and ``turn`` (the two ``root_point`` results, turn in the
         robot base), ``tilt_root`` (``T_base_tiltroot``), ``common_normal_mm`` and
         ``common_normal_bound95_mm``, ``axes_angle_deg`` and ``axes_angle_bound95_deg``.
 
@@ -147,15 +167,11 @@ def positioner_2axis(tilt_points_mm: object, tilt_values_deg: object, turn_point
     X, L_signed, angle = _axes_geometry(tilt.frame, turn.frame, tau)
     L = abs(L_signed)
 
-    def geometry(d: FloatArray) -> FloatArray:
-        Xd, Ld, ad = _axes_geometry(_perturbed(tilt.frame, d[:6]), _perturbed(turn.frame, d[6:]), tau)
-        return np.r_[Ld, ad, pose_difference(X, Xd)]
-
     dof_t, dof_u = tilt.report.extras["dof"], turn.report.extras["dof"]
     C = np.zeros((12, 12))
     C[:6, :6] = tilt.report.covariance * scale95(1, dof_t, dof_t > 0) / scale95(1, 0, False)
     C[6:, 6:] = turn.report.covariance * scale95(1, dof_u, dof_u > 0) / scale95(1, 0, False)
-    _, Cg = propagate(geometry, np.zeros(12), C, np.r_[_STEPS, _STEPS])
+    Cg = _geometry_covariance(tilt.frame, turn.frame, tau, X, C)
     z95 = np.sqrt(scale95(1, 0, False))
     L_b = float(z95 * np.sqrt(Cg[0, 0]))
     angle_b = float(z95 * np.sqrt(Cg[1, 1]))
@@ -173,7 +189,6 @@ def positioner_2axis(tilt_points_mm: object, tilt_values_deg: object, turn_point
     if abs(angle - nominal_angle_deg) > max(angle_b, ANGLE_TOL_DEG):
         warnings.append(Finding("axes_angle", f"the axes make {angle:.3f} deg (±{angle_b:.3f}), "
                                 f"designed {nominal_angle_deg:g} deg", ("turn_points_mm",)))
-    T = _common_normal_frame(X)
     cov = Cg[2:, 2:]
     guidance = tilt.report.guidance if tilt.report.bad_point is not None else turn.report.guidance
     report = QualityReport(
@@ -186,9 +201,9 @@ def positioner_2axis(tilt_points_mm: object, tilt_values_deg: object, turn_point
         guidance=guidance,
         extras={"tilt": tilt, "turn": turn, "tilt_root": tilt.frame, "common_normal_mm": L,
                 "common_normal_bound95_mm": L_b, "axes_angle_deg": angle,
-                "axes_angle_bound95_deg": angle_b, "turn_root_in_tilt_flange": X},
+                "axes_angle_bound95_deg": angle_b, "common_normal_frame": _common_normal_frame(X)},
     )
-    return CalibrationResult("ext.positioner_2axis", T, report)
+    return CalibrationResult("ext.positioner_2axis", X, report)
 
 
 __all__ = ["positioner_2axis"]

@@ -295,7 +295,7 @@ def root_point(points_mm: object, axis_values_deg: object, *, nominal_axis: obje
     else:
         guidance = (f"touch the mark at axis value {next_value:.0f} deg next: the centre's 95 % bound "
                     f"would shrink from {pos_b:.3f} to about "
-                    f"{np.sqrt(k_pos) * sigma * next_b:.3f} mm")
+                    f"{np.sqrt(scale95(3, dof + 2, estimated)) * sigma * next_b:.3f} mm")
 
     report = QualityReport(
         residuals_mm=fit.distances_mm,
