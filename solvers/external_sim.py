@@ -55,7 +55,8 @@ def touch(points_true_mm: FloatArray, axis_values: FloatArray, sigma_mm: float,
           rng: np.random.Generator, tool: FloatArray = DEFAULT_TOOL) -> TouchUps:
     """Touch-ups of the true points with noise N(0, sigma²) per coordinate; flange orientations
     tilted up to 30 deg from straight down about a random horizontal axis, random twist."""
-    P = np.asarray(points_true_mm, dtype=float) + rng.normal(0.0, sigma_mm, np.shape(points_true_mm))
+    P = np.asarray(points_true_mm, dtype=float)
+    P = P + rng.normal(0.0, sigma_mm, P.shape)
     n = len(P)
     az = rng.uniform(0, 2 * np.pi, n)
     tilt = np.radians(rng.uniform(0, 30, n))
@@ -134,8 +135,10 @@ def make_turntable(*, tilt_deg: float = 0.0, root_offset_mm: float = 0.0, sign: 
     >>> round(float(np.degrees(np.arccos(t.axis @ [0, 0, 1]))), 6)
     1.0
     """
-    N = _frame(np.eye(3), [1500.0, 0.0, 300.0]) if nominal_root is None else np.asarray(nominal_root)
-    return Turntable(rotary_root(N, tilt_deg=tilt_deg, root_offset_mm=root_offset_mm), N, sign, scale)
+    N = (_frame(np.eye(3), [1500.0, 0.0, 300.0]) if nominal_root is None
+         else np.asarray(nominal_root, dtype=float))
+    root = rotary_root(N, tilt_deg=tilt_deg, root_offset_mm=root_offset_mm)
+    return Turntable(root, N, sign, scale)
 
 
 @dataclass(frozen=True)
@@ -155,7 +158,8 @@ class Positioner:
         turn = rz(self.turn_sign * self.turn_scale * np.asarray(turn_deg, dtype=float))
         return self.tilt.flange(tilt_deg) @ self.turn_in_tilt @ turn
 
-    def mark(self, mark_flange_mm: FloatArray, tilt_deg: FloatArray, turn_deg: FloatArray) -> FloatArray:
+    def mark(self, mark_flange_mm: FloatArray, tilt_deg: FloatArray,
+             turn_deg: FloatArray) -> FloatArray:
         F = self.flange(tilt_deg, turn_deg)
         return F[:, :3, :3] @ np.asarray(mark_flange_mm, dtype=float) + F[:, :3, 3]
 
@@ -187,7 +191,8 @@ def make_positioner(*, tilt_deg: float = 0.0, root_offset_mm: float = 0.0, sign:
     >>> [round(v, 6) for v in p.true_axes()]
     [3.0, 90.0]
     """
-    nominal_tilt = _frame(Rotation.from_euler("y", 90, degrees=True).as_matrix(), [1400.0, 0.0, 600.0])
+    nominal_tilt = _frame(Rotation.from_euler("y", 90, degrees=True).as_matrix(),
+                          [1400.0, 0.0, 600.0])
     tilt = Turntable(rotary_root(nominal_tilt, tilt_deg=tilt_deg, root_offset_mm=root_offset_mm),
                      nominal_tilt, sign, scale)
     # in the tilt flange, base z is -x: the turn axis points along -x, its table above the axis

@@ -102,7 +102,8 @@ def test_root_point_words_for_each_disagreement():
     P = make_turntable().mark(MARK, [-135.0, -45.0, 45.0, 135.0, -100.0])
     res = root_point(P, shuffled)
     assert "axis_wrong" in codes(res)
-    assert next(w.message for w in res.report.warnings if w.code == "axis_wrong").startswith("axis wrong")
+    msg = next(w.message for w in res.report.warnings if w.code == "axis_wrong")
+    assert msg.startswith("axis wrong")
 
 
 def test_root_point_names_the_bad_point_and_suggests_the_next_position():
@@ -264,7 +265,8 @@ def test_linear_unit_truth_within_95_bounds_and_error_named(error):
         tu = lu.touch_mark(RAIL_MARK, RAIL_VALUES, SIGMA_MM, rng)
         res = linear_unit(tu.points_mm, tu.axis_values, nominal_direction=lu.nominal_in_base)
         ex = res.report.extras
-        inside_d += angle_deg(ex["travel_direction"], lu.travel_in_base) <= res.report.angle_bound95_deg
+        err_deg = angle_deg(ex["travel_direction"], lu.travel_in_base)
+        inside_d += err_deg <= res.report.angle_bound95_deg
         inside_s += abs(ex["scale"] - lu.scale) <= ex["scale_bound95"]
         found = codes(res) & {"direction_wrong", "sign_reversed", "scale_off", "not_straight"}
         named += code in found

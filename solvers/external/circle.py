@@ -101,8 +101,8 @@ def _basis(n: FloatArray) -> tuple[FloatArray, FloatArray]:
     return u, cross(n, u)
 
 
-def _residuals(P: FloatArray, c: FloatArray, n: FloatArray, r: float) -> tuple[FloatArray, FloatArray,
-                                                                                     FloatArray]:
+def _residuals(P: FloatArray, c: FloatArray, n: FloatArray,
+               r: float) -> tuple[FloatArray, FloatArray, FloatArray]:
     """(h, ρ, w): heights over the plane, distances from the axis, in-plane vectors (N, 3)."""
     d = P - c
     h = d @ n

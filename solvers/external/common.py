@@ -78,7 +78,8 @@ def axis_values(value: object, loc: str, count: int, points_loc: str) -> FloatAr
     return v
 
 
-def check_rotary_steps(values_deg: FloatArray, loc: str, min_step_deg: float = MIN_AXIS_STEP_DEG) -> None:
+def check_rotary_steps(values_deg: FloatArray, loc: str,
+                       min_step_deg: float = MIN_AXIS_STEP_DEG) -> None:
     """Refuse two rotary axis positions less than ``min_step_deg`` apart (modulo 360 deg).
 
     Examples
@@ -95,21 +96,22 @@ point 1 (0.00 deg): teach the axis positions at least 10 deg apart
         d = np.minimum(d, 360.0 - d)
         i = int(np.argmin(d))
         if d[i] < min_step_deg:
-            raise CalibrationError((loc, j), f"axis value {v[j]:.2f} deg is {d[i]:.2f} deg from point "
-                                   f"{i + 1} ({v[i]:.2f} deg): teach the axis positions at least "
-                                   f"{min_step_deg:g} deg apart")
+            raise CalibrationError((loc, j), f"axis value {v[j]:.2f} deg is {d[i]:.2f} deg from "
+                                   f"point {i + 1} ({v[i]:.2f} deg): teach the axis positions at "
+                                   f"least {min_step_deg:g} deg apart")
 
 
-def check_linear_steps(values_mm: FloatArray, loc: str, min_step_mm: float = MIN_RAIL_STEP_MM) -> None:
+def check_linear_steps(values_mm: FloatArray, loc: str,
+                       min_step_mm: float = MIN_RAIL_STEP_MM) -> None:
     """Refuse two rail positions less than ``min_step_mm`` apart."""
     v = np.asarray(values_mm, dtype=float)
     for j in range(1, len(v)):
         d = np.abs(v[:j] - v[j])
         i = int(np.argmin(d))
         if d[i] < min_step_mm:
-            raise CalibrationError((loc, j), f"rail position {v[j]:.2f} mm is {d[i]:.2f} mm from point "
-                                   f"{i + 1} ({v[i]:.2f} mm): teach the rail positions at least "
-                                   f"{min_step_mm:g} mm apart")
+            raise CalibrationError((loc, j), f"rail position {v[j]:.2f} mm is {d[i]:.2f} mm from "
+                                   f"point {i + 1} ({v[i]:.2f} mm): teach the rail positions at "
+                                   f"least {min_step_mm:g} mm apart")
 
 
 def off_line_rms_mm(points_mm: FloatArray) -> float:

@@ -116,9 +116,10 @@ def linear_unit(points_mm: object, axis_values_mm: object, *,
     k = float(np.linalg.norm(b))
     moved = k * (e.max() - e.min())
     if moved < MIN_OFF_LINE_MM:
-        raise CalibrationError(("points_mm",), f"the mark moved only {moved:.2f} mm in the robot base "
-                               f"while the rail travelled {e.max() - e.min():.0f} mm: did the robot "
-                               "ride on the carriage, and was the mark fixed in the cell?")
+        raise CalibrationError(("points_mm",), f"the mark moved only {moved:.2f} mm in the robot "
+                               f"base while the rail travelled {e.max() - e.min():.0f} mm: did "
+                               "the robot ride on the carriage, and was the mark fixed in the "
+                               "cell?")
     a = p_bar - b * e_bar
     E = P - (a + np.outer(e, b))
     d = -b / k
@@ -144,16 +145,18 @@ def linear_unit(points_mm: object, axis_values_mm: object, *,
                                 f"{dir_err:.3f} deg (±{angle_b:.3f}) off the nominal direction "
                                 "({:.3f}, {:.3f}, {:.3f}) in the robot base: set the travel "
                                 "direction (z of the linear unit's transformation) to "
-                                "({:.4f}, {:.4f}, {:.4f})".format(*nominal, *d), ("nominal_direction",)))
+                                "({:.4f}, {:.4f}, {:.4f})".format(*nominal, *d),
+                                ("nominal_direction",)))
     if abs(k - 1.0) > max(scale_b, SCALE_TOL):
         warnings.append(Finding("scale_off", f"scale off: the carriage moves {k:.5f} mm per mm "
                                 f"counted (±{scale_b:.5f}); correct the encoder scaling",
                                 ("axis_values_mm",)))
     if n >= 4 and perp_rms > max(STRAIGHTNESS_TOL_MM, 3.0 * touch_sigma_mm):
         worst = int(np.argmax(perp_norm))
-        warnings.append(Finding("not_straight", f"not straight: the mark scatters {perp_rms:.2f} mm "
-                                f"RMS across the travel (point {worst + 1}: {straightness:.2f} mm); "
-                                "check the rail's alignment or the mark's fixing", ("points_mm", worst)))
+        warnings.append(Finding("not_straight", f"not straight: the mark scatters {perp_rms:.2f} "
+                                f"mm RMS across the travel (point {worst + 1}: "
+                                f"{straightness:.2f} mm); check the rail's alignment or the "
+                                "mark's fixing", ("points_mm", worst)))
     if n == 3:
         warnings.append(Finding("few_points", "3 positions leave 3 redundant numbers: teach 4 or "
                                 "more to check the straightness", ("points_mm",), "info"))

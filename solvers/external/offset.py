@@ -7,10 +7,13 @@ kinematic, so the controller can follow it when the axis turns.
 
 from __future__ import annotations
 
+from dataclasses import replace
+
 import numpy as np
 from scipy.spatial.transform import Rotation
 
-from solvers.base import (BASE_3POINT_LOCS, POSE_PARAMETERS, as_transform, frame_from_three_points,
+from solvers.base import (BASE_3POINT_LOCS, POSE_PARAMETERS, as_transform, base_numeric,
+                          frame_from_three_points,
                           three_point_report)
 from solvers.external.common import TOUCH_SIGMA_MM, rz, scale95
 from solvers.frames import Pose
@@ -163,10 +166,7 @@ def offset_numeric(pose: Pose | object) -> CalibrationResult:
     >>> offset_numeric(Pose(0, 100, 50, 0, 0, 0)).frame[:3, 3].tolist()
     [0.0, 100.0, 50.0]
     """
-    v = as_array(pose.as_array() if isinstance(pose, Pose) else pose, "pose", (6,))
-    p = Pose.from_array(v)
-    return CalibrationResult("ext.offset_numeric", p.as_matrix(),
-                             QualityReport(residuals_mm=np.zeros(0), extras={"pose": p}))
+    return replace(base_numeric(pose), method="ext.offset_numeric")
 
 
 __all__ = ["offset", "offset_numeric"]

@@ -34,8 +34,8 @@ ANGLE_TOL_DEG = 0.2
 _STEPS = np.r_[1e-3, 1e-3, 1e-3, 1e-4, 1e-4, 1e-4]
 
 
-def _axes_geometry(T_tilt: FloatArray, T_turn: FloatArray, tau_deg: float) -> tuple[FloatArray, float,
-                                                                                        float]:
+def _axes_geometry(T_tilt: FloatArray, T_turn: FloatArray,
+                   tau_deg: float) -> tuple[FloatArray, float, float]:
     """(T_tiltflange_turnroot, signed common normal mm, angle between the axes deg).
 
     The signed length ``o·m`` with ``m = unit(e_z × w)`` is smooth where the axes intersect
@@ -63,7 +63,8 @@ def _geometry_covariance(T_tilt: FloatArray, T_turn: FloatArray, tau_deg: float,
         for sgn in (1.0, -1.0):
             d = np.zeros(12)
             d[i] = sgn * h[i]
-            Xd, Ld, ad = _axes_geometry(_perturbed(T_tilt, d[:6]), _perturbed(T_turn, d[6:]), tau_deg)
+            Xd, Ld, ad = _axes_geometry(_perturbed(T_tilt, d[:6]), _perturbed(T_turn, d[6:]),
+                                        tau_deg)
             rows.append([Ld, ad, *(Xd[:3, 3] - X[:3, 3])])
             Xs.append(X[:3, :3].T @ Xd[:3, :3])
     rot = Rotation.from_matrix(np.array(Xs)).as_rotvec(degrees=True)
@@ -126,9 +127,9 @@ def positioner_2axis(tilt_points_mm: object, tilt_values_deg: object, turn_point
         ``method="ext.positioner_2axis"``, ``frame = T_tiltflange_turnroot`` (the turn axis'
         root frame as ``root_point`` defines it, in the tilt flange frame); ``covariance`` is
         its own. ``extras``: ``common_normal_frame`` (that frame moved along the turn axis to
-        the foot of the common normal, x along the normal), ``tilt`` and ``turn`` (the two ``root_point`` results, turn in the
-        robot base), ``tilt_root`` (``T_base_tiltroot``), ``common_normal_mm`` and
-        ``common_normal_bound95_mm``, ``axes_angle_deg`` and ``axes_angle_bound95_deg``.
+        the foot of the common normal, x along the normal), ``tilt`` and ``turn`` (the two
+        ``root_point`` results, turn in the robot base), ``tilt_root`` (``T_base_tiltroot``),
+        ``common_normal_mm`` and ``common_normal_bound95_mm``, ``axes_angle_deg`` and ``axes_angle_bound95_deg``.
 
     Raises
     ------
@@ -150,7 +151,8 @@ def positioner_2axis(tilt_points_mm: object, tilt_values_deg: object, turn_point
     >>> tilt = pos.mark([150, 0, 0], [-60, -20, 20, 60], [0, 0, 0, 0])
     >>> turn = pos.mark([150, 0, 0], [0, 0, 0, 0], [0, 90, 180, 270])
     >>> res = positioner_2axis(tilt, [-60, -20, 20, 60], turn, [0, 90, 180, 270], 0.0)
-    >>> round(res.report.extras["common_normal_mm"], 6), round(res.report.extras["axes_angle_deg"], 6)
+    >>> ex = res.report.extras
+    >>> round(ex["common_normal_mm"], 6), round(ex["axes_angle_deg"], 6)
     (3.0, 90.0)
     """
     tau = float(as_array(turn_taught_at_tilt_deg, "turn_taught_at_tilt_deg", ()))

@@ -14,15 +14,17 @@ The result is the *root frame* ``T_base_root`` of the rotary axis, in the robot 
 
 from __future__ import annotations
 
+from dataclasses import replace
+
 import numpy as np
 
-from solvers.base import POSE_PARAMETERS
+from solvers.base import POSE_PARAMETERS, base_numeric
 from solvers.errors import CalibrationError
 from solvers.external.circle import (CircleFit, _basis, circle_jacobian, fit_circle_3d,
                                      fit_circle_algebraic)
-from solvers.external.common import (MIN_OFF_LINE_MM, MIN_RADIUS_MM, SIGMA_FLOOR_MM, TOUCH_SIGMA_MM, axis_values,
-                                     check_rotary_steps, cross, off_line_rms_mm, outlier_critical,
-                                     scale95,
+from solvers.external.common import (MIN_OFF_LINE_MM, MIN_RADIUS_MM, SIGMA_FLOOR_MM,
+                                     TOUCH_SIGMA_MM, axis_values, check_rotary_steps, cross,
+                                     off_line_rms_mm, outlier_critical, scale95,
                                      sigma_from_residuals, unit, wrap_rad)
 from solvers.frames import Pose
 from solvers.report import BadPoint, CalibrationResult, Finding, QualityReport
@@ -59,15 +61,15 @@ def _check_points(P: FloatArray, theta_deg: FloatArray, loc: str) -> None:
     chord = float(np.linalg.norm(P[i] - P[j]))
     r_est = chord / (2.0 * np.sin(np.radians(max(d[i, j], 1e-9)) / 2.0))
     if r_est < MIN_RADIUS_MM:
-        raise CalibrationError((loc,), f"the mark is about {r_est:.1f} mm from the axis (points {i + 1} "
-                               f"and {j + 1} are {chord:.2f} mm apart although the axis turned "
-                               f"{d[i, j]:.1f} deg): a mark on the axis does not move; put it at "
-                               f"least {MIN_RADIUS_MM:g} mm off the axis")
+        raise CalibrationError((loc,), f"the mark is about {r_est:.1f} mm from the axis (points "
+                               f"{i + 1} and {j + 1} are {chord:.2f} mm apart although the axis "
+                               f"turned {d[i, j]:.1f} deg): a mark on the axis does not move; put "
+                               f"it at least {MIN_RADIUS_MM:g} mm off the axis")
     off = off_line_rms_mm(P)
     if off < MIN_OFF_LINE_MM:
-        raise CalibrationError((loc,), f"all {len(P)} touch-ups lie on one line (RMS {off:.2f} mm off "
-                               "it): a turning axis moves the mark on a circle; was a linear axis "
-                               "moved, or is the mark touched on the axis line?")
+        raise CalibrationError((loc,), f"all {len(P)} touch-ups lie on one line (RMS {off:.2f} "
+                               "mm off it): a turning axis moves the mark on a circle; was a "
+                               "linear axis moved, or is the mark touched on the axis line?")
 
 
 def angle_check(fit: CircleFit, P: FloatArray, theta_deg: FloatArray, sigma_mm: float) -> dict:
@@ -75,7 +77,7 @@ def angle_check(fit: CircleFit, P: FloatArray, theta_deg: FloatArray, sigma_mm: 
 
     The sign s = ±1 is the one for which ``φ_k - s θ_k`` scatters least (circular spread);
     the unwrapped angles ``φ_k' = s θ_k + φ0 + wrap(φ_k - s θ_k - φ0)`` then give the scale
-    by the regression ``φ_k' = a + ŝ θ_k`` (σ(ŝ) = (σ/r) / sqrt(Σ(θ-θ̄)²)). The frame uses
+    by the regression ``φ_k' = a + ŝ θ_k``, ``σ(ŝ) = (σ/r) / sqrt(Σ(θ-θ̄)²)``. The frame uses
     ``φ0 = circmean(φ_k - s θ_k)`` (unit scale); its residuals are ``residuals_deg``.
     """
     th = np.radians(theta_deg)
@@ -100,16 +102,18 @@ def angle_check(fit: CircleFit, P: FloatArray, theta_deg: FloatArray, sigma_mm: 
                 np.sqrt(np.mean(lin**2)))), "sigma_phi": sigma_phi, "phi": phi}
 
 
-def _next_axis_value(fit: CircleFit, phi0: float, sign: int, limits_deg: FloatArray) -> tuple[float, float]:
+def _next_axis_value(fit: CircleFit, phi0: float, sign: int,
+                     limits_deg: FloatArray) -> tuple[float, float]:
     """The axis value whose touch-up shrinks the centre and axis uncertainty most.
 
     Candidate points on the fitted circle every 5 deg within the limits; the one minimising
-    ``tr C_c + r² tr C_tilt`` of ``(JᵀJ + J_newᵀ J_new)⁻¹`` (unit sigma). Returns (value, the
-    new centre bound factor sqrt(λ_max C_c))."""
+    ``tr C_c + r² tr C_tilt`` of ``(JᵀJ + J_newᵀ J_new)⁻¹`` (unit sigma). Returns (value,
+    the new centre bound factor sqrt(λ_max C_c))."""
     JtJ = fit.jacobian.T @ fit.jacobian
     cand = np.arange(limits_deg[0], limits_deg[1] + 1e-9, 5.0)
     phis = phi0 + sign * np.radians(cand)
-    pts = fit.centre_mm + fit.radius_mm * (np.cos(phis)[:, None] * fit.u + np.sin(phis)[:, None] * fit.v)
+    pts = fit.centre_mm + fit.radius_mm * (np.cos(phis)[:, None] * fit.u
+                                           + np.sin(phis)[:, None] * fit.v)
     Jn = circle_jacobian(pts, fit.centre_mm, fit.normal, fit.u, fit.v).reshape(len(cand), 2, 6)
     M = JtJ[None] + np.einsum("kai,kaj->kij", Jn, Jn)
     C = np.linalg.inv(M)
@@ -118,10 +122,11 @@ def _next_axis_value(fit: CircleFit, phi0: float, sign: int, limits_deg: FloatAr
     return float(cand[k]), float(np.sqrt(np.linalg.eigvalsh(C[k, :3, :3]).max()))
 
 
-def root_point(points_mm: object, axis_values_deg: object, *, nominal_axis: object = (0.0, 0.0, 1.0),
-               nominal_root_mm: object = None, touch_sigma_mm: float = TOUCH_SIGMA_MM,
-               axis_limits_deg: object = (-180.0, 180.0),
-               points_loc: str = "points_mm", values_loc: str = "axis_values_deg") -> CalibrationResult:
+def root_point(points_mm: object, axis_values_deg: object, *,
+               nominal_axis: object = (0.0, 0.0, 1.0), nominal_root_mm: object = None,
+               touch_sigma_mm: float = TOUCH_SIGMA_MM, axis_limits_deg: object = (-180.0, 180.0),
+               points_loc: str = "points_mm",
+               values_loc: str = "axis_values_deg") -> CalibrationResult:
     """Root point: one mark on the turning flange touched at N >= 3 (better >= 4) axis values.
 
     1. Plane by SVD of the centred points: its normal is the axis direction [3]_.
@@ -242,8 +247,9 @@ def root_point(points_mm: object, axis_values_deg: object, *, nominal_axis: obje
     axis_wrong = n_pts >= 3 and lin_rms > lin_allow
     if axis_wrong:
         warnings.append(Finding("axis_wrong", f"axis wrong: the mark's angles do not follow the "
-                                f"recorded axis values (RMS {lin_rms:.2f} deg off the best straight "
-                                f"line): was another axis moved or recorded?", (values_loc,)))
+                                f"recorded axis values (RMS {lin_rms:.2f} deg off the best "
+                                f"straight line): was another axis moved or recorded?",
+                                (values_loc,)))
     if s < 0 and not axis_wrong:
         warnings.append(Finding("sign_reversed", "sign reversed: increasing axis values turn the "
                                 "flange clockwise about the nominal axis ({:.2f}, {:.2f}, {:.2f}); "
@@ -252,17 +258,17 @@ def root_point(points_mm: object, axis_values_deg: object, *, nominal_axis: obje
     scale_dev = abs(abs(ang["slope"]) - 1.0)
     if not axis_wrong and scale_dev > max(scale_b, SCALE_TOL):
         warnings.append(Finding("scale_off", f"scale off: the flange turns {abs(ang['slope']):.4f} "
-                                f"deg per deg of axis value (±{scale_b:.4f}); check the gear ratio "
-                                f"in the machine data", (values_loc,)))
+                                f"deg per deg of axis value (±{scale_b:.4f}); check the gear "
+                                f"ratio in the machine data", (values_loc,)))
     tilt_deg = float(np.degrees(np.arccos(np.clip(fit.normal @ nominal, -1.0, 1.0))))
     if tilt_deg > max(axis_b, TILT_TOL_DEG):
-        warnings.append(Finding("axis_tilted", f"axis tilted: the fitted axis is {tilt_deg:.3f} deg "
-                                f"(±{axis_b:.3f}) off the nominal axis ({nominal[0]:.2f}, "
+        warnings.append(Finding("axis_tilted", f"axis tilted: the fitted axis is {tilt_deg:.3f} "
+                                f"deg (±{axis_b:.3f}) off the nominal axis ({nominal[0]:.2f}, "
                                 f"{nominal[1]:.2f}, {nominal[2]:.2f})", ("nominal_axis",)))
     root_offset = root_offset_b = None
     if q_root is not None:
-        # distance of q from the line (c, n): e = (I - n nᵀ)(q - c), d|e| = -ê·δc - (n·w) ê·δn
-        # with δn = -a v + b u
+        # distance of q from the line (c, n): e = (I - n nᵀ)(q - c),
+        # d|e| = -ê·δc - (n·w) ê·δn with δn = -a v + b u
         w_q = q_root - fit.centre_mm
         e_q = w_q - (w_q @ fit.normal) * fit.normal
         root_offset = float(np.linalg.norm(e_q))
@@ -272,18 +278,20 @@ def root_point(points_mm: object, axis_values_deg: object, *, nominal_axis: obje
         root_offset_b = float(np.sqrt(k_one * (j @ C6 @ j)))
         if root_offset > max(root_offset_b, ROOT_TOL_MM):
             warnings.append(Finding("root_offset", f"root offset: the fitted axis runs "
-                                    f"{root_offset:.2f} mm (±{root_offset_b:.2f}) from the nominal "
-                                    f"root point", ("nominal_root_mm",)))
+                                    f"{root_offset:.2f} mm (±{root_offset_b:.2f}) from the "
+                                    f"nominal root point", ("nominal_root_mm",)))
 
     phi = ang["phi"]
     span = _covered_arc_deg(phi)
     if span < SHORT_ARC_DEG:
-        warnings.append(Finding("short_arc", f"the touch-ups cover only {span:.0f} deg of the circle: "
-                                f"{SHORT_ARC_DEG:g} deg or more keeps centre and axis steadier",
+        warnings.append(Finding("short_arc", f"the touch-ups cover only {span:.0f} deg of the "
+                                f"circle: {SHORT_ARC_DEG:g} deg or more keeps centre and axis "
+                                "steadier",
                                 (values_loc,)))
     if n_pts == 3:
-        warnings.append(Finding("few_points", "3 points fix a circle exactly: the residuals are zero "
-                                "and the bounds assume touch_sigma_mm; teach 4 or more to check them",
+        warnings.append(Finding("few_points", "3 points fix a circle exactly: the residuals are "
+                                "zero and the bounds assume touch_sigma_mm; teach 4 or more to "
+                                "check them",
                                 (points_loc,), "info"))
 
     phi_u = s * np.radians(theta) + phi0 + ang["residuals_rad"]
@@ -293,8 +301,8 @@ def root_point(points_mm: object, axis_values_deg: object, *, nominal_axis: obje
         warnings.append(Finding("bad_point", bad.message(), (points_loc, bad.index)))
         guidance = f"re-teach point {bad.index + 1}"
     else:
-        guidance = (f"touch the mark at axis value {next_value:.0f} deg next: the centre's 95 % bound "
-                    f"would shrink from {pos_b:.3f} to about "
+        guidance = (f"touch the mark at axis value {next_value:.0f} deg next: the centre's 95 % "
+                    f"bound would shrink from {pos_b:.3f} to about "
                     f"{np.sqrt(scale95(3, dof + 2, estimated)) * sigma * next_b:.3f} mm")
 
     report = QualityReport(
@@ -312,7 +320,8 @@ def root_point(points_mm: object, axis_values_deg: object, *, nominal_axis: obje
                 "radius_mm": r, "radius_bound95_mm": radius_b, "scale": ang["slope"],
                 "scale_bound95": scale_b, "sign": s, "axis_tilt_deg": tilt_deg,
                 "root_offset_mm": root_offset, "root_offset_bound95_mm": root_offset_b,
-                "angles_deg": np.degrees(phi), "angle_residuals_deg": np.degrees(ang["residuals_rad"]),
+                "angles_deg": np.degrees(phi),
+                "angle_residuals_deg": np.degrees(ang["residuals_rad"]),
                 "covered_arc_deg": span, "circle_covariance": C6, "dof": dof,
                 "next_axis_value_deg": next_value},
     )
@@ -327,7 +336,8 @@ def circle_bad_point(points_mm: FloatArray, phi_rad: FloatArray, theta_rad: Floa
     and the line ``φ = a + ŝ θ`` through their unwrapped angles ``phi_rad``; they predict
     ``e_k = [h_k, ρ_k - r, r (φ_k - a - ŝ θ_k)]`` (mm: off the plane, off the radius, along the
     circle) with covariance ``σ² S``, ``S = diag(I + J_k (JᵀJ)⁻¹ J_kᵀ, 1 + 1/(N-1) +
-    (θ_k - θ̄)² / Σ(θ - θ̄)²)`` and ``σ = max(σ̂_others, touch_sigma_mm)``. Point k is bad when
+    (θ_k - θ̄)² / Σ(θ - θ̄)²)`` and ``σ = max(σ̂_others, touch_sigma_mm)``. Point k is bad
+    when
     ``e_kᵀ S⁻¹ e_k / σ²`` exceeds the ``1 - false_alarm / N`` quantile of ``3 F(3, dof)``
     (``chi2(3)`` when σ is the nominal one): the externally studentised residual with a
     Bonferroni correction over the N points [1]_. The worst such point is named.
@@ -362,7 +372,8 @@ def circle_bad_point(points_mm: FloatArray, phi_rad: FloatArray, theta_rad: Floa
         Jk = circle_jacobian(P[k:k + 1], c, nrm, u, v)
         S = np.zeros((3, 3))
         S[:2, :2] = np.eye(2) + Jk @ np.linalg.solve(J.T @ J, Jk.T)
-        S[2, 2] = 1.0 + 1.0 / (n - 1) + (theta_rad[k] - th.mean()) ** 2 / ((th - th.mean()) ** 2).sum()
+        dth = th - th.mean()
+        S[2, 2] = 1.0 + 1.0 / (n - 1) + (theta_rad[k] - th.mean()) ** 2 / (dth @ dth)
         dk = P[k] - c
         hk = float(dk @ nrm)
         e = np.array([hk, np.linalg.norm(dk - hk * nrm) - r,
@@ -409,10 +420,7 @@ def root_point_numeric(pose: Pose | object) -> CalibrationResult:
     >>> res.frame[:3, 3].tolist(), res.method
     ([1500.0, 0.0, 300.0], 'ext.root_point_numeric')
     """
-    v = as_array(pose.as_array() if isinstance(pose, Pose) else pose, "pose", (6,))
-    p = Pose.from_array(v)
-    return CalibrationResult("ext.root_point_numeric", p.as_matrix(),
-                             QualityReport(residuals_mm=np.zeros(0), extras={"pose": p}))
+    return replace(base_numeric(pose), method="ext.root_point_numeric")
 
 
 __all__ = ["root_point", "root_point_numeric", "angle_check"]
