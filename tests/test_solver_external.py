@@ -245,6 +245,30 @@ def test_offset_stays_put_when_the_table_turns():
     assert np.allclose(frames[0], truth, atol=1e-9) and np.allclose(frames[1], truth, atol=1e-9)
 
 
+def test_offset_with_a_reversed_axis_follows_the_calibrated_root():
+    """A table whose axis counts the other way: the root point's z takes the sign, so the
+    offset taught at one value predicts the base at another."""
+    table = make_turntable(sign=-1, tilt_deg=0.5)
+    root = root_point(table.mark(MARK, VALUES), VALUES).frame
+    base_on_flange = np.eye(4)
+    base_on_flange[:3, 3] = [60.0, -90.0, 15.0]
+
+    def touched(theta):  # the base as it really sits at axis value theta
+        W = table.flange([theta])[0] @ base_on_flange
+        return W, (W[:3, 3], W[:3, 3] + 200 * W[:3, 0], W[:3, 3] + 150 * W[:3, 1])
+
+    res = offset(*touched(-40.0)[1], -40.0, root)
+    W_at_70, _ = touched(70.0)
+    assert np.allclose(root @ rz([70.0])[0] @ res.frame, W_at_70, atol=1e-8)
+
+
+def test_simulated_flange_poses_put_the_tool_on_the_touched_points():
+    tu = make_turntable().touch_mark(MARK, VALUES, SIGMA_MM, np.random.default_rng(2))
+    tcp = tu.flange_poses @ tu.tool[:, 3]
+    assert np.allclose(tcp[:, :3], tu.points_mm, atol=1e-9)
+    assert np.allclose(tu.axis_values, VALUES)
+
+
 # ----------------------------------------------------------------------------- linear unit
 
 RAIL_ERRORS = {
