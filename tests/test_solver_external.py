@@ -307,6 +307,8 @@ def test_linear_unit_travel_is_z_of_its_frame_and_a_bent_rail_is_not_straight():
     P = lu.mark_in_base(RAIL_MARK, RAIL_VALUES)
     res = linear_unit(P, RAIL_VALUES)
     assert np.allclose(res.frame[:3, 2], lu.travel_in_base, atol=1e-12)
+    base_on_carriage = res.report.extras["base_on_carriage"]  # T_rail_base
+    assert np.allclose(base_on_carriage[:3, :3] @ lu.travel_in_base, [0, 0, 1], atol=1e-12)
     assert res.report.extras["scale"] == pytest.approx(1.0, abs=1e-12)
     P[2] += [0.0, 0.8, 0.0]  # the middle of the rail sags sideways
     res = linear_unit(P, RAIL_VALUES)

@@ -80,7 +80,8 @@ def linear_unit(points_mm: object, axis_values_mm: object, *,
         ``method="ext.linear_unit"``, ``frame = T_base_rail``; ``angle_bound95_deg`` of the
         direction (2 dof); ``extras``: ``travel_direction``, ``scale``, ``scale_bound95``,
         ``direction_error_deg``, ``straightness_mm`` (largest perpendicular deviation),
-        ``mark_at_zero_mm`` (a), ``residual_vectors_mm``.
+        ``mark_at_zero_mm`` (a), ``residual_vectors_mm``, ``base_on_carriage``
+        (``T_rail_base``, the robot base in the rail frame: its tilt against the travel).
 
     Raises
     ------
@@ -178,7 +179,7 @@ def linear_unit(points_mm: object, axis_values_mm: object, *,
         extras={"travel_direction": d, "scale": k, "scale_bound95": scale_b,
                 "direction_error_deg": dir_err, "straightness_mm": straightness,
                 "straightness_rms_mm": perp_rms, "mark_at_zero_mm": a, "residual_vectors_mm": E,
-                "dof": dof},
+                "base_on_carriage": np.linalg.inv(T), "dof": dof},
     )
     return CalibrationResult("ext.linear_unit", T, report)
 
