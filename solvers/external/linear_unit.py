@@ -94,7 +94,8 @@ def linear_unit(points_mm: object, axis_values_mm: object, *,
     ----------
     .. [1] KUKA System Software 8.x, Operating and programming instructions for system
        integrators, "Calibrating a linear unit".
-    .. [2] ABB Robot Web Services, "Calibration of mechanical units: SingleTrack".
+    .. [2] ABB, Application manual - Robot Web Services, 3HAC050973-001, "Calibration for
+       SingleTrack" (``POST /rw/motionsystem/mechunits/{mechunit}/calib``).
     .. [3] N. R. Draper, H. Smith, "Applied Regression Analysis", 3rd ed., Wiley, 1998, ch. 1
        (straight-line regression, variance of the slope).
 

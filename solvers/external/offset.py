@@ -1,6 +1,7 @@
 """External kinematics > Offset: a base on the moving flange of a turntable or positioner.
 
-KUKA *Calibrate > External kinematics > Offset* [1]_; ABB ``BaseFrameMoving`` alike: a work
+KUKA *Calibrate > External kinematics > Offset* [1]_; ABB's ``BaseFrameMoving`` calibration
+(Robot Web Services, 3HAC050973-001, "Calibration for BaseFrameMoving") alike: a work
 base that moves with the external axis is stored in the flange frame of the external
 kinematic, so the controller can follow it when the axis turns.
 """

@@ -184,7 +184,9 @@ def root_point(points_mm: object, axis_values_deg: object, *,
     ----------
     .. [1] KUKA System Software 8.x, Operating and programming instructions for system
        integrators, "Calibrating external kinematics: Root point calibration" and "Offset".
-    .. [2] ABB Robot Web Services, "Calibration of mechanical units: RobotAxisRot".
+    .. [2] ABB, Application manual - Robot Web Services, 3HAC050973-001, "Calibration for
+       RobotAxisRot" (``POST /rw/motionsystem/mechunits/{mechunit}/calib``, at least 4
+       points, each ``[x, y, z, q1, q2, q3, q4, axis_value]``).
     .. [3] C. M. Shakarji, J. Res. NIST 103(6):633-641, 1998.
     .. [4] I. Kåsa, IEEE Trans. Instrum. Meas. IM-25(1):8-14, 1976.
 
