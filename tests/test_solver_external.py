@@ -204,10 +204,17 @@ def test_linear_unit_refuses_close_positions_and_a_mark_that_did_not_move():
 
 # ----------------------------------------------------------------------------- offset
 
-def test_offset_truth_within_95_bounds_with_a_calibrated_root():
+OFFSET_ERRORS = {
+    "tilted axis and root offset": {"tilt_deg": 1.0, "root_offset_mm": 3.0},
+    "sign reversed": {"sign": -1},
+}
+
+
+@pytest.mark.parametrize("error", OFFSET_ERRORS)
+def test_offset_truth_within_95_bounds_with_a_calibrated_root(error):
     """The base on the table, in the flange frame: touched at θ = 35 deg with a root point
     calibrated from noisy touch-ups (its covariance carried along)."""
-    table = make_turntable(tilt_deg=1.0, root_offset_mm=3.0)
+    table = make_turntable(**OFFSET_ERRORS[error])
     truth = np.eye(4)
     truth[:3, :3] = Rotation.from_euler("z", 30, degrees=True).as_matrix()
     truth[:3, 3] = [-100.0, -60.0, 20.0]
