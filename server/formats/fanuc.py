@@ -17,7 +17,7 @@ import numpy as np
 
 from solvers.frames import Pose, fanuc_from_matrix
 
-from server.formats.model import ROBOT_HELD, FrameEntry, LoadData, check_unique_slots
+from server.formats.model import ROBOT_HELD, FrameEntry, LoadData, check_unique_slots, one_line
 
 __all__ = ["export_fanuc", "KGF_CM_S2_PER_KG_M2"]
 
@@ -25,7 +25,8 @@ KGF_CM_S2_PER_KG_M2 = 1.0 / 0.0980665  # 1 kg m^2 in kgf cm s^2
 MAX_UTOOL = 10
 MAX_UFRAME = 9
 _ROLE = {"tool": "tool", "workpiece": "workpiece held by the robot (Remote TCP: UTOOL)",
-         "base": "user frame", "fixed_tool": "fixed tool (Remote TCP: UFRAME)"}
+         "base": "user frame", "fixed_tool": "fixed tool (Remote TCP: UFRAME)",
+         "coordinated_base": "coordinated user frame of unit"}
 
 
 def _f(v: float, decimals: int = 6) -> str:
@@ -33,8 +34,8 @@ def _f(v: float, decimals: int = 6) -> str:
 
 
 def _comment(name: str) -> str:
-    """FANUC frame comments hold 16 characters; quotes are dropped."""
-    return name.replace('"', "").replace("'", "")[:16]
+    """FANUC frame comments hold 16 characters on one line; quotes are dropped."""
+    return one_line(name).replace('"', "").replace("'", "")[:16]
 
 
 def _payload(load: LoadData) -> tuple[float, np.ndarray, np.ndarray, float]:
@@ -117,7 +118,8 @@ def export_fanuc(entries: Iterable[FrameEntry], group: int = 1) -> str:
                       f"ARRAY[{group},{size}] OF POSITION"]
         for e in chosen:
             x, y, z, w, p, r = (_f(v) for v in fanuc_from_matrix(e.pose.as_matrix()))
-            lines += [f" [{group},{e.number}] =  ! {_ROLE[e.kind]} \"{_comment(e.name)}\"",
+            role = _ROLE[e.kind] + (f" {_comment(e.mech_unit or '')}" if e.mech_unit else "")
+            lines += [f" [{group},{e.number}] =  ! {role} \"{_comment(e.name)}\"",
                       f"  Group: {group}   Config: N U T, 0, 0, 0",
                       f"  X: {x:>14}   Y: {y:>14}   Z: {z:>14}",
                       f"  W: {w:>14}   P: {p:>14}   R: {r:>14}"]

@@ -15,14 +15,15 @@ from typing import Iterable
 
 from solvers.frames import ur_from_matrix
 
-from server.formats.model import FormatError, FrameEntry, LoadData
+from server.formats.model import FormatError, FrameEntry, LoadData, one_line
 
 __all__ = ["export_ur"]
 
 _TITLE = {"tool": "Tools (TCP in the tool flange)",
           "workpiece": "Workpieces held by the robot (pose in the tool flange)",
           "base": "Features (bases, pose in the robot base)",
-          "fixed_tool": "Fixed tools (TCP in the robot base)"}
+          "fixed_tool": "Fixed tools (TCP in the robot base)",
+          "coordinated_base": "Features on a mechanical unit (pose in the unit's flange)"}
 
 
 def _num(v: float, decimals: int) -> str:
@@ -41,7 +42,7 @@ def _payload(load: LoadData) -> str:
 
 
 def _comment(name: str) -> str:
-    return "".join(" " if ord(c) < 32 else c for c in name)
+    return one_line(name).replace('"', "'")
 
 
 def export_ur(entries: Iterable[FrameEntry]) -> str:
@@ -81,7 +82,7 @@ def export_ur(entries: Iterable[FrameEntry]) -> str:
         seen[(e.kind, e.number)] = i
     lines = ["# pendant: Universal Robots TCP and feature data (docs/formats.md)",
              "# p[x, y, z, rx, ry, rz]: metres, rotation vector in radians"]
-    for kind in ("tool", "workpiece", "base", "fixed_tool"):
+    for kind in ("tool", "workpiece", "base", "fixed_tool", "coordinated_base"):
         chosen = sorted((e for e in entries if e.kind == kind), key=lambda e: e.number)
         if not chosen:
             continue
