@@ -28,7 +28,7 @@ SlotName = Annotated[str, Field(max_length=NAME_CHARS),
 TableName = Literal["tool", "base"]
 Vec3 = Annotated[list[Mm], Field(min_length=3, max_length=3)]
 ExportFormat = Literal["kuka", "abb", "fanuc", "ur", "json"]
-ImportFormat = Literal["kuka", "abb", "json"]
+ImportFormat = Literal["kuka", "abb", "fanuc", "ur", "json"]
 
 
 class In(BaseModel):

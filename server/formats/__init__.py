@@ -4,8 +4,10 @@ Pure functions (text in, dataclasses out; no database, no web):
 
 - :func:`export_kuka` / :func:`read_kuka`: KUKA KR C4 ``$config.dat`` (TOOL_DATA, BASE_DATA ...);
 - :func:`export_abb` / :func:`read_abb`: ABB RAPID module with ``tooldata`` / ``wobjdata``;
-- :func:`export_fanuc`: FANUC UTOOL / UFRAME table and ``$MNUTOOL`` / ``$MNUFRAME`` listing;
-- :func:`export_ur`: Universal Robots URScript with ``set_tcp`` / ``set_payload`` and features.
+- :func:`export_fanuc` / :func:`read_fanuc`: FANUC UTOOL / UFRAME table and ``$MNUTOOL`` /
+  ``$MNUFRAME`` listing;
+- :func:`export_ur` / :func:`read_ur`: Universal Robots URScript with ``set_tcp`` /
+  ``set_payload`` and features.
 
 See docs/formats.md for the mapping of entry kinds onto each controller.
 """
@@ -13,7 +15,7 @@ See docs/formats.md for the mapping of entry kinds onto each controller.
 from typing import Callable, Iterable, Literal
 
 from server.formats.abb import export_abb, import_abb, read_abb
-from server.formats.fanuc import export_fanuc
+from server.formats.fanuc import export_fanuc, read_fanuc
 from server.formats.kuka import export_kuka, import_kuka, read_kuka
 from server.formats.model import (
     FRAME_KINDS,
@@ -26,7 +28,7 @@ from server.formats.model import (
     Skipped,
     canonical_order,
 )
-from server.formats.ur import export_ur
+from server.formats.ur import export_ur, read_ur
 
 ControllerFormat = Literal["kuka", "abb", "fanuc", "ur"]
 
@@ -40,9 +42,13 @@ PATCHERS: dict[str, Callable[[Iterable[FrameEntry], str], str]] = {
     "abb": lambda entries, text: export_abb(entries, template=text),
 }
 #: format -> reader of a whole file (text in, ParsedFile out).
-READERS: dict[str, Callable[[str], ParsedFile]] = {"kuka": read_kuka, "abb": read_abb}
+READERS: dict[str, Callable[[str], ParsedFile]] = {
+    "kuka": read_kuka, "abb": read_abb, "fanuc": read_fanuc, "ur": read_ur,
+}
 #: format -> reader (text in, entries out in canonical_order).
-IMPORTERS: dict[str, Callable[[str], list[FrameEntry]]] = {"kuka": import_kuka, "abb": import_abb}
+IMPORTERS: dict[str, Callable[[str], list[FrameEntry]]] = {
+    fmt: (lambda text, read=read: read(text).entries) for fmt, read in READERS.items()
+}
 #: the file name a controller expects (or a sensible one), for a download.
 FILE_NAMES: dict[str, str] = {
     "kuka": "$config.dat", "abb": "CalibData.mod", "fanuc": "frames.txt", "ur": "frames.script",
@@ -52,5 +58,5 @@ __all__ = [
     "EXPORTERS", "FILE_NAMES", "FRAME_KINDS", "IMPORTERS", "LOADED", "PATCHERS", "READERS",
     "ControllerFormat", "FormatError", "FrameEntry", "FrameKind", "LoadData", "ParsedFile",
     "Skipped", "canonical_order", "export_abb", "import_abb", "read_abb", "export_fanuc",
-    "export_kuka", "import_kuka", "read_kuka", "export_ur",
+    "export_kuka", "import_kuka", "read_kuka", "export_ur", "read_fanuc", "read_ur",
 ]

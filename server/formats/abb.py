@@ -702,6 +702,7 @@ def _patch(template: str, entries: list[FrameEntry]) -> str:
         return template
     edits: list[tuple[int, int, str]] = []
     taken = {d.name.upper() for d in decls}
+    untagged_removed = {k[0] for k, (f, _) in old.items() if k not in new and f.decl.tag is None}
     for key, (f, was) in old.items():
         e = new.get(key)
         if e == was:
@@ -727,7 +728,8 @@ def _patch(template: str, entries: list[FrameEntry]) -> str:
                 text_new = _leaf_text(tok, want)
                 if text_new != tok.text:
                     edits.append((tok.start, tok.end, text_new))
-        if (was.name, was.kind) != (e.name, e.kind) or d.tag is None and was.name != d.name:
+        if (was.name, was.kind) != (e.name, e.kind) or d.tag is None and (
+                was.name != d.name or key[0] in untagged_removed):
             tag = f'! pendant: {e.kind} {e.number} "{_tag_name(e.name)}"'
             if d.tag:
                 s0 = _offset_of_line(text, d.tag[3])
@@ -750,6 +752,15 @@ def _patch(template: str, entries: list[FrameEntry]) -> str:
                 after = _line_end(text, d.end - 1)
                 edits.append((after, after, f"{indent}PERS loaddata {d.name}_load:="
                                             f"{_load(e.load)};  ! use with GripLoad\n"))
+    # numbers of untagged declarations follow the file order: once one of a family is gone,
+    # the later untagged ones of that family get their number written in a tag
+    for key, (f, was) in old.items():
+        if key[0] in untagged_removed and f.decl.tag is None and new.get(key) == was:
+            d = f.decl
+            s0 = _line_start(text, d.start)
+            lead = text[s0:d.start] if not text[s0:d.start].strip() else "  "
+            edits.append((s0, s0, f'{lead}! pendant: {was.kind} {was.number} '
+                                  f'"{_tag_name(was.name)}"\n'))
     added = [e for k, e in sorted(new.items()) if k not in old]
     if added:
         at = _line_start(text, endmodule)
