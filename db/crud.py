@@ -13,13 +13,14 @@ from typing import Any
 from sqlalchemy import select
 from sqlalchemy.orm import Session
 
-from db.models import (BASE_SLOTS, TOOL_SLOTS, CalibSession, Controller, EntryHistory, FrameEntry,
-                       StoredDocument, TaughtPoint, utcnow)
+from db.models import (BASE_SLOTS, TOOL_SLOTS, CalibSession, Controller, ControllerFile,
+                       EntryHistory, FrameEntry, StoredDocument, TaughtPoint, utcnow)
 
 SLOTS = {"tool": TOOL_SLOTS, "base": BASE_SLOTS}
 MAX_ID = 2**63 - 1  # SQLite INTEGER: a larger id cannot be a row (and would overflow the driver)
 DEFAULT_KIND = {"tool": "tool", "base": "base"}
-KINDS_OF_TABLE = {"tool": ("tool", "workpiece"), "base": ("base", "fixed_tool")}
+KINDS_OF_TABLE = {"tool": ("tool", "workpiece"),
+                  "base": ("base", "fixed_tool", "coordinated_base")}
 
 
 class NotFound(LookupError):
@@ -118,7 +119,8 @@ def list_entries(db: Session, controller_id: int, table: str | None = None,
 
 ENTRY_FIELDS = ("name", "kind", "x_mm", "y_mm", "z_mm", "a_deg", "b_deg", "c_deg", "mass_kg",
                 "com_x_mm", "com_y_mm", "com_z_mm", "inertia_x_kgm2", "inertia_y_kgm2",
-                "inertia_z_kgm2", "method", "session_id", "error_max_mm", "error_rms_mm",
+                "inertia_z_kgm2", "inertia_a_deg", "inertia_b_deg", "inertia_c_deg", "mech_unit",
+                "method", "session_id", "error_max_mm", "error_rms_mm",
                 "updated_at")
 
 
@@ -175,6 +177,24 @@ def restore_entry(db: Session, e: FrameEntry, history_id: int) -> EntryHistory:
                        f"no history entry {history_id} for {e.entry_table} {e.number}")
     values = {f: h.before[f] for f in ENTRY_FIELDS if f in h.before and f != "updated_at"}
     return change_entry(db, e, values, reason="restore", session_id=h.session_id)
+
+
+# ------------------------------------------------------------------------ controller files
+
+def get_controller_file(db: Session, controller_id: int, fmt: str) -> ControllerFile | None:
+    """The file last imported in ``fmt`` (kept to patch values into on export), if any."""
+    return db.scalar(select(ControllerFile).where(ControllerFile.controller_id == controller_id,
+                                                  ControllerFile.format == fmt))
+
+
+def store_controller_file(db: Session, controller_id: int, fmt: str, text: str) -> None:
+    """Keep ``text`` as the controller's ``fmt`` file (replacing an earlier one)."""
+    row = get_controller_file(db, controller_id, fmt)
+    if row is None:
+        db.add(ControllerFile(controller_id=controller_id, format=fmt, text=text))
+    else:
+        row.text, row.imported_at = text, utcnow()
+    db.flush()
 
 
 # ------------------------------------------------------------------------------- sessions

@@ -9,7 +9,8 @@ from __future__ import annotations
 from datetime import datetime, timezone
 from typing import Any
 
-from sqlalchemy import JSON, DateTime, ForeignKey, MetaData, String, TypeDecorator, UniqueConstraint
+from sqlalchemy import (JSON, DateTime, ForeignKey, MetaData, String, Text, TypeDecorator,
+                        UniqueConstraint)
 from sqlalchemy.orm import DeclarativeBase, Mapped, mapped_column, relationship
 
 NAMING_CONVENTION = {
@@ -111,7 +112,7 @@ class FrameEntry(PoseColumns, Base):
     entry_table: Mapped[str] = mapped_column(String(8))  # 'tool' | 'base'
     number: Mapped[int]  # 1..16 tools, 1..32 bases, as on the pendant
     name: Mapped[str] = mapped_column(String(64), default="")
-    kind: Mapped[str] = mapped_column(String(16))  # tool | workpiece | base | fixed_tool
+    kind: Mapped[str] = mapped_column(String(16))  # tool|workpiece|base|fixed_tool|coordinated_base
     mass_kg: Mapped[float | None]
     com_x_mm: Mapped[float | None]
     com_y_mm: Mapped[float | None]
@@ -119,6 +120,12 @@ class FrameEntry(PoseColumns, Base):
     inertia_x_kgm2: Mapped[float | None]
     inertia_y_kgm2: Mapped[float | None]
     inertia_z_kgm2: Mapped[float | None]
+    # revision 0003_files: KUKA CM A, B, C (ABB aom) of the principal inertia axes, and the
+    # mechanical unit that moves a coordinated_base (ABB ufmec, KUKA MACHINE_FRAME_DAT PARENT)
+    inertia_a_deg: Mapped[float | None]
+    inertia_b_deg: Mapped[float | None]
+    inertia_c_deg: Mapped[float | None]
+    mech_unit: Mapped[str | None] = mapped_column(String(32))
     method: Mapped[str | None] = mapped_column(String(32))  # provenance: which menu wrote it
     session_id: Mapped[int | None] = mapped_column(_session_fk("SET NULL"))
     error_max_mm: Mapped[float | None]
@@ -223,3 +230,20 @@ class StoredDocument(Base):
     collection: Mapped[str] = mapped_column(String(16), index=True)
     doc: Mapped[dict[str, Any]]
     created_at: Mapped[datetime] = mapped_column(default=utcnow)
+
+
+class ControllerFile(Base):
+    """The controller file last imported in a format, kept as sent (revision 0003_files).
+
+    Export in that format patches the changed values into this text (docs/formats.md), so
+    everything else in the file goes back onto the controller unchanged.
+    """
+
+    __tablename__ = "controller_file"
+    __table_args__ = (UniqueConstraint("controller_id", "format"),)
+
+    id: Mapped[int] = mapped_column(primary_key=True)
+    controller_id: Mapped[int] = mapped_column(_controller_fk(), index=True)
+    format: Mapped[str] = mapped_column(String(8))  # kuka | abb | fanuc | ur
+    text: Mapped[str] = mapped_column(Text)
+    imported_at: Mapped[datetime] = mapped_column(default=utcnow)

@@ -4,9 +4,9 @@
 that :func:`db.crud.restore_backup` can store as they are, or raises
 :class:`~solvers.errors.CalibrationError` naming the field, e.g.
 ``("text", "sessions", 0, "points", 2, "pose")``. Nothing that a later read, compute, export or
-restore cannot handle gets into the DB: unknown fields, NaN and Infinity, numbers out of range,
-an unknown method or kind, a slot number the table does not have, a session result without
-its report.
+restore cannot handle gets into the DB: unknown fields, NaN and Infinity, numbers out of range
+(slot values: server/bounds.py, the same bounds as the API and the file import), an unknown
+method or kind, a slot number the table does not have, a session result without its report.
 """
 
 from __future__ import annotations
@@ -19,13 +19,14 @@ from pydantic import BaseModel, ConfigDict, Field, ValidationError, field_valida
 
 from db.crud import MAX_ID, SLOTS, KINDS_OF_TABLE
 from server.methods import METHODS
-from server.schemas import (Deg, EntryKind, MethodName, Mm, ReportOut, SessionParamsIn,
+from server.bounds import MECH_UNIT_CHARS, Deg, Kg, Kgm2, Mm
+from server.schemas import (EntryKind, MethodName, ReportOut, SessionParamsIn, SlotName,
                             TableName)
 from solvers.errors import CalibrationError
 
 FORMAT = "pendant-backup/1"
 RowId = Annotated[int, Field(ge=1, le=MAX_ID)]
-Amount = Annotated[float, Field(ge=-1e6, le=1e6)]  # kg, kg m^2, mm of an error
+Amount = Annotated[float, Field(ge=-1e6, le=1e6)]  # mm of an error
 
 
 class _Doc(BaseModel):
@@ -54,7 +55,7 @@ def _checked(model: type[BaseModel], value: dict[str, Any]) -> BaseModel:
 class SnapshotIn(_Doc):
     """A slot's values (the history's before/after; an entry without table and number)."""
 
-    name: str = Field(max_length=64)
+    name: SlotName
     kind: EntryKind
     x_mm: Mm
     y_mm: Mm
@@ -62,13 +63,17 @@ class SnapshotIn(_Doc):
     a_deg: Deg
     b_deg: Deg
     c_deg: Deg
-    mass_kg: float | None = Field(None, ge=0.0, le=1e4)
+    mass_kg: Kg | None = None
     com_x_mm: Mm | None = None
     com_y_mm: Mm | None = None
     com_z_mm: Mm | None = None
-    inertia_x_kgm2: Amount | None = None
-    inertia_y_kgm2: Amount | None = None
-    inertia_z_kgm2: Amount | None = None
+    inertia_x_kgm2: Kgm2 | None = None
+    inertia_y_kgm2: Kgm2 | None = None
+    inertia_z_kgm2: Kgm2 | None = None
+    inertia_a_deg: Deg | None = None
+    inertia_b_deg: Deg | None = None
+    inertia_c_deg: Deg | None = None
+    mech_unit: str | None = Field(None, min_length=1, max_length=MECH_UNIT_CHARS)
     method: str | None = Field(None, max_length=32)
     session_id: RowId | None = None
     error_max_mm: Amount | None = None

@@ -3,6 +3,7 @@
     pendant serve [--host 127.0.0.1] [--port 8000] [--db URL]
     pendant calibrate METHOD FILE [--robot KEY] [--tcp X,Y,Z] [--json]
     pendant export CONTROLLER --format kuka|abb|fanuc|ur|json [--db URL]
+    pendant import FILE --controller NAME [--format kuka|abb|fanuc|ur] [--dry-run] [--db URL]
 
 ``calibrate`` reads taught poses from a JSON or CSV file (format in docs/api.md, "pendant
 calibrate") and prints the report; it needs no service and no DB.
@@ -175,8 +176,60 @@ def build_parser() -> argparse.ArgumentParser:
     e.add_argument("--format", choices=["kuka", "abb", "fanuc", "ur", "json"], default="kuka")
     e.add_argument("--db", help="database URL")
 
+    i = sub.add_parser("import", help="read a controller file into a controller's tables "
+                                      "(--dry-run: show what would change)")
+    i.add_argument("file", type=Path)
+    i.add_argument("--controller", required=True, help="controller name (or id)")
+    i.add_argument("--format", choices=["kuka", "abb", "fanuc", "ur"],
+                   help="default from the file name: .dat kuka, .mod/.modx/.sys abb, "
+                        ".txt/.ls fanuc, .script ur")
+    i.add_argument("--dry-run", action="store_true", help="write nothing")
+    i.add_argument("--db", help="database URL")
+
     add_analysis_commands(sub)
     return p
+
+
+IMPORT_SUFFIXES = {".dat": "kuka", ".mod": "abb", ".modx": "abb", ".sys": "abb", ".txt": "fanuc",
+                   ".ls": "fanuc", ".script": "ur"}
+
+
+def import_file(args: argparse.Namespace) -> int:
+    """``pendant import``: the same checks and write path as POST .../import."""
+    from db import crud
+    from server.app import create_app
+    from server.controller_files import apply_import, parse_file
+
+    fmt = args.format or IMPORT_SUFFIXES.get(args.file.suffix.lower())
+    if fmt is None:
+        raise CalibrationError(("--format",), f"cannot tell the format of {args.file.name}; "
+                               "give --format kuka|abb|fanuc|ur")
+    raw = args.file.read_bytes()
+    try:
+        text = raw.decode("utf-8")
+    except UnicodeDecodeError:
+        text = raw.decode("cp1252")  # KSS and RobotWare write ANSI files on Windows
+    app = create_app(_settings(args.db))
+    with app.state.sessionmaker() as db:
+        controller = crud.find_controller(db, args.controller)
+        result = apply_import(db, controller, fmt, text, parse_file(fmt, text), args.dry_run)
+        if not args.dry_run:
+            db.commit()
+    for c in result.slots:
+        if not c.changed:
+            continue
+        after = c.after or {"name": "(unused)", "kind": ""}
+        before = c.before or {"name": "(unused)", "kind": ""}
+        what = f"  kind {c.kind_change}" if c.kind_change else ""
+        print(f"{c.table} {c.number:>2}: {before['name']!r} -> {after['name']!r} "
+              f"({after['kind'] or 'emptied'}){what}")
+    for k in result.skipped:
+        print(f"skipped line {k.line}: {k.field}: {k.reason}")
+    changed = sum(c.changed for c in result.slots)
+    verb = "would change" if args.dry_run else "changed"
+    print(f"{args.file.name}: {changed} slot(s) {verb}, {len(result.skipped)} declaration(s) "
+          f"skipped{' (dry run: nothing written)' if args.dry_run else ''}")
+    return 0
 
 
 def _settings(db: str | None):  # noqa: ANN202
@@ -214,6 +267,8 @@ def main(argv: Sequence[str] | None = None) -> int:
                 controller = crud.find_controller(db, args.controller)
                 sys.stdout.write(export_text(db, controller.id, args.format))
             return 0
+        if args.command == "import":
+            return import_file(args)
         return int(args.func(args) or 0) if hasattr(args, "func") else 2
     except CalibrationError as err:
         print(f"pendant: {'.'.join(str(x) for x in err.loc)}: {err.reason}", file=sys.stderr)
@@ -223,6 +278,10 @@ def main(argv: Sequence[str] | None = None) -> int:
         return 2
     except OSError as err:
         print(f"pendant: {err}", file=sys.stderr)
+        return 2
+    except UnicodeDecodeError as err:
+        print(f"pendant: {args.file}: not UTF-8 text ({err.reason} at byte {err.start})",
+              file=sys.stderr)
         return 2
 
 

@@ -10,26 +10,25 @@ from datetime import datetime
 from typing import Annotated, Any, Literal
 
 import numpy as np
-from pydantic import BaseModel, ConfigDict, Field, model_validator
+from pydantic import AfterValidator, BaseModel, ConfigDict, Field, model_validator
 
+from server.bounds import MAX_MM, MECH_UNIT_CHARS, NAME_CHARS, Deg, Kg, Kgm2, Mm, check_name
 from server.methods import METHODS
 from solvers.frames import Pose
 from solvers.report import CalibrationResult
 
-# Magnitudes no cell has: beyond them a number is a typo or the wrong unit (and the kinematics
-# would overflow to inf/NaN), so the request is refused naming the field.
-MAX_MM = 1e6  # 1 km
-MAX_DEG = 1e4
-Mm = Annotated[float, Field(ge=-MAX_MM, le=MAX_MM)]
-Deg = Annotated[float, Field(ge=-MAX_DEG, le=MAX_DEG)]
+# Magnitudes no cell has (server/bounds.py, the same on every path): beyond them a number is a
+# typo or the wrong unit, so the request is refused naming the field.
 Physical = Annotated[float, Field(ge=-1e3, le=1e3)]  # an imperfection of the emulated arm
 
 MethodName = Literal[tuple(METHODS)]  # type: ignore[valid-type]
-EntryKind = Literal["tool", "workpiece", "base", "fixed_tool"]
+EntryKind = Literal["tool", "workpiece", "base", "fixed_tool", "coordinated_base"]
+SlotName = Annotated[str, Field(max_length=NAME_CHARS),
+                     AfterValidator(lambda v: check_name(v, ("name",)))]
 TableName = Literal["tool", "base"]
 Vec3 = Annotated[list[Mm], Field(min_length=3, max_length=3)]
 ExportFormat = Literal["kuka", "abb", "fanuc", "ur", "json"]
-ImportFormat = Literal["kuka", "abb", "json"]
+ImportFormat = Literal["kuka", "abb", "fanuc", "ur", "json"]
 
 
 class In(BaseModel):
@@ -226,15 +225,17 @@ class ClockOut(Out):
 # ------------------------------------------------------------------------------------ tables
 
 class LoadIn(In):
-    mass_kg: float = Field(ge=0.0, le=1e4)
+    mass_kg: Kg
     com_mm: Vec3 = [0.0, 0.0, 0.0]
-    inertia_kgm2: Vec3 = [0.0, 0.0, 0.0]
+    inertia_kgm2: Annotated[list[Kgm2], Field(min_length=3, max_length=3)] = [0.0, 0.0, 0.0]
+    inertia_axes_deg: Annotated[list[Deg], Field(min_length=3, max_length=3)] = [0.0, 0.0, 0.0]
 
 
 class LoadOut(Out):
     mass_kg: float
     com_mm: list[float]
     inertia_kgm2: list[float]
+    inertia_axes_deg: list[float] = [0.0, 0.0, 0.0]
 
 
 class ProvenanceOut(Out):
@@ -248,10 +249,12 @@ class ProvenanceOut(Out):
 class EntryIn(In):
     """Edit a slot by hand (numeric input without a session). Omitted fields stay."""
 
-    name: str | None = Field(None, max_length=64)
+    name: SlotName | None = None
     kind: EntryKind | None = None
     pose: PoseIn | None = None
     load: LoadIn | None = None
+    mech_unit: str | None = Field(None, min_length=1, max_length=MECH_UNIT_CHARS,
+                                  description="coordinated_base: the mechanical unit moving it")
 
 
 class EntryOut(Out):
@@ -261,6 +264,7 @@ class EntryOut(Out):
     kind: EntryKind
     pose: PoseOut
     load: LoadOut | None
+    mech_unit: str | None = None
     provenance: ProvenanceOut
 
 
@@ -437,12 +441,36 @@ class RunCycleOut(Out):
 class ImportIn(In):
     format: ImportFormat
     text: str = Field(min_length=1, max_length=5_000_000)
+    dry_run: bool = Field(False, description="say what would change; write nothing")
+
+
+class SlotChangeOut(Out):
+    """One slot a controller file names: before -> after (None = unused)."""
+
+    table: TableName
+    number: int
+    line: int | None = Field(description="where the file gives the slot")
+    before: dict[str, Any] | None
+    after: dict[str, Any] | None
+    kind_change: str | None = Field(description='"tool -> workpiece" when the kind changes')
+    changed: bool
+
+
+class SkippedOut(Out):
+    """A declaration the import left out, with its line and why."""
+
+    line: int
+    field: str
+    reason: str
 
 
 class ImportOut(Out):
     format: str
     entries: int
     history: int = 0
+    dry_run: bool = False
+    slots: list[SlotChangeOut] = []
+    skipped: list[SkippedOut] = []
 
 
 # -------------------------------------------------------------------------------------- util

@@ -29,6 +29,7 @@ from server.formats import (
     export_ur,
     import_abb,
     import_kuka,
+    read_kuka,
 )
 from server.formats.abb import rapid_name
 from solvers.errors import CalibrationError
@@ -128,10 +129,10 @@ def test_kuka_export_writes_slots_as_the_controller_does():
     text = export_kuka(ALL)
     assert line_of(text, "TOOL_DATA[1]=") == "TOOL_DATA[1]={X 0.0,Y 0.0,Z 180.0,A 0.0,B 0.0,C 0.0}"
     assert line_of(text, "TOOL_NAME[1,]") == 'TOOL_NAME[1,]="pointer"'
-    assert line_of(text, "TOOL_TYPE[1]") == "TOOL_TYPE[1]=#TCP"
+    assert line_of(text, "TOOL_TYPE[1]") == "TOOL_TYPE[1]=#BASE"  # conventional: robot-held tool
     assert line_of(text, "LOAD_DATA[1]=") == \
         "LOAD_DATA[1]={M 2.5,CM {X 0.0,Y 0.0,Z 80.0,A 0.0,B 0.0,C 0.0},J {X 0.01,Y 0.01,Z 0.005}}"
-    assert line_of(text, "TOOL_TYPE[2]") == "TOOL_TYPE[2]=#BASE"  # robot-held workpiece
+    assert line_of(text, "TOOL_TYPE[2]") == "TOOL_TYPE[2]=#TCP"  # external TCP: held workpiece
     assert line_of(text, "BASE_TYPE[1]") == "BASE_TYPE[1]=#BASE"
     assert line_of(text, "BASE_TYPE[4]") == "BASE_TYPE[4]=#TCP"  # fixed tool = external TCP
     assert line_of(text, "BASE_DATA[4]=") == "BASE_DATA[4]={X 800.0,Y 500.0,Z 900.0,A 0.0,B 180.0,C 0.0}"
@@ -163,23 +164,28 @@ def test_kuka_export_keeps_every_digit_and_cleans_names():
 
 def test_kuka_reads_any_spacing_case_comments_and_crlf():
     text = ("&ACCESS RVP\r\n&REL 3\r\nDEFDAT $config PUBLIC\r\n;FOLD tools\r\n"
-            "decl frame tool_data[4]\r\n"
-            "  tool_data[2] = { x 12.5 , y -3.25,Z 3.1e2 ,a 0, b 0.0 ,c -45.0 } ; re-taught\r\n"
-            'Tool_Name[2,] = "drill; 6mm"   ; name with a semicolon\r\n'
-            "tool_type[2]=#tcp\r\n"
-            "load_data[2]={m 1.5 , cm {x 0,y 0,z 55,a 0,b 0,c 0}, j {x 0.002,y 0.002,z 0.001}}\r\n"
-            "$BASE_DATA[7]={X 1,Y 2,Z 3,A 4,B 5,C 6}\r\n"
-            ";ENDFOLD\r\nENDDAT\r\n")
+            "decl frame tool_data[1]\r\n"
+            "  tool_data[1] = { x 12.5 , y -3.25,Z 3.1e2 ,a 0, b 0.0 ,c -45.0 } ; re-taught\r\n"
+            'Tool_Name[1,] = "drill; 6mm"   ; name with a semicolon\r\n'
+            "tool_type[1]=#base\r\n"
+            "load_data[1]={m 1.5 , cm {x 0,y 0,z 55,a 0,b 0,c 0}, j {x 0.002,y 0.002,z 0.001}}\r\n"
+            "$BASE_DATA[1]={X 1,Y 2,Z 3,A 4,B 5,C 6}\r\nBASE_NAME[1,]=\" \"\r\n"
+            "BASE_TYPE[1]=#NONE\r\n;ENDFOLD\r\nENDDAT\r\n")
     tool, base = import_kuka(text)
-    assert tool == FrameEntry(2, "drill; 6mm", "tool", Pose(12.5, -3.25, 310, 0, 0, -45),
+    assert tool == FrameEntry(1, "drill; 6mm", "tool", Pose(12.5, -3.25, 310, 0, 0, -45),
                               LoadData(1.5, (0, 0, 55), (0.002, 0.002, 0.001)))
-    assert base == FrameEntry(7, "", "base", Pose(1, 2, 3, 4, 5, 6))
+    assert base == FrameEntry(1, "", "base", Pose(1, 2, 3, 4, 5, 6))
 
 
 def test_kuka_skips_unused_slots_but_keeps_a_tool_at_the_flange():
-    text = ("TOOL_DATA[1]={X 0.0,Y 0.0,Z 0.0,A 0.0,B 0.0,C 0.0}\nTOOL_NAME[1,]=\"spare\"\n"
-            "TOOL_TYPE[1]=#NONE\nTOOL_DATA[2]={X 0.0,Y 0.0,Z 0.0,A 0.0,B 0.0,C 0.0}\nTOOL_TYPE[2]=#TCP\n")
-    assert import_kuka(text) == [FrameEntry(2, "", "tool", Pose())]
+    unused = "{M -1,CM {X 0,Y 0,Z 0,A 0,B 0,C 0},J {X 0,Y 0,Z 0}}"
+    text = ("DEFDAT $CONFIG\nTOOL_DATA[1]={X 0.0,Y 0.0,Z 0.0,A 0.0,B 0.0,C 0.0}\n"
+            "TOOL_NAME[1,]=\"spare\"\nTOOL_TYPE[1]=#NONE\nLOAD_DATA[1]=" + unused + "\n"
+            "TOOL_DATA[2]={X 0.0,Y 0.0,Z 0.0,A 0.0,B 0.0,C 0.0}\nTOOL_NAME[2,]=\" \"\n"
+            "TOOL_TYPE[2]=#BASE\nLOAD_DATA[2]=" + unused + "\nENDDAT\n")
+    parsed = read_kuka(text)
+    assert parsed.entries == [FrameEntry(2, "", "tool", Pose())]
+    assert parsed.unused == [("robot_held", 1)]  # listed, so that an import empties it
 
 
 @pytest.mark.parametrize("line, field, reason", [
@@ -192,17 +198,22 @@ def test_kuka_skips_unused_slots_but_keeps_a_tool_at_the_flange():
     ("TOOL_NAME[3,]=gripper", "TOOL_NAME[3,]", "quoted name"),
     ("TOOL_NAME[3]=\"gripper\"", "TOOL_NAME[3,]", "TOOL_NAME[n,]"),
     ("TOOL_DATA[0]={X 0,Y 0,Z 0,A 0,B 0,C 0}", "TOOL_DATA[0]", "start at 1"),
-    ("TOOL_DATA[17]={X 0,Y 0,Z 0,A 0,B 0,C 0}", "TOOL_DATA[17]", "beyond DECL TOOL_DATA[16] on line 1"),
-    ("TOOL_DATA[2]={X 0,Y 0,Z 9,A 0,B 0,C 0}", "TOOL_DATA[2]", "assigned twice (first on line 2)"),
+    ("TOOL_DATA[17]={X 0,Y 0,Z 0,A 0,B 0,C 0}", "TOOL_DATA[17]", "beyond DECL TOOL_DATA[16] on line 2"),
+    ("TOOL_DATA[2]={X 0,Y 0,Z 9,A 0,B 0,C 0}", "TOOL_DATA[2]", "assigned twice (first on line 3)"),
+    ("TOOL_DATA[3]={X 2.0E+07,Y 0,Z 0,A 0,B 0,C 0}", "TOOL_DATA[3].X", "-1e+06..1e+06 mm"),
+    ("TOOL_DATA[3]={X 0,Y 0,Z 0,A 9E+99,B 0,C 0}", "TOOL_DATA[3].A", "-10000..10000 deg"),
+    ("LOAD_DATA[3]={M 2E4,CM {X 0,Y 0,Z 0,A 0,B 0,C 0},J {X 0,Y 0,Z 0}}", "LOAD_DATA[3].M", "0..10000 kg"),
+    ("TOOL_NAME[3,]=\"" + "x" * 70 + "\"", "TOOL_NAME[3,]", "at most 24"),
     ("LOAD_DATA[3]={M -3.0,CM {X 0,Y 0,Z 0,A 0,B 0,C 0},J {X 0,Y 0,Z 0}}", "LOAD_DATA[3].M", "-1"),
     ("LOAD_DATA[3]={M 3.0,CM {X 0,Y 0,Z 0,A 0,B 0,C 0}}", "LOAD_DATA[3]", "missing J"),
     ("LOAD_DATA[3]={M 3.0,CM {X 0,Y 0,Z 0},J {X 0,Y 0,Z 0}}", "LOAD_DATA[3].CM", "missing A"),
 ])
 def test_kuka_malformed_line_is_named(line, field, reason):
-    text = "DECL FRAME TOOL_DATA[16]\nTOOL_DATA[2]={X 0,Y 0,Z 1,A 0,B 0,C 0}\n; comment\n" + line + "\n"
+    text = ("DEFDAT $CONFIG\nDECL FRAME TOOL_DATA[16]\nTOOL_DATA[2]={X 0,Y 0,Z 1,A 0,B 0,C 0}\n"
+            "DECL CHAR TOOL_NAME[16,24]\n" + line + "\nENDDAT\n")
     with pytest.raises(FormatError) as err:
         import_kuka(text)
-    assert err.value.loc == ("file", "line 4", field)
+    assert err.value.loc == ("file", "line 5", field)
     assert reason in err.value.reason
 
 
@@ -295,7 +306,7 @@ def test_abb_reads_a_real_module():
     assert by["tTorch"].pose.b == pytest.approx(67.5, abs=1e-4)  # 6-digit quaternion in the file
     assert by["tTorch"].load.inertia_axes_deg[1] == pytest.approx(22.5, abs=1e-4)
     assert by["wPanel"].load.mass_kg == 129.297  # from loaddata wPanel_load
-    assert by["tGlueNozzle"].load is None
+    assert by["tGlueNozzle"].load == LoadData(2.5, (0, 0, 120))  # the stationary tool's tload
     # work object pose = uframe * oframe
     fixture = by["wFixtureA"].pose
     assert (fixture.x, fixture.y) == pytest.approx((885.94 + 20, -145.63 - 10), abs=1e-4)
@@ -323,14 +334,10 @@ def test_abb_round_trip_at_gimbal_lock_and_the_180_deg_seam(pose):
      3, "t1.tframe.rot", "[num, num, num, num]"),
     ("PERS tooldata t1:=[TRUE,[[0,0,100],[2,0,0,0]],[1,[0,0,0],[1,0,0,0],0,0,0]];",
      3, "t1.tframe.rot", "length 2"),
-    ("PERS tooldata t1:=[TRUE,[[0,0,nLen],[1,0,0,0]],load1];", 3, "t1", "only literal values"),
     ("PERS tooldata t1:=[TRUE,\n  [[0,0,100],[1,0,0,0]]\n  [1,[0,0,0],[1,0,0,0],0,0,0]];", 5, "t1",
      "expected ',' or ']'"),
     ("PERS tooldata t1:=[TRUE,[[0,0,100],[1,0,0,0]],[1,[0,0,0],[1,0,0,0],0,0,0]]", 3, "t1", "no ';'"),
-    ('PERS wobjdata w1:=[FALSE,FALSE,"STN_1",[[0,0,0],[1,0,0,0]],[[0,0,250],[1,0,0,0]]];',
-     3, "w1.ufprog", "STN_1"),
     ("PERS wobjdata w1:=[FALSE,TRUE,[[0,0,0],[1,0,0,0]],[[0,0,250],[1,0,0,0]]];", 3, "w1", "robhold,ufprog"),
-    ("PERS tooldata tools{2}:=[[TRUE]];", 3, "tools", "arrays"),
     ('! pendant: base 1 "t"\n  PERS tooldata t1:=[TRUE,[[0,0,1],[1,0,0,0]],[1,[0,0,0],[1,0,0,0],0,0,0]];',
      3, "t1", "comment says base"),
 ])

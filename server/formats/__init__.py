@@ -2,28 +2,33 @@
 
 Pure functions (text in, dataclasses out; no database, no web):
 
-- :func:`export_kuka` / :func:`import_kuka`: KUKA KR C4 ``$config.dat`` (TOOL_DATA, BASE_DATA ...);
-- :func:`export_abb` / :func:`import_abb`: ABB RAPID module with ``tooldata`` / ``wobjdata``;
-- :func:`export_fanuc`: FANUC UTOOL / UFRAME table and ``$MNUTOOL`` / ``$MNUFRAME`` listing;
-- :func:`export_ur`: Universal Robots URScript with ``set_tcp`` / ``set_payload`` and features.
+- :func:`export_kuka` / :func:`read_kuka`: KUKA KR C4 ``$config.dat`` (TOOL_DATA, BASE_DATA ...);
+- :func:`export_abb` / :func:`read_abb`: ABB RAPID module with ``tooldata`` / ``wobjdata``;
+- :func:`export_fanuc` / :func:`read_fanuc`: FANUC UTOOL / UFRAME table and ``$MNUTOOL`` /
+  ``$MNUFRAME`` listing;
+- :func:`export_ur` / :func:`read_ur`: Universal Robots URScript with ``set_tcp`` /
+  ``set_payload`` and features.
 
 See docs/formats.md for the mapping of entry kinds onto each controller.
 """
 
 from typing import Callable, Iterable, Literal
 
-from server.formats.abb import export_abb, import_abb
-from server.formats.fanuc import export_fanuc
-from server.formats.kuka import export_kuka, import_kuka
+from server.formats.abb import export_abb, import_abb, read_abb
+from server.formats.fanuc import export_fanuc, read_fanuc
+from server.formats.kuka import export_kuka, import_kuka, read_kuka
 from server.formats.model import (
     FRAME_KINDS,
+    LOADED,
     FormatError,
     FrameEntry,
     FrameKind,
     LoadData,
+    ParsedFile,
+    Skipped,
     canonical_order,
 )
-from server.formats.ur import export_ur
+from server.formats.ur import export_ur, read_ur
 
 ControllerFormat = Literal["kuka", "abb", "fanuc", "ur"]
 
@@ -31,15 +36,27 @@ ControllerFormat = Literal["kuka", "abb", "fanuc", "ur"]
 EXPORTERS: dict[str, Callable[[Iterable[FrameEntry]], str]] = {
     "kuka": export_kuka, "abb": export_abb, "fanuc": export_fanuc, "ur": export_ur,
 }
-#: format -> reader (text in, entries out in canonical_order); KUKA and ABB can be read.
-IMPORTERS: dict[str, Callable[[str], list[FrameEntry]]] = {"kuka": import_kuka, "abb": import_abb}
+#: format -> writer into an imported file (entries, the imported text -> patched text).
+PATCHERS: dict[str, Callable[[Iterable[FrameEntry], str], str]] = {
+    "kuka": lambda entries, text: export_kuka(entries, template=text),
+    "abb": lambda entries, text: export_abb(entries, template=text),
+}
+#: format -> reader of a whole file (text in, ParsedFile out).
+READERS: dict[str, Callable[[str], ParsedFile]] = {
+    "kuka": read_kuka, "abb": read_abb, "fanuc": read_fanuc, "ur": read_ur,
+}
+#: format -> reader (text in, entries out in canonical_order).
+IMPORTERS: dict[str, Callable[[str], list[FrameEntry]]] = {
+    fmt: (lambda text, read=read: read(text).entries) for fmt, read in READERS.items()
+}
 #: the file name a controller expects (or a sensible one), for a download.
 FILE_NAMES: dict[str, str] = {
     "kuka": "$config.dat", "abb": "CalibData.mod", "fanuc": "frames.txt", "ur": "frames.script",
 }
 
 __all__ = [
-    "EXPORTERS", "FILE_NAMES", "FRAME_KINDS", "IMPORTERS", "ControllerFormat", "FormatError",
-    "FrameEntry", "FrameKind", "LoadData", "canonical_order",
-    "export_abb", "import_abb", "export_fanuc", "export_kuka", "import_kuka", "export_ur",
+    "EXPORTERS", "FILE_NAMES", "FRAME_KINDS", "IMPORTERS", "LOADED", "PATCHERS", "READERS",
+    "ControllerFormat", "FormatError", "FrameEntry", "FrameKind", "LoadData", "ParsedFile",
+    "Skipped", "canonical_order", "export_abb", "import_abb", "read_abb", "export_fanuc",
+    "export_kuka", "import_kuka", "read_kuka", "export_ur", "read_fanuc", "read_ur",
 ]

@@ -14,7 +14,15 @@ Kinds (ABB *Technical reference manual - RAPID Instructions, Functions and Data 
 - ``fixed_tool``: tooldata, robhold FALSE (stationary tool), tframe = T_world_fixedtool;
 - ``workpiece``: wobjdata, robhold TRUE, ufprog TRUE, ufmec "", uframe = T_flange_workpiece
   (the robot holds the work object), oframe identity; its load as ``loaddata <name>_load``;
-- ``base``: wobjdata, robhold FALSE, ufprog TRUE, ufmec "", uframe = T_world_base, oframe identity.
+- ``base``: wobjdata, robhold FALSE, ufprog TRUE, ufmec "", uframe = T_world_base, oframe identity;
+- ``coordinated_base``: wobjdata, robhold FALSE, ufprog FALSE, ufmec = the mechanical unit
+  that moves it (``"STN1"``), uframe * oframe = T_unit_base (a coordinated work object);
+- ``fixed_tool`` keeps its tload: for a stationary tool it is the load the robot carries.
+
+A module must be whole (``MODULE`` ... ``ENDMODULE``). A declaration pendant cannot use (an
+array, a value that is not literal, no value) is skipped and listed, never a reason to
+refuse the rest. Given the imported text, :func:`export_abb` patches only the values that
+changed into it.
 
 ABB refuses a tool mass of 0, so a tool without a known load is written with ABB's own
 minimum load ``[0.001,[0,0,0.001],[1,0,0,0],0,0,0]`` (that of ``tool0``), and that load
@@ -27,30 +35,38 @@ from __future__ import annotations
 
 import re
 import unicodedata
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 from typing import Iterable
 
 import numpy as np
 
 from solvers.frames import Pose, abb_from_matrix, kuka_from_matrix, matrix_from_abb
 
+from server.bounds import check_name, check_value
 from server.formats.model import (
     ROBOT_HELD,
     FormatError,
     FrameEntry,
     LoadData,
+    ParsedFile,
+    Skipped,
     canonical_order,
     check_unique_slots,
+    family_of,
+    one_line,
 )
+from solvers.errors import CalibrationError
 
-__all__ = ["export_abb", "import_abb", "rapid_name", "MIN_TOOL_MASS_KG", "UNKNOWN_LOAD"]
+__all__ = ["export_abb", "import_abb", "read_abb", "rapid_name", "MIN_TOOL_MASS_KG",
+           "UNKNOWN_LOAD"]
 
 MIN_TOOL_MASS_KG = 0.001
 UNKNOWN_LOAD = "[0.001,[0,0,0.001],[1,0,0,0],0,0,0]"  # tool0's load: ABB's "nothing known"
 _UNKNOWN = (0.001, (0.0, 0.0, 0.001), (1.0, 0.0, 0.0, 0.0), 0.0, 0.0, 0.0)
 IDENT_CHARS = 32
 QUAT_NORM_TOL = 1e-3
-_PREFIX = {"tool": "tool", "fixed_tool": "stattool", "workpiece": "heldwobj", "base": "wobj"}
+_PREFIX = {"tool": "tool", "fixed_tool": "stattool", "workpiece": "heldwobj", "base": "wobj",
+           "coordinated_base": "cwobj"}
 _RESERVED = {
     w.upper() for w in (
         "ALIAS AND BACKWARD CASE CONNECT CONST DEFAULT DIV DO ELSE ELSEIF ENDFOR ENDFUNC ENDIF "
@@ -63,8 +79,8 @@ _RESERVED = {
     ).split()
 }
 _IDENT = re.compile(r"[A-Za-z][A-Za-z0-9_]*")
-_TAG = re.compile(r'^\s*!\s*pendant:\s*(tool|fixed_tool|workpiece|base)\s+(\d+)\s+"(.*)"\s*$',
-                  re.IGNORECASE)
+_TAG = re.compile(r'^\s*!\s*pendant:\s*(tool|fixed_tool|workpiece|base|coordinated_base)\s+'
+                  r'(\d+)\s+"(.*)"\s*$', re.IGNORECASE)
 
 
 # --------------------------------------------------------------------------- export
@@ -107,6 +123,14 @@ def _load(load: LoadData | None) -> str:
                            *(rapid_num(x) for x in load.inertia_kgm2)]) + "]"
 
 
+def _ident_for(e: FrameEntry, taken: set[str]) -> str:
+    limit = IDENT_CHARS - len("_load") if e.load is not None and e.kind != "tool" else IDENT_CHARS
+    name = rapid_name(e.name, e.kind, e.number, taken, limit)
+    if e.load is not None and e.kind not in ("tool", "fixed_tool"):
+        taken.add(f"{name}_load".upper())
+    return name
+
+
 def rapid_name(name: str, kind: str, number: int, taken: set[str],
                max_chars: int = IDENT_CHARS) -> str:
     """A RAPID identifier for ``name``: ASCII letters, digits and ``_``, a letter first, at most
@@ -136,11 +160,34 @@ def rapid_name(name: str, kind: str, number: int, taken: set[str],
 
 
 def _tag_name(name: str) -> str:
-    return "".join("'" if c == '"' else (" " if ord(c) < 32 else c) for c in name)
+    return one_line(name).replace('"', "'")
 
 
-def export_abb(entries: Iterable[FrameEntry], module_name: str = "CalibData") -> str:
-    """A RAPID module declaring one PERS ``tooldata`` / ``wobjdata`` per entry.
+def _string(text: str) -> str:
+    """A RAPID string literal (quotes and backslashes cannot be written: they become ')."""
+    return '"' + one_line(text).replace('"', "'").replace("\\", "/") + '"'
+
+
+def _declaration(e: FrameEntry, name: str, indent: str = "  ") -> list[str]:
+    """The tag comment and the PERS declaration(s) of one entry."""
+    out = [f'{indent}! pendant: {e.kind} {e.number} "{_tag_name(e.name)}"']
+    if e.kind in ("tool", "fixed_tool"):
+        held = "TRUE" if e.kind == "tool" else "FALSE"
+        out.append(f"{indent}PERS tooldata {name}:=[{held},{_pose(e.pose)},{_load(e.load)}];")
+        return out
+    held = "TRUE" if e.kind == "workpiece" else "FALSE"
+    prog, unit = ("FALSE", e.mech_unit or "") if e.kind == "coordinated_base" else ("TRUE", "")
+    out.append(f"{indent}PERS wobjdata {name}:=[{held},{prog},{_string(unit)},{_pose(e.pose)},"
+               "[[0,0,0],[1,0,0,0]]];")
+    if e.load is not None:
+        out.append(f"{indent}PERS loaddata {name}_load:={_load(e.load)};  ! use with GripLoad")
+    return out
+
+
+def export_abb(entries: Iterable[FrameEntry], module_name: str = "CalibData",
+               template: str | None = None) -> str:
+    """A RAPID module declaring one PERS ``tooldata`` / ``wobjdata`` per entry, or the
+    imported module (``template``) with only the changed values patched in.
 
     Orientations are quaternions scalar first (``abb_from_matrix``, q1 >= 0); numbers are
     written with the shortest exact digits, so ``import_abb`` gives back every pose to 1e-9.
@@ -151,6 +198,10 @@ def export_abb(entries: Iterable[FrameEntry], module_name: str = "CalibData") ->
     entries : iterable of FrameEntry
     module_name : str
         The RAPID module name (an identifier).
+    template : str, optional
+        The module imported before: its declarations of unchanged slots, comments, other
+        data, routines and order stay byte for byte; a changed slot's numbers are patched
+        in place (numbers whose value did not change keep their digits).
 
     Raises
     ------
@@ -169,6 +220,8 @@ def export_abb(entries: Iterable[FrameEntry], module_name: str = "CalibData") ->
     ENDMODULE
     """
     entries = list(entries)
+    if template is not None:
+        return _patch(template, entries)
     if not isinstance(module_name, str) or not _IDENT.fullmatch(module_name) \
             or len(module_name) > IDENT_CHARS or module_name.upper() in _RESERVED:
         raise FormatError(("module_name",),
@@ -183,28 +236,15 @@ def export_abb(entries: Iterable[FrameEntry], module_name: str = "CalibData") ->
         f"  ! A load of {UNKNOWN_LOAD} means the load is not known: set it before running.",
     ]
     groups = (("tool", "Tools (robot-held)"), ("fixed_tool", "Stationary tools"),
-              ("workpiece", "Work objects held by the robot"), ("base", "Work objects (bases)"))
+              ("workpiece", "Work objects held by the robot"), ("base", "Work objects (bases)"),
+              ("coordinated_base", "Work objects moved by a mechanical unit (coordinated)"))
     for kind, title in groups:
         chosen = sorted((e for e in entries if e.kind == kind), key=lambda e: e.number)
         if not chosen:
             continue
         lines += ["", f"  ! {title}"]
         for e in chosen:
-            limit = IDENT_CHARS - len("_load") if kind == "workpiece" else IDENT_CHARS
-            name = rapid_name(e.name, kind, e.number, taken, limit)
-            lines.append(f'  ! pendant: {kind} {e.number} "{_tag_name(e.name)}"')
-            if kind == "tool":
-                lines.append(f"  PERS tooldata {name}:=[TRUE,{_pose(e.pose)},{_load(e.load)}];")
-            elif kind == "fixed_tool":
-                lines.append(f"  PERS tooldata {name}:=[FALSE,{_pose(e.pose)},{UNKNOWN_LOAD}];")
-            else:
-                held = "TRUE" if kind == "workpiece" else "FALSE"
-                lines.append(f'  PERS wobjdata {name}:=[{held},TRUE,"",{_pose(e.pose)},'
-                             "[[0,0,0],[1,0,0,0]]];")
-                if e.load is not None:
-                    taken.add(f"{name}_load".upper())
-                    lines.append(f"  PERS loaddata {name}_load:={_load(e.load)};"
-                                 "  ! use with GripLoad")
+            lines += _declaration(e, _ident_for(e, taken))
     lines.append("ENDMODULE")
     return "\n".join(lines) + "\n"
 
@@ -217,6 +257,8 @@ _DECL = re.compile(
     r"\b(?:(?:LOCAL|TASK)\s+)*(PERS|CONST|VAR)\s+(tooldata|wobjdata|loaddata)\s+"
     r"([A-Za-z]\w*)\s*(\{[^}]*\})?\s*",
     re.IGNORECASE)
+_MODULE = re.compile(r"^[ \t]*MODULE\s+([A-Za-z]\w*)", re.IGNORECASE | re.MULTILINE)
+_ENDMODULE = re.compile(r"^[ \t]*ENDMODULE\b", re.IGNORECASE | re.MULTILINE)
 
 
 @dataclass
@@ -224,6 +266,12 @@ class _Tok:
     kind: str  # "[", "]", ",", "num", "str", "word", "other"
     text: str
     line: int
+    start: int = 0
+    end: int = 0
+
+
+class _NotLiteral(FormatError):
+    """A value pendant cannot evaluate (a reference, a function call): skipped, not refused."""
 
 
 @dataclass
@@ -233,6 +281,20 @@ class _Decl:
     line: int
     value: object  # nested lists of float / bool / str
     tag: tuple[str, int, str, int] | None  # kind, number, name, line of the tag
+    start: int = 0  # offset of the declaration (storage class) in the text
+    end: int = 0  # offset after its ';'
+    leaves: list[_Tok] = field(default_factory=list)  # the literal values in order
+
+
+@dataclass
+class _Found:
+    decl: _Decl
+    kind: str
+    pose: Pose
+    load: LoadData | None
+    unit: str | None = None
+    oframe: np.ndarray | None = None
+    load_decl: _Decl | None = None
 
 
 def _strip_comments(text: str) -> str:
@@ -260,11 +322,12 @@ def _tokens(text: str, start: int, line_of, decl_line: int, name: str) -> tuple[
         m = _TOKEN.match(text, pos)
         if not m:
             raise FormatError.at_line(decl_line, name, "no ';' ends this declaration")
-        kind = kinds[m.lastindex - 1]
+        k = m.lastindex
+        kind = kinds[k - 1]  # type: ignore[operator]
         pos = m.end()
-        if kind == "other" and m.group(m.lastindex) == ";":
+        if kind == "other" and m.group(k) == ";":
             return toks, pos
-        toks.append(_Tok(kind, m.group(m.lastindex), line_of(m.start(m.lastindex))))
+        toks.append(_Tok(kind, m.group(k), line_of(m.start(k)), m.start(k), m.end(k)))
 
 
 def _parse_value(toks: list[_Tok], name: str, decl_line: int) -> object:
@@ -287,6 +350,9 @@ def _parse_value(toks: list[_Tok], name: str, decl_line: int) -> object:
                 else:
                     line = toks[i].line if i < len(toks) else decl_line
                     got = toks[i].text if i < len(toks) else "';'"
+                    if i < len(toks) and toks[i].kind in ("word", "other"):
+                        raise _NotLiteral.at_line(line, name, "only literal values can be "
+                                                  f"read, got {got!r}")
                     raise FormatError.at_line(line, name, f"expected ',' or ']', got {got}")
         if t.kind == "num":
             return float(t.text), i + 1
@@ -294,18 +360,40 @@ def _parse_value(toks: list[_Tok], name: str, decl_line: int) -> object:
             return t.text[1:-1], i + 1
         if t.kind == "word" and t.text.upper() in ("TRUE", "FALSE"):
             return t.text.upper() == "TRUE", i + 1
-        raise FormatError.at_line(t.line, name, f"only literal values can be read, got {t.text!r}")
+        raise _NotLiteral.at_line(t.line, name, f"only literal values can be read, got {t.text!r}")
 
     if not toks:
         raise FormatError.at_line(decl_line, name, "no value after ':='")
     v, end = value(0)
     if end != len(toks):
+        if toks[end].kind in ("word", "other"):
+            raise _NotLiteral.at_line(toks[end].line, name, "only literal values can be read, "
+                                      f"got {toks[end].text!r} after the value")
         raise FormatError.at_line(toks[end].line, name,
                                   f"unexpected {toks[end].text!r} after the value")
     return v
 
 
-def _declarations(text: str) -> list[_Decl]:
+def _module_span(text: str, code: str) -> tuple[int, int]:
+    """Offsets of ``MODULE`` and of ``ENDMODULE``; a file cut short is refused."""
+    n_lines = text.count("\n") + (0 if text.endswith("\n") else 1)
+    m = _MODULE.search(code)
+    if not m:
+        raise FormatError.at_line(1, "MODULE", "no MODULE: a whole RAPID module is needed "
+                                  "(MODULE name ... ENDMODULE)")
+    e = _ENDMODULE.search(code, m.end())
+    if not e:
+        raise FormatError.at_line(n_lines, "ENDMODULE", f"the module ends at line {n_lines} "
+                                  "without ENDMODULE: it was cut short")
+    rest = code[e.end():].strip()
+    if rest:
+        line = code.count("\n", 0, e.end() + code[e.end():].index(rest[0])) + 1
+        raise FormatError.at_line(line, "ENDMODULE", "text after ENDMODULE")
+    return m.start(), e.start()
+
+
+def _declarations(text: str) -> tuple[list[_Decl], list[Skipped], int]:
+    """Declarations with their values, the skipped ones, and the offset of ENDMODULE."""
     lines = text.split("\n")
     starts = np.cumsum([0] + [len(s) + 1 for s in lines])
 
@@ -318,45 +406,63 @@ def _declarations(text: str) -> list[_Decl]:
         if m:
             tags[n] = (m.group(1).lower(), int(m.group(2)), m.group(3).strip(), n)
     code = _strip_comments(text)
+    begin, endmodule = _module_span(text, code)
     decls: list[_Decl] = []
-    pos, last_line = 0, 0
+    skipped: list[Skipped] = []
+    pos, last_line = begin, 0
     while True:
-        m = _DECL.search(code, pos)
+        m = _DECL.search(code, pos, endmodule)
         if not m:
-            return decls
+            return decls, skipped, endmodule
         line = line_of(m.start())
         dtype, name, array = m.group(2).lower(), m.group(3), m.group(4)
-        if array:
-            raise FormatError.at_line(line, name,
-                                      f"arrays of {dtype} are not supported; declare one per name")
         after = m.end()
+        if array:
+            end = code.find(";", after)
+            pos = after if end < 0 else end + 1
+            skipped.append(Skipped(line, name, f"an array of {dtype}: declare one per name"))
+            last_line = line
+            continue
         if code.startswith(":=", after):
             toks, pos = _tokens(code, after + 2, line_of, line, name)
-            value = _parse_value(toks, name, line)
+            try:
+                value = _parse_value(toks, name, line)
+            except _NotLiteral as err:
+                skipped.append(Skipped(err.line or line, name, err.reason))
+                last_line = line
+                continue
         elif code.startswith(";", after):
             pos = after + 1
+            skipped.append(Skipped(line, name, f"a {dtype} declared without a value"))
             last_line = line
-            continue  # declared without a value: nothing to import
+            continue
         else:
             raise FormatError.at_line(line, name, "expected ':=' or ';' after the name")
         tag = None
         if dtype != "loaddata":
             pending = [n for n in tags if last_line < n < line]
             tag = tags[max(pending)] if pending else None
-        decls.append(_Decl(dtype, name, line, value, tag))
+        leaves = [t for t in toks if t.kind in ("num", "str", "word")]
+        decls.append(_Decl(dtype, name, line, value, tag, m.start(), pos, leaves))
         last_line = line
 
 
-def _nums(v: object, n: int, line: int, field: str) -> list[float]:
+def _nums(v: object, n: int, line: int, field: str, unit: str | None = None) -> list[float]:
     if not (isinstance(v, list) and len(v) == n and all(isinstance(x, float) for x in v)):
         raise FormatError.at_line(line, field, f"expected [{', '.join(['num'] * n)}]")
+    if unit is not None:
+        for i, x in enumerate(v):
+            try:
+                check_value(x, unit, (field,))
+            except CalibrationError as err:
+                raise FormatError.at_line(line, f"{field}[{i + 1}]", err.reason) from None
     return v  # type: ignore[return-value]
 
 
 def _read_pose(v: object, line: int, field: str) -> np.ndarray:
     if not (isinstance(v, list) and len(v) == 2):
         raise FormatError.at_line(line, field, "expected [[x,y,z],[q1,q2,q3,q4]]")
-    pos = _nums(v[0], 3, line, f"{field}.trans")
+    pos = _nums(v[0], 3, line, f"{field}.trans", "mm")
     q = np.array(_nums(v[1], 4, line, f"{field}.rot"))
     norm = float(np.linalg.norm(q))
     if abs(norm - 1.0) > QUAT_NORM_TOL:
@@ -378,52 +484,30 @@ def _read_load(v: object, line: int, field: str) -> LoadData | None:
     if not (isinstance(v, list) and len(v) == 6):
         raise FormatError.at_line(line, field, f"expected {shape}")
     mass = v[0]
-    cog, aom = _nums(v[1], 3, line, f"{field}.cog"), _nums(v[2], 4, line, f"{field}.aom")
+    cog = _nums(v[1], 3, line, f"{field}.cog", "mm")
+    aom = _nums(v[2], 4, line, f"{field}.aom")
     inertia = _nums(v[3:], 3, line, f"{field}.ix")
     if not isinstance(mass, float):
         raise FormatError.at_line(line, f"{field}.mass", "expected a number")
     if (mass, tuple(cog), tuple(aom), *inertia) == _UNKNOWN:
         return None
-    if mass < 0:
-        raise FormatError.at_line(line, f"{field}.mass", f"must be >= 0, got {mass}")
-    if any(x < 0 for x in inertia):
-        raise FormatError.at_line(line, f"{field}.ix", "moments of inertia must be >= 0")
+    for fld, x, unit in ((f"{field}.mass", mass, "kg"), (f"{field}.ix", inertia[0], "kgm2"),
+                         (f"{field}.iy", inertia[1], "kgm2"), (f"{field}.iz", inertia[2], "kgm2")):
+        try:
+            check_value(x, unit, (fld,))
+        except CalibrationError as err:
+            raise FormatError.at_line(line, fld, err.reason) from None
     axes = _pose_of(_read_pose([[0.0, 0.0, 0.0], aom], line, f"{field}.aom"))
     return LoadData(mass, tuple(cog), tuple(inertia),  # type: ignore[arg-type]
                     (axes.a, axes.b, axes.c))
 
 
-def import_abb(text: str) -> list[FrameEntry]:
-    """Tools, stationary tools and work objects declared in a RAPID module.
-
-    Reads every ``PERS``/``CONST``/``VAR`` (optionally ``LOCAL``/``TASK``) ``tooldata`` and
-    ``wobjdata`` with a literal value: numbers in any notation, TRUE/FALSE, free spacing and
-    line breaks, ``!`` comments. A work object's pose is ``uframe * oframe``. A ``loaddata``
-    named ``<wobj>_load`` is the load of the robot-held work object ``<wobj>``. A stationary
-    tool's tload (the gripper load, in ABB's model) is not kept: pendant stores loads on
-    robot-held entries only. Numbers and names come from ``! pendant:`` comments when
-    present; otherwise the RAPID name is the name and numbers follow the file order.
-
-    Raises
-    ------
-    FormatError
-        ``("file", "line N", "<data name>.<field>")`` for a value of the wrong shape, a
-        non-literal value, a quaternion far from unit length, a work object moved by a
-        mechanical unit (ufprog FALSE), or two declarations tagged with one slot.
-
-    Examples
-    --------
-    >>> e = import_abb('PERS tooldata tPen:=[TRUE,[[0,0,1.2E2],[1,0,0,0]],'
-    ...                '[0.5,[0,0,40],[1,0,0,0],0,0,0]];')[0]
-    >>> e.name, e.kind, e.pose.z, e.load.mass_kg
-    ('tPen', 'tool', 120.0, 0.5)
-    """
+def _read(text: str) -> tuple[list[_Found], list[FrameEntry], list[Skipped], list[_Decl], int]:
     if not isinstance(text, str):
         raise FormatError(("file",), f"expected text, got {type(text).__name__}")
-    text = text.replace("\r\n", "\n").replace("\r", "\n")
-    decls = _declarations(text)
+    decls, skipped, endmodule = _declarations(text)
     loads = {d.name.upper(): d for d in decls if d.dtype == "loaddata"}
-    found: list[tuple[_Decl, str, Pose, LoadData | None]] = []
+    found: list[_Found] = []
     for d in decls:
         v, line, name = d.value, d.line, d.name
         if d.dtype == "tooldata":
@@ -432,56 +516,266 @@ def import_abb(text: str) -> list[FrameEntry]:
                                           "expected [robhold,[[x,y,z],[q1,q2,q3,q4]],[tload]]")
             pose = _pose_of(_read_pose(v[1], line, f"{name}.tframe"))
             load = _read_load(v[2], line, f"{name}.tload")
-            if v[0]:
-                found.append((d, "tool", pose, load))
-            else:
-                found.append((d, "fixed_tool", pose, None))
+            found.append(_Found(d, "tool" if v[0] else "fixed_tool", pose, load))
         elif d.dtype == "wobjdata":
             if not (isinstance(v, list) and len(v) == 5 and isinstance(v[0], bool)
                     and isinstance(v[1], bool) and isinstance(v[2], str)):
                 raise FormatError.at_line(line, name,
                                           'expected [robhold,ufprog,"ufmec",[uframe],[oframe]]')
-            if not v[0] and not v[1]:
-                raise FormatError.at_line(line, f"{name}.ufprog",
-                                          f'a work object moved by the mechanical unit "{v[2]}" '
-                                          "has no fixed pose; only ufprog TRUE is read")
-            T = _read_pose(v[3], line, f"{name}.uframe") @ _read_pose(v[4], line, f"{name}.oframe")
-            load = None
-            if v[0] and f"{name.upper()}_LOAD" in loads:
-                ld = loads[f"{name.upper()}_LOAD"]
-                load = _read_load(ld.value, ld.line, ld.name)
-            found.append((d, "workpiece" if v[0] else "base", _pose_of(T), load))
-    return canonical_order(_numbered(found))
+            unit = v[2].strip() or None
+            if not v[1] and (v[0] or unit is None):
+                why = ("a work object held by the robot cannot also be moved by a unit"
+                       if v[0] else "ufprog FALSE but no mechanical unit in ufmec")
+                skipped.append(Skipped(line, f"{name}.ufprog", why))
+                continue
+            if v[1]:
+                unit = None
+            oframe = _read_pose(v[4], line, f"{name}.oframe")
+            T = _read_pose(v[3], line, f"{name}.uframe") @ oframe
+            load, load_decl = None, loads.get(f"{name.upper()}_LOAD")
+            if v[0] and load_decl is not None:
+                load = _read_load(load_decl.value, load_decl.line, load_decl.name)
+            kind = "workpiece" if v[0] else ("coordinated_base" if unit else "base")
+            found.append(_Found(d, kind, _pose_of(T), load, unit, oframe,
+                                load_decl if v[0] else None))
+    return found, _numbered(found), skipped, decls, endmodule
 
 
-def _numbered(found: list[tuple[_Decl, str, Pose, LoadData | None]]) -> list[FrameEntry]:
-    used: dict[tuple[bool, int], int] = {}
+def read_abb(text: str) -> ParsedFile:
+    """Tools, stationary tools and work objects declared in a whole RAPID module.
+
+    Reads every ``PERS``/``CONST``/``VAR`` (optionally ``LOCAL``/``TASK``) ``tooldata`` and
+    ``wobjdata`` with a literal value between ``MODULE`` and ``ENDMODULE``: numbers in any
+    notation, TRUE/FALSE, free spacing and line breaks, ``!`` comments. A work object's pose
+    is ``uframe * oframe``; one moved by a mechanical unit (``ufprog FALSE``, ``ufmec
+    "STN1"``) is a ``coordinated_base`` of that unit. A ``loaddata`` named ``<wobj>_load``
+    is the load of the robot-held work object ``<wobj>``; a stationary tool keeps its tload.
+    Numbers and names come from ``! pendant:`` comments when present; otherwise the RAPID
+    name is the name and numbers follow the file order per family. Arrays, values that are
+    not literal and declarations without a value are skipped and listed.
+
+    Raises
+    ------
+    FormatError
+        ``("file", "line N", "<data name>.<field>")`` for a value of the wrong shape, a number
+        beyond server/bounds.py, a quaternion far from unit length, two declarations tagged
+        with one slot; a file without ``MODULE`` or cut before ``ENDMODULE``.
+    """
+    text = text.replace("\r\n", "\n").replace("\r", "\n") if isinstance(text, str) else text
+    found, entries, skipped, _, _ = _read(text)  # type: ignore[arg-type]
+    where = {(family_of(e.kind), e.number): f.decl.line for f, e in zip(found, entries)}
+    return ParsedFile(canonical_order(entries), skipped, [], where)
+
+
+def import_abb(text: str) -> list[FrameEntry]:
+    """The entries of :func:`read_abb`, in canonical order.
+
+    Examples
+    --------
+    >>> e = import_abb('MODULE M\\nPERS tooldata tPen:=[TRUE,[[0,0,1.2E2],[1,0,0,0]],'
+    ...                '[0.5,[0,0,40],[1,0,0,0],0,0,0]];\\nENDMODULE')[0]
+    >>> e.name, e.kind, e.pose.z, e.load.mass_kg
+    ('tPen', 'tool', 120.0, 0.5)
+    """
+    return read_abb(text).entries
+
+
+def _numbered(found: list[_Found]) -> list[FrameEntry]:
+    used: dict[tuple[str, int], int] = {}
     numbers: dict[int, tuple[int, str]] = {}
-    for i, (d, kind, _, _) in enumerate(found):
+    for i, f in enumerate(found):
+        d, kind = f.decl, f.kind
         if d.tag is None:
             continue
         tag_kind, number, tag_name, tag_line = d.tag
         if tag_kind != kind:
             raise FormatError.at_line(tag_line, d.name,
                                       f"comment says {tag_kind} but the data is a {kind}")
-        family = kind in ROBOT_HELD
+        family = family_of(kind)
         if number < 1:
             raise FormatError.at_line(tag_line, d.name, "slot numbers start at 1")
         if (family, number) in used:
             raise FormatError.at_line(tag_line, d.name, f"{kind} {number} already used "
                                       f"on line {used[(family, number)]}")
+        try:
+            check_name(tag_name, (d.name,))
+        except CalibrationError as err:
+            raise FormatError.at_line(tag_line, f"{d.name}.name", err.reason) from None
         used[(family, number)] = tag_line
         numbers[i] = (number, tag_name)
     out = []
-    for i, (d, kind, pose, load) in enumerate(found):
+    for i, f in enumerate(found):
         if i in numbers:
             number, name = numbers[i]
         else:
-            family = kind in ROBOT_HELD
+            family = family_of(f.kind)
             number = 1
             while (family, number) in used:
                 number += 1
-            used[(family, number)] = d.line
-            name = d.name
-        out.append(FrameEntry(number, name, kind, pose, load))  # type: ignore[arg-type]
+            used[(family, number)] = f.decl.line
+            name = f.decl.name
+        try:
+            out.append(FrameEntry(number, name, f.kind, f.pose, f.load,  # type: ignore[arg-type]
+                                  f.unit))
+        except CalibrationError as err:
+            raise FormatError.at_line(f.decl.line, f"{f.decl.name}.{err.loc[-1]}",
+                                      err.reason) from None
     return out
+
+
+# --------------------------------------------------------------------------- patching
+
+
+def _leaf_text(tok: _Tok, want: object) -> str:
+    """The literal for ``want`` if it differs from the token's value, else the token."""
+    if tok.kind == "num":
+        return tok.text if float(tok.text) == want else rapid_num(want)  # type: ignore[arg-type]
+    if tok.kind == "str":
+        return tok.text if tok.text[1:-1] == want else _string(str(want))
+    return tok.text if (tok.text.upper() == "TRUE") == want else ("TRUE" if want else "FALSE")
+
+
+def _old_leaf_values(d: _Decl) -> list[object]:
+    out: list[object] = []
+    for t in d.leaves:
+        out.append(float(t.text) if t.kind == "num" else
+                   t.text[1:-1] if t.kind == "str" else t.text.upper() == "TRUE")
+    return out
+
+
+def _pose_leaves(T: np.ndarray, old: list[object], same_rotation: bool) -> list[object]:
+    q = list(old[3:7]) if same_rotation else [float(x) for x in _quat(T)]
+    return [float(x) + 0.0 for x in T[:3, 3]] + q
+
+
+def _load_leaves(load: LoadData | None, old: list[object], old_load: LoadData | None) -> list:
+    if load == old_load:
+        return old
+    if load is None:
+        return [_UNKNOWN[0], *_UNKNOWN[1], *_UNKNOWN[2], *_UNKNOWN[3:]]
+    if old_load is not None and old_load.inertia_axes_deg == load.inertia_axes_deg:
+        aom = list(old[4:8])
+    else:
+        aom = [float(x) for x in _quat(Pose(0, 0, 0, *load.inertia_axes_deg).as_matrix())]
+    return [max(load.mass_kg, MIN_TOOL_MASS_KG), *load.com_mm, *aom, *load.inertia_kgm2]
+
+
+def _target_leaves(f: _Found, old_entry: FrameEntry, e: FrameEntry) -> list[object] | None:
+    """The new literal values of ``f``'s declaration, or None when its data type changes."""
+    old = _old_leaf_values(f.decl)
+    same_rot = (old_entry.pose.a, old_entry.pose.b, old_entry.pose.c) == (e.pose.a, e.pose.b,
+                                                                           e.pose.c)
+    if f.decl.dtype == "tooldata" and e.kind in ("tool", "fixed_tool"):
+        pose = old[1:8] if old_entry.pose == e.pose else _pose_leaves(
+            e.pose.as_matrix(), old[1:8], same_rot)
+        return [e.kind == "tool", *pose, *_load_leaves(e.load, old[8:], old_entry.load)]
+    if f.decl.dtype == "wobjdata" and e.kind not in ("tool", "fixed_tool") and (
+            (e.kind == "workpiece") == (f.kind == "workpiece")):
+        if old_entry.pose == e.pose:
+            uframe = old[3:10]
+        else:
+            oframe = np.eye(4) if f.oframe is None else f.oframe
+            T = e.pose.as_matrix() @ np.linalg.inv(oframe)
+            uframe = _pose_leaves(T, old[3:10], same_rot)
+        unit = e.mech_unit if e.kind == "coordinated_base" else ""
+        return [e.kind == "workpiece", e.kind != "coordinated_base", unit, *uframe, *old[10:]]
+    return None
+
+
+def _line_start(text: str, offset: int) -> int:
+    return text.rfind("\n", 0, offset) + 1
+
+
+def _line_end(text: str, offset: int) -> int:
+    end = text.find("\n", offset)
+    return len(text) if end < 0 else end + 1
+
+
+def _patch(template: str, entries: list[FrameEntry]) -> str:
+    crlf = template.count("\r\n") > template.count("\n") / 2
+    text = template.replace("\r\n", "\n").replace("\r", "\n")
+    found, old_entries, _, decls, endmodule = _read(text)
+    check_unique_slots(entries, {"robot_held": 10**9, "stationary": 10**9}, "ABB")
+    new = {(family_of(e.kind), e.number): e for e in entries}
+    old = {(family_of(e.kind), e.number): (f, e) for f, e in zip(found, old_entries)}
+    if all(new.get(k) == e for k, (_, e) in old.items()) and set(new) == set(old):
+        return template
+    edits: list[tuple[int, int, str]] = []
+    taken = {d.name.upper() for d in decls}
+    untagged_removed = {k[0] for k, (f, _) in old.items() if k not in new and f.decl.tag is None}
+    for key, (f, was) in old.items():
+        e = new.get(key)
+        if e == was:
+            continue
+        d = f.decl
+        indent = text[_line_start(text, d.start):d.start]
+        indent = indent if not indent.strip() else "  "
+        if e is None:  # the slot was emptied: its declaration goes
+            first = d.tag[3] if d.tag else d.line
+            start = _line_start(text, d.start) if not d.tag else _offset_of_line(text, first)
+            edits.append((start, _line_end(text, d.end - 1), ""))
+            if f.load_decl is not None:
+                ld = f.load_decl
+                edits.append((_line_start(text, ld.start), _line_end(text, ld.end - 1), ""))
+            continue
+        leaves = _target_leaves(f, was, e)
+        if leaves is None:
+            name = d.name
+            body = _declaration(e, name, "")[1:]
+            edits.append((d.start, d.end, body[0]))
+        else:
+            for tok, want in zip(d.leaves, leaves):
+                text_new = _leaf_text(tok, want)
+                if text_new != tok.text:
+                    edits.append((tok.start, tok.end, text_new))
+        if (was.name, was.kind) != (e.name, e.kind) or d.tag is None and (
+                was.name != d.name or key[0] in untagged_removed):
+            tag = f'! pendant: {e.kind} {e.number} "{_tag_name(e.name)}"'
+            if d.tag:
+                s0 = _offset_of_line(text, d.tag[3])
+                e0 = _line_end(text, s0) - 1
+                lead = text[s0:e0][:len(text[s0:e0]) - len(text[s0:e0].lstrip())]
+                edits.append((s0, e0, lead + tag))
+            else:
+                s0 = _line_start(text, d.start)
+                edits.append((s0, s0, indent + tag + "\n"))
+        if e.kind == "workpiece" and (was.load != e.load or leaves is None):
+            ld = f.load_decl
+            if ld is not None and e.load is not None:
+                for tok, want in zip(ld.leaves, _load_leaves(e.load, _old_leaf_values(ld),
+                                                             was.load)):
+                    if _leaf_text(tok, want) != tok.text:
+                        edits.append((tok.start, tok.end, _leaf_text(tok, want)))
+            elif ld is not None:
+                edits.append((_line_start(text, ld.start), _line_end(text, ld.end - 1), ""))
+            elif e.load is not None:
+                after = _line_end(text, d.end - 1)
+                edits.append((after, after, f"{indent}PERS loaddata {d.name}_load:="
+                                            f"{_load(e.load)};  ! use with GripLoad\n"))
+    # numbers of untagged declarations follow the file order: once one of a family is gone,
+    # the later untagged ones of that family get their number written in a tag
+    for key, (f, was) in old.items():
+        if key[0] in untagged_removed and f.decl.tag is None and new.get(key) == was:
+            d = f.decl
+            s0 = _line_start(text, d.start)
+            lead = text[s0:d.start] if not text[s0:d.start].strip() else "  "
+            edits.append((s0, s0, f'{lead}! pendant: {was.kind} {was.number} '
+                                  f'"{_tag_name(was.name)}"\n'))
+    added = [e for k, e in sorted(new.items()) if k not in old]
+    if added:
+        at = _line_start(text, endmodule)
+        body = []
+        for e in canonical_order(added):
+            body += _declaration(e, _ident_for(e, taken))
+        edits.append((at, at, "\n".join(body) + "\n"))
+    out = text
+    for start, end, repl in sorted(edits, key=lambda x: (x[0], x[1]), reverse=True):
+        out = out[:start] + repl + out[end:]
+    return out.replace("\n", "\r\n") if crlf else out
+
+
+def _offset_of_line(text: str, line: int) -> int:
+    pos = 0
+    for _ in range(line - 1):
+        pos = text.index("\n", pos) + 1
+    return pos

@@ -11,21 +11,35 @@ inertia about it in kgf cm s^2 (1 kgf cm s^2 = 0.0980665 kg m^2).
 
 from __future__ import annotations
 
+import re
 from typing import Iterable
 
 import numpy as np
 
-from solvers.frames import Pose, fanuc_from_matrix
+from solvers.errors import CalibrationError
+from solvers.frames import Pose, fanuc_from_matrix, matrix_from_fanuc
 
-from server.formats.model import ROBOT_HELD, FrameEntry, LoadData, check_unique_slots
+from server.bounds import check_value
+from server.formats.model import (
+    ROBOT_HELD,
+    FormatError,
+    FrameEntry,
+    LoadData,
+    ParsedFile,
+    canonical_order,
+    check_unique_slots,
+    family_of,
+    one_line,
+)
 
-__all__ = ["export_fanuc", "KGF_CM_S2_PER_KG_M2"]
+__all__ = ["export_fanuc", "read_fanuc", "KGF_CM_S2_PER_KG_M2"]
 
 KGF_CM_S2_PER_KG_M2 = 1.0 / 0.0980665  # 1 kg m^2 in kgf cm s^2
 MAX_UTOOL = 10
 MAX_UFRAME = 9
 _ROLE = {"tool": "tool", "workpiece": "workpiece held by the robot (Remote TCP: UTOOL)",
-         "base": "user frame", "fixed_tool": "fixed tool (Remote TCP: UFRAME)"}
+         "base": "user frame", "fixed_tool": "fixed tool (Remote TCP: UFRAME)",
+         "coordinated_base": "coordinated user frame of unit"}
 
 
 def _f(v: float, decimals: int = 6) -> str:
@@ -33,8 +47,8 @@ def _f(v: float, decimals: int = 6) -> str:
 
 
 def _comment(name: str) -> str:
-    """FANUC frame comments hold 16 characters; quotes are dropped."""
-    return name.replace('"', "").replace("'", "")[:16]
+    """FANUC frame comments hold 16 characters on one line; quotes are dropped."""
+    return one_line(name).replace('"', "").replace("'", "")[:16]
 
 
 def _payload(load: LoadData) -> tuple[float, np.ndarray, np.ndarray, float]:
@@ -117,8 +131,100 @@ def export_fanuc(entries: Iterable[FrameEntry], group: int = 1) -> str:
                       f"ARRAY[{group},{size}] OF POSITION"]
         for e in chosen:
             x, y, z, w, p, r = (_f(v) for v in fanuc_from_matrix(e.pose.as_matrix()))
-            lines += [f" [{group},{e.number}] =  ! {_ROLE[e.kind]} \"{_comment(e.name)}\"",
+            role = _ROLE[e.kind] + (f" {_comment(e.mech_unit or '')}" if e.mech_unit else "")
+            lines += [f" [{group},{e.number}] =  ! {role} \"{_comment(e.name)}\"",
                       f"  Group: {group}   Config: N U T, 0, 0, 0",
                       f"  X: {x:>14}   Y: {y:>14}   Z: {z:>14}",
                       f"  W: {w:>14}   P: {p:>14}   R: {r:>14}"]
+    lines += ["", END_LINE]
     return "\n".join(lines) + "\n"
+
+
+# --------------------------------------------------------------------------- reading
+
+END_LINE = "! end of pendant frames"
+_ROLE_KIND = (("coordinated user frame of unit ", "coordinated_base"), ("workpiece", "workpiece"),
+              ("fixed tool", "fixed_tool"), ("user frame", "base"), ("tool", "tool"))
+_SECTION = re.compile(r"^\[\*SYSTEM\*\]\$(MNUTOOL|MNUFRAME)\b")
+_ROLE_LINE = re.compile(r'^ \[(\d+),(\d+)\] =  ! (.*?) "(.*)"\s*$')
+
+
+def _number(text: str, unit: str, line: int, fld: str) -> float:
+    try:
+        v = float(text)
+    except ValueError:
+        raise FormatError.at_line(line, fld, f"expected a number, got {text!r}") from None
+    try:
+        return check_value(v, unit, (fld,))
+    except CalibrationError as err:
+        raise FormatError.at_line(line, fld, err.reason) from None
+
+
+def read_fanuc(text: str) -> ParsedFile:
+    """The frames of pendant's own FANUC listing (:func:`export_fanuc`), whole.
+
+    Values come from the UTOOL / UFRAME / PAYLOAD table (6 decimals; payload centre in cm
+    and inertia in kgf cm s^2, converted back), kinds and units from the ``$MNUTOOL`` /
+    ``$MNUFRAME`` part. The listing must start with pendant's header and end with
+    ``! end of pendant frames``.
+
+    Raises
+    ------
+    FormatError
+        ``("file", "line N", "UTOOL 3.X")`` for a value that is not a number or beyond
+        server/bounds.py; a listing without its header or cut before its end line.
+    """
+    if not isinstance(text, str):
+        raise FormatError(("file",), f"expected text, got {type(text).__name__}")
+    lines = text.replace("\r\n", "\n").split("\n")
+    if not lines[0].startswith("! pendant: FANUC"):
+        raise FormatError.at_line(1, "header", "not a pendant FANUC listing (its first line "
+                                  "is '! pendant: FANUC user tool / user frame data ...')")
+    end = next((i for i, s in enumerate(lines, 1) if s.rstrip() == END_LINE), None)
+    if end is None:
+        n = len(lines) - (1 if lines[-1] == "" else 0)
+        raise FormatError.at_line(n, "end", f"the listing ends at line {n} without "
+                                  f"'{END_LINE}': it was cut short")
+    rows: dict[tuple[str, int], tuple[str, Pose, int]] = {}
+    payloads: dict[int, tuple[LoadData, int]] = {}
+    roles: dict[tuple[str, int], str] = {}
+    section = None
+    for n, raw in enumerate(lines[:end], 1):
+        label = raw[:7].strip()
+        if label in ("UTOOL", "UFRAME") and raw[7:10].strip().isdigit():
+            number, fld = int(raw[7:10]), f"{label} {int(raw[7:10])}"
+            cells = raw[28:].split()
+            if len(cells) != 6:
+                raise FormatError.at_line(n, fld, "expected X, Y, Z, W, P, R")
+            v = [_number(c, "mm" if i < 3 else "deg", n, f"{fld}.{'XYZWPR'[i]}")
+                 for i, c in enumerate(cells)]
+            rows[(label, number)] = (raw[12:28].rstrip(), Pose.from_matrix(matrix_from_fanuc(v)), n)
+        elif raw.startswith("PAYLOAD"):
+            number, fld = int(raw[7:10]), f"PAYLOAD {raw[7:10].strip()}"
+            cells = raw[10:].split()
+            if len(cells) != 7:
+                raise FormatError.at_line(n, fld, "expected Mass, X, Y, Z, IX, IY, IZ")
+            units = ("kg", "mm", "mm", "mm", "kgm2", "kgm2", "kgm2")
+            v = [_number(c, u, n, f"{fld}.{k}") for c, u, k in
+                 zip(cells, units, ("Mass", "X", "Y", "Z", "IX", "IY", "IZ"))]
+            payloads[number] = (LoadData(v[0], tuple(10.0 * x for x in v[1:4]),  # type: ignore[arg-type]
+                                         tuple(x / KGF_CM_S2_PER_KG_M2 for x in v[4:])), n)
+        elif _SECTION.match(raw):
+            section = "UTOOL" if _SECTION.match(raw).group(1) == "MNUTOOL" else "UFRAME"  # type: ignore[union-attr]
+        elif section and _ROLE_LINE.match(raw):
+            m = _ROLE_LINE.match(raw)
+            roles[(section, int(m.group(2)))] = m.group(3)  # type: ignore[union-attr]
+    entries, where = [], {}
+    for (label, number), (name, pose, line) in rows.items():
+        role = roles.get((label, number), "tool" if label == "UTOOL" else "user frame")
+        kind, unit = next(((k, role[len(p):].strip() if k == "coordinated_base" else None)
+                           for p, k in _ROLE_KIND if role.startswith(p)), (None, None))
+        if kind is None or (kind in ROBOT_HELD) != (label == "UTOOL"):
+            raise FormatError.at_line(line, f"{label} {number}", f"unknown role {role!r}")
+        load = payloads[number][0] if label == "UTOOL" and number in payloads else None
+        try:
+            entries.append(FrameEntry(number, name, kind, pose, load, unit))  # type: ignore[arg-type]
+        except CalibrationError as err:
+            raise FormatError.at_line(line, f"{label} {number}", err.reason) from None
+        where[(family_of(kind), number)] = line
+    return ParsedFile(canonical_order(entries), [], [], where)

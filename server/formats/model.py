@@ -6,25 +6,33 @@ and its pose in the KUKA notation (x, y, z in mm, a, b, c in degrees). The kinds
 - ``tool``: a robot-held tool, pose = T_flange_tcp;
 - ``workpiece``: a robot-held workpiece, pose = T_flange_workpiece;
 - ``base``: a base (user frame, work object), pose = T_world_base;
-- ``fixed_tool``: a stationary (external) tool, pose = T_world_fixedtool.
+- ``fixed_tool``: a stationary (external) tool, pose = T_world_fixedtool;
+- ``coordinated_base``: a base moved by a mechanical unit (a positioner): ABB's coordinated
+  work object (``ufprog FALSE``, ``ufmec "STN1"``), KUKA's base on an external kinematic
+  (``MACHINE_FRAME_DAT[n]`` names its machine); pose = T_unit_base, ``mech_unit`` the unit.
 
-Only robot-held frames (tool, workpiece) carry a :class:`LoadData`: it is what the robot
-carries when it works with that slot. Parsers raise :class:`FormatError`, which names the
-line and the field like ``("file", "line 12", "TOOL_DATA[3]")``.
+A :class:`LoadData` is what the robot carries when it works with the slot: a tool's or a
+held workpiece's load, and for a stationary tool the gripper and part the robot brings to
+it (ABB's tload of a stationary tool). Bases carry none. Parsers raise :class:`FormatError`,
+which names the line and the field like ``("file", "line 12", "TOOL_DATA[3]")``; a
+declaration a reader cannot use but that need not stop the file is a :class:`Skipped`.
 """
 
 from __future__ import annotations
 
 import math
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 from typing import Iterable, Literal, get_args
 
+from server.bounds import MECH_UNIT_CHARS, NAME_CHARS, check_name, check_value, unprintable
 from solvers.errors import CalibrationError
 from solvers.frames import Pose
 
-FrameKind = Literal["tool", "fixed_tool", "base", "workpiece"]
+FrameKind = Literal["tool", "fixed_tool", "base", "workpiece", "coordinated_base"]
 FRAME_KINDS: tuple[str, ...] = get_args(FrameKind)
 ROBOT_HELD: frozenset[str] = frozenset({"tool", "workpiece"})
+STATIONARY: frozenset[str] = frozenset({"base", "fixed_tool", "coordinated_base"})
+LOADED: frozenset[str] = frozenset({"tool", "workpiece", "fixed_tool"})
 
 
 class FormatError(CalibrationError):
@@ -82,6 +90,10 @@ class LoadData:
         if any(x < 0 for x in self.inertia_kgm2):
             raise CalibrationError(("load", "inertia_kgm2"), "moments of inertia must be >= 0")
         object.__setattr__(self, "mass_kg", float(self.mass_kg))
+        check_value(self.mass_kg, "kg", ("load", "mass_kg"))
+        for fld, unit in (("com_mm", "mm"), ("inertia_kgm2", "kgm2"), ("inertia_axes_deg", "deg")):
+            for i, x in enumerate(getattr(self, fld)):
+                check_value(x, unit, ("load", fld, i))
 
 
 @dataclass(frozen=True)
@@ -99,6 +111,7 @@ class FrameEntry:
     kind: FrameKind
     pose: Pose
     load: LoadData | None = None
+    mech_unit: str | None = None  # coordinated_base only: the unit that moves it
 
     def __post_init__(self) -> None:
         if self.kind not in FRAME_KINDS:
@@ -109,9 +122,62 @@ class FrameEntry:
         values = self.pose.as_array()
         if not all(math.isfinite(x) for x in values):
             raise CalibrationError(("pose",), "x, y, z, a, b, c must be finite")
-        if self.load is not None and self.kind not in ROBOT_HELD:
+        for k, x in zip("xyzabc", values):
+            check_value(float(x), "mm" if k in "xyz" else "deg", ("pose", k))
+        if len(self.name) > NAME_CHARS:  # control characters are the writers' job (one_line)
+            raise CalibrationError(("name",), f"has {len(self.name)} characters; "
+                                   f"at most {NAME_CHARS}")
+        if self.load is not None and self.kind not in LOADED:
             raise CalibrationError(("load",), f"a {self.kind} is not carried by the robot; "
-                                              "only tool and workpiece take a load")
+                                              "only tool, workpiece and fixed_tool take a load")
+        if (self.kind == "coordinated_base") != (self.mech_unit is not None):
+            raise CalibrationError(("mech_unit",), "a coordinated_base names its mechanical "
+                                   "unit, and only a coordinated_base has one")
+        if self.mech_unit is not None:
+            check_name(self.mech_unit, ("mech_unit",), MECH_UNIT_CHARS)
+            if not self.mech_unit.strip():
+                raise CalibrationError(("mech_unit",), "must not be blank")
+
+
+@dataclass(frozen=True)
+class Skipped:
+    """A declaration a reader left out, with its 1-based line and the reason."""
+
+    line: int
+    field: str
+    reason: str
+
+
+@dataclass(frozen=True)
+class ParsedFile:
+    """What a reader found in a whole controller file.
+
+    ``entries`` in :func:`canonical_order`; ``skipped`` the declarations left out (never a
+    reason to refuse the rest); ``unused`` the slots the file lists as empty, as
+    ``(family, number)`` with family ``"robot_held"`` or ``"stationary"`` (KUKA lists every
+    slot; an import empties them too); ``slot_lines`` the line where each slot
+    ``(family, number)`` is given, for errors a later check finds.
+    """
+
+    entries: list[FrameEntry]
+    skipped: list[Skipped] = field(default_factory=list)
+    unused: list[tuple[str, int]] = field(default_factory=list)
+    slot_lines: dict[tuple[str, int], int] = field(default_factory=dict)
+
+
+def family_of(kind: str) -> str:
+    """``"robot_held"`` (KUKA TOOL slots, FANUC UTOOL) or ``"stationary"`` (BASE, UFRAME)."""
+    return "robot_held" if kind in ROBOT_HELD else "stationary"
+
+
+def one_line(text: str) -> str:
+    r"""``text`` with every character that would break a line (control characters, U+0085,
+    U+2028, U+2029) turned into a space: what any exporter may write inside a line.
+
+    >>> one_line("pointer\nUTOOL 9\u2028x\x85y")
+    'pointer UTOOL 9 x y'
+    """
+    return "".join(" " if unprintable(c) else c for c in text)
 
 
 def canonical_order(entries: Iterable[FrameEntry]) -> list[FrameEntry]:
@@ -127,7 +193,7 @@ def check_unique_slots(entries: Iterable[FrameEntry], limits: dict[str, int], fm
     """
     seen: dict[tuple[str, int], int] = {}
     for i, e in enumerate(entries):
-        family = "robot_held" if e.kind in ROBOT_HELD else "stationary"
+        family = family_of(e.kind)
         if e.number > limits[family]:
             raise FormatError(("entries", i, "number"),
                               f"{fmt} has {limits[family]} {family.replace('_', '-')} slots; "

@@ -57,24 +57,28 @@ def entry_out(e: FrameEntry) -> EntryOut:
     if e.mass_kg is not None:
         com = [e.com_x_mm, e.com_y_mm, e.com_z_mm]
         inertia = [e.inertia_x_kgm2, e.inertia_y_kgm2, e.inertia_z_kgm2]
+        axes = [e.inertia_a_deg, e.inertia_b_deg, e.inertia_c_deg]
         load = LoadOut(mass_kg=e.mass_kg, com_mm=[v or 0.0 for v in com],
-                       inertia_kgm2=[v or 0.0 for v in inertia])
+                       inertia_kgm2=[v or 0.0 for v in inertia],
+                       inertia_axes_deg=[v or 0.0 for v in axes])
     provenance = ProvenanceOut(method=e.method, session_id=e.session_id,
                                error_max_mm=e.error_max_mm, error_rms_mm=e.error_rms_mm,
                                updated_at=e.updated_at)
     return EntryOut(table=e.entry_table, number=e.number, name=e.name,  # type: ignore[arg-type]
                     kind=e.kind, pose=PoseOut.of(e.pose_values()),  # type: ignore[arg-type]
-                    load=load, provenance=provenance)
+                    load=load, mech_unit=e.mech_unit, provenance=provenance)
 
 
 def load_values(load: object | None) -> dict:
     if load is None:
         return {}
     com, inertia = load.com_mm, load.inertia_kgm2  # type: ignore[attr-defined]
+    axes = getattr(load, "inertia_axes_deg", (0.0, 0.0, 0.0))
     return {"mass_kg": load.mass_kg,  # type: ignore[attr-defined]
             "com_x_mm": com[0], "com_y_mm": com[1], "com_z_mm": com[2],
             "inertia_x_kgm2": inertia[0], "inertia_y_kgm2": inertia[1],
-            "inertia_z_kgm2": inertia[2]}
+            "inertia_z_kgm2": inertia[2], "inertia_a_deg": axes[0], "inertia_b_deg": axes[1],
+            "inertia_c_deg": axes[2]}
 
 
 # -------------------------------------------------------------------------------- sessions

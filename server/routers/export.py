@@ -11,11 +11,10 @@ import json
 from fastapi import APIRouter, Response
 
 from db import crud
-from db.models import FrameEntry as SlotRow
+from server.controller_files import ImportResult, apply_import, export_file, parse_file
 from server.deps import SessionDep
-from server.schemas import ExportFormat, ImportIn, ImportOut
+from server.schemas import ExportFormat, ImportIn, ImportOut, SkippedOut, SlotChangeOut
 from solvers.errors import CalibrationError
-from solvers.frames import Pose
 
 router = APIRouter(prefix="/controllers/{controller_id}", tags=["Export"])
 
@@ -24,39 +23,21 @@ MEDIA = {"kuka": ("text/plain", "$config.dat"), "abb": ("text/plain", "CalibData
          "json": ("application/json", "backup.json")}
 
 
-def _is_used(e: SlotRow) -> bool:
-    return bool(e.name) or any(v != 0.0 for v in e.pose_values()) or e.mass_kg is not None
-
-
-def to_frame_entries(rows: list[SlotRow]) -> list:
-    """The used slots as server.formats FrameEntry values (load only on robot-held kinds)."""
-    from server.formats import FrameEntry, LoadData
-
-    out = []
-    for e in rows:
-        if not _is_used(e):
-            continue
-        load = None
-        if e.mass_kg is not None and e.kind in ("tool", "workpiece"):
-            com = tuple(v or 0.0 for v in (e.com_x_mm, e.com_y_mm, e.com_z_mm))
-            inertia = tuple(v or 0.0 for v in
-                            (e.inertia_x_kgm2, e.inertia_y_kgm2, e.inertia_z_kgm2))
-            load = LoadData(e.mass_kg, com, inertia)  # type: ignore[arg-type]
-        pose = Pose(*e.pose_values())
-        out.append(FrameEntry(e.number, e.name, e.kind, pose, load))  # type: ignore[arg-type]
-    return out
-
-
 def export_text(db: SessionDep, controller_id: int, fmt: str) -> str:
-    """The controller's tables in ``fmt`` (also used by ``pendant export``)."""
+    """The controller's tables in ``fmt`` (also used by ``pendant export``): a controller
+    file patched into the one last imported in that format, if any (docs/formats.md)."""
     c = crud.get_controller(db, controller_id)
     if fmt == "json":
         return json.dumps(crud.backup(db, c), indent=1)
-    from server import formats
+    return export_file(db, controller_id, fmt)
 
-    writer = {"kuka": formats.export_kuka, "abb": formats.export_abb, "fanuc": formats.export_fanuc,
-              "ur": formats.export_ur}[fmt]
-    return writer(to_frame_entries(crud.list_entries(db, controller_id)))
+
+def import_out(result: ImportResult) -> ImportOut:
+    return ImportOut(
+        format=result.format, entries=result.entries, dry_run=result.dry_run,
+        slots=[SlotChangeOut(**vars(s)) for s in result.slots],
+        skipped=[SkippedOut(line=k.line, field=k.field, reason=k.reason)
+                 for k in result.skipped])
 
 
 @router.get("/export", response_class=Response,
@@ -73,10 +54,13 @@ def export(controller_id: int, db: SessionDep, format: ExportFormat = "kuka") ->
 
 @router.post("/import")
 def import_tables(controller_id: int, body: ImportIn, db: SessionDep) -> ImportOut:
-    """Read a KUKA ``$config.dat``, an ABB RAPID module or a JSON backup into the tables.
+    """Read a controller file (KUKA ``$config.dat``, ABB RAPID module, pendant's FANUC or UR
+    export) or a JSON backup into the tables.
 
-    Controller files overwrite the slots they name (each change recorded in history); a
-    JSON backup replaces the tables, history and sessions of this controller."""
+    A controller file replaces each slot it names whole (each change recorded in history)
+    and is kept, so that a later export in that format patches only changed values into it.
+    ``dry_run`` returns, per slot, before -> after, kind changes and skipped declarations,
+    and writes nothing. A JSON backup replaces the tables, history and sessions."""
     c = crud.get_controller(db, controller_id)
     if body.format == "json":
         from server.backup import parse_backup
@@ -95,31 +79,14 @@ def import_tables(controller_id: int, body: ImportIn, db: SessionDep) -> ImportO
                 check_joint_limits(robot, joints)
             except CalibrationError as err:
                 raise CalibrationError(loc + tuple(err.loc[1:]), err.reason) from None
+        if body.dry_run:
+            return ImportOut(format="json", entries=len(doc["entries"]), dry_run=True)
         try:
             n, h = crud.restore_backup(db, c, doc)
         except (KeyError, TypeError, ValueError) as err:
             raise CalibrationError(("text",),
                                    f"malformed backup: {type(err).__name__} {err}") from None
         return ImportOut(format="json", entries=n, history=h)
-    from server import formats
-
-    reader = formats.import_kuka if body.format == "kuka" else formats.import_abb
-    entries = reader(body.text)
-    if not entries:
-        raise CalibrationError(("text",), "no tool, base, workpiece or fixed-tool entry found in "
-                               f"this {body.format} text")
-    for fe in entries:
-        table = "tool" if fe.kind in ("tool", "workpiece") else "base"
-        e = crud.get_entry(db, controller_id, table, fe.number)
-        values = dict(zip(("x_mm", "y_mm", "z_mm", "a_deg", "b_deg", "c_deg"),
-                          fe.pose.as_array().tolist()))
-        values.update(name=fe.name, kind=fe.kind, method=f"import.{body.format}", session_id=None,
-                      error_max_mm=None, error_rms_mm=None)
-        if fe.load is not None:
-            com, inertia = fe.load.com_mm, fe.load.inertia_kgm2
-            values.update(mass_kg=fe.load.mass_kg, com_x_mm=com[0], com_y_mm=com[1],
-                          com_z_mm=com[2],
-                          inertia_x_kgm2=inertia[0], inertia_y_kgm2=inertia[1],
-                          inertia_z_kgm2=inertia[2])
-        crud.change_entry(db, e, values, reason="import")
-    return ImportOut(format=body.format, entries=len(entries))
+    result = apply_import(db, c, body.format, body.text, parse_file(body.format, body.text),
+                          body.dry_run)
+    return import_out(result)

@@ -45,6 +45,12 @@ def table_router(table: str, path: str, tag: str) -> APIRouter:
                 raise CalibrationError(("kind",),
                                        f"a {table} slot holds {kinds}, not {body.kind!r}")
             values["kind"] = body.kind
+        kind = values.get("kind", e.kind)
+        if body.mech_unit is not None or kind != "coordinated_base":
+            values["mech_unit"] = body.mech_unit if kind == "coordinated_base" else None
+        if kind == "coordinated_base" and not values.get("mech_unit", e.mech_unit):
+            raise CalibrationError(("mech_unit",), "a coordinated_base names the mechanical "
+                                   "unit that moves it")
         if body.pose is not None:
             values.update(zip(("x_mm", "y_mm", "z_mm", "a_deg", "b_deg", "c_deg"),
                               body.pose.to_pose().as_array().tolist()))

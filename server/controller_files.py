@@ -1,0 +1,181 @@
+"""Controller files in and out of the tables: the slots as ``FrameEntry`` values and back.
+
+:func:`apply_import` is the one write path of a file import (route and ``pendant import``):
+each slot the file names is replaced whole (pose, name, kind, load, unit), the change is
+recorded in history with reason ``import``, and the file is kept so that
+:func:`export_file` can patch later changes into it. With ``dry_run`` nothing is written
+and the reply says what would change. The formats themselves live in server/formats.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass, field
+from typing import Any
+
+from sqlalchemy.orm import Session
+
+from db import crud
+from db.models import Controller
+from db.models import FrameEntry as SlotRow
+from server import formats
+from server.formats.model import ParsedFile, family_of
+from solvers.errors import CalibrationError
+from solvers.frames import Pose
+
+TABLE_OF_FAMILY = {"robot_held": "tool", "stationary": "base"}
+POSE_FIELDS = ("x_mm", "y_mm", "z_mm", "a_deg", "b_deg", "c_deg")
+LOAD_FIELDS = ("mass_kg", "com_x_mm", "com_y_mm", "com_z_mm", "inertia_x_kgm2",
+               "inertia_y_kgm2", "inertia_z_kgm2", "inertia_a_deg", "inertia_b_deg",
+               "inertia_c_deg")
+
+
+def is_used(e: SlotRow) -> bool:
+    return bool(e.name) or any(v != 0.0 for v in e.pose_values()) or e.mass_kg is not None
+
+
+def to_frame_entry(e: SlotRow) -> formats.FrameEntry:
+    """A used slot as a server.formats FrameEntry (a load only where the kind takes one)."""
+    load = None
+    if e.mass_kg is not None and e.kind in formats.LOADED:
+        com = tuple(v or 0.0 for v in (e.com_x_mm, e.com_y_mm, e.com_z_mm))
+        inertia = tuple(v or 0.0 for v in (e.inertia_x_kgm2, e.inertia_y_kgm2, e.inertia_z_kgm2))
+        axes = tuple(v or 0.0 for v in (e.inertia_a_deg, e.inertia_b_deg, e.inertia_c_deg))
+        load = formats.LoadData(e.mass_kg, com, inertia, axes)  # type: ignore[arg-type]
+    unit = e.mech_unit if e.kind == "coordinated_base" else None
+    if e.kind == "coordinated_base" and not unit:
+        raise CalibrationError((e.entry_table, e.number, "mech_unit"),
+                               "a coordinated_base needs the mechanical unit that moves it")
+    return formats.FrameEntry(e.number, e.name, e.kind, Pose(*e.pose_values()),  # type: ignore[arg-type]
+                              load, unit)
+
+
+def to_frame_entries(rows: list[SlotRow]) -> list[formats.FrameEntry]:
+    """The used slots as server.formats FrameEntry values."""
+    return [to_frame_entry(e) for e in rows if is_used(e)]
+
+
+def export_file(db: Session, controller_id: int, fmt: str) -> str:
+    """The tables in ``fmt``: patched into the file last imported in that format, if any."""
+    entries = to_frame_entries(crud.list_entries(db, controller_id))
+    kept = crud.get_controller_file(db, controller_id, fmt)
+    if kept is not None and fmt in formats.PATCHERS:
+        return formats.PATCHERS[fmt](entries, kept.text)
+    return formats.EXPORTERS[fmt](entries)
+
+
+def slot_values(fe: formats.FrameEntry | None, table: str) -> dict[str, Any]:
+    """Every value of a slot, as ENTRY_FIELDS: the whole slot, nothing left from before."""
+    if fe is None:
+        values: dict[str, Any] = dict(zip(POSE_FIELDS, (0.0,) * 6))
+        values.update(name="", kind=crud.DEFAULT_KIND[table], mech_unit=None)
+        values.update(dict.fromkeys(LOAD_FIELDS))
+        return values
+    values = dict(zip(POSE_FIELDS, fe.pose.as_array().tolist()))
+    values.update(name=fe.name, kind=fe.kind, mech_unit=fe.mech_unit)
+    values.update(dict.fromkeys(LOAD_FIELDS))
+    if fe.load is not None:
+        ld = fe.load
+        values.update(mass_kg=ld.mass_kg, com_x_mm=ld.com_mm[0], com_y_mm=ld.com_mm[1],
+                      com_z_mm=ld.com_mm[2], inertia_x_kgm2=ld.inertia_kgm2[0],
+                      inertia_y_kgm2=ld.inertia_kgm2[1], inertia_z_kgm2=ld.inertia_kgm2[2],
+                      inertia_a_deg=ld.inertia_axes_deg[0], inertia_b_deg=ld.inertia_axes_deg[1],
+                      inertia_c_deg=ld.inertia_axes_deg[2])
+    return values
+
+
+def _view(values: dict[str, Any] | None) -> dict[str, Any] | None:
+    """A slot for the preview: None when unused, else name, kind, pose, load, unit."""
+    if values is None or not (values["name"] or any(values[f] for f in POSE_FIELDS)
+                              or values["mass_kg"] is not None):
+        return None
+    load = None
+    if values["mass_kg"] is not None:
+        load = {"mass_kg": values["mass_kg"],
+                "com_mm": [values[f"com_{k}_mm"] or 0.0 for k in "xyz"],
+                "inertia_kgm2": [values[f"inertia_{k}_kgm2"] or 0.0 for k in "xyz"],
+                "inertia_axes_deg": [values[f"inertia_{k}_deg"] or 0.0 for k in "abc"]}
+    return {"name": values["name"], "kind": values["kind"],
+            "pose": dict(zip("xyzabc", (values[f] for f in POSE_FIELDS))),
+            "load": load, "mech_unit": values["mech_unit"]}
+
+
+@dataclass
+class SlotChange:
+    table: str
+    number: int
+    line: int | None
+    before: dict[str, Any] | None
+    after: dict[str, Any] | None
+    kind_change: str | None  # "tool -> workpiece"
+    changed: bool
+
+
+@dataclass
+class ImportResult:
+    format: str
+    dry_run: bool
+    slots: list[SlotChange] = field(default_factory=list)
+    skipped: list[formats.Skipped] = field(default_factory=list)
+
+    @property
+    def entries(self) -> int:
+        return sum(1 for s in self.slots if s.after is not None)
+
+
+def parse_file(fmt: str, text: str) -> ParsedFile:
+    """The controller file ``text`` in ``fmt`` read (FormatError names the line and field)."""
+    parsed = formats.READERS[fmt](text)
+    if not parsed.entries:
+        raise CalibrationError(("text",), "no tool, base, workpiece or fixed-tool entry found "
+                               f"in this {fmt} text")
+    return parsed
+
+
+def apply_import(db: Session, controller: Controller, fmt: str, text: str,
+                 parsed: ParsedFile, dry_run: bool = False) -> ImportResult:
+    """Replace every slot ``parsed`` names by the file's values (or say what would change).
+
+    Each named slot is written whole: pose, name, kind, load (none when the file has none,
+    e.g. KUKA ``M -1``) and mechanical unit. Slots the file lists as unused are emptied.
+    Nothing is written before every slot has been checked against the tables; ``dry_run``
+    writes nothing at all. ``text`` is kept for :func:`export_file`.
+
+    Raises
+    ------
+    CalibrationError
+        ``("text", "line N", "<slot>")`` for a slot number the tables do not have.
+    """
+    planned: list[tuple[SlotRow, dict[str, Any], SlotChange]] = []
+    named = [(family_of(fe.kind), fe.number, fe) for fe in parsed.entries]
+    named += [(family, n, None) for family, n in parsed.unused]
+    for family, number, fe in sorted(named, key=lambda x: (x[0] != "robot_held", x[1])):
+        table = TABLE_OF_FAMILY[family]
+        line = parsed.slot_lines.get((family, number))
+        if not 1 <= number <= crud.SLOTS[table]:
+            if fe is None:
+                continue  # an unused slot beyond the tables: nothing to empty
+            where = f"line {line}" if line else "file"
+            raise CalibrationError(("text", where, f"{fe.kind} {number}"),
+                                   f"{table} slots are numbered 1..{crud.SLOTS[table]}; "
+                                   f"this controller has no {table} {number}")
+        row = crud.get_entry(db, controller.id, table, number)
+        before = {f: getattr(row, f) for f in slot_values(None, table)}
+        after = slot_values(fe, table)
+        changed = any(before[k] != v for k, v in after.items())
+        if fe is None and not is_used(row):
+            continue
+        kind_change = None
+        if is_used(row) and fe is not None and row.kind != fe.kind:
+            kind_change = f"{row.kind} -> {fe.kind}"
+        planned.append((row, after, SlotChange(table, number, line, _view(before), _view(after),
+                                               kind_change, changed)))
+    result = ImportResult(fmt, dry_run, [c for _, _, c in planned], list(parsed.skipped))
+    if dry_run:
+        return result
+    for row, after, change in planned:
+        if change.changed:
+            after.update(method=f"import.{fmt}", session_id=None, error_max_mm=None,
+                         error_rms_mm=None)
+            crud.change_entry(db, row, after, reason="import")
+    crud.store_controller_file(db, controller.id, fmt, text)
+    return result

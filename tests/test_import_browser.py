@@ -1,0 +1,73 @@
+"""The pendant page's import preview in Debian's Chromium: a person picks a controller file,
+sees per slot before -> after, kind changes and skipped declarations, and nothing is written
+until they confirm."""
+
+from __future__ import annotations
+
+from pathlib import Path
+
+import pytest
+
+from browser_helpers import VIEWPORT, idle, open_pendant
+
+DATA = Path(__file__).parent / "data"
+
+
+@pytest.fixture
+def page(chromium, site: str):  # noqa: ANN001, ANN201
+    context = chromium.new_context(viewport=VIEWPORT)
+    context.set_default_timeout(15_000)
+    p = context.new_page()
+    errors: list[str] = []
+    p.on("pageerror", lambda e: errors.append(str(e)))
+    yield p
+    context.close()
+    assert not errors, f"JavaScript errors on the page: {errors}"
+
+
+def slot(page, site: str, path: str) -> dict:  # noqa: ANN001
+    r = page.request.get(site + "/controllers/1" + path)
+    assert r.ok, r.text()
+    return r.json()
+
+
+def test_import_preview_then_confirm(page, site):
+    open_pendant(page, site)
+    form = page.locator("#import-form")
+    form.locator("#import-file").set_input_files(str(DATA / "kuka_cell7_config.dat"))
+    form.get_by_role("button", name="Preview").click()
+    preview = form.locator("#import-preview")
+    preview.wait_for(state="visible")
+    assert "9 slot(s) would change" in preview.locator("#import-summary").inner_text()
+    rows = preview.locator("#import-diff tbody tr")
+    assert rows.count() == 9
+    assert "Door panel LH [workpiece]" in rows.nth(2).inner_text()
+    assert slot(page, site, "/tools/3")["name"] == ""  # a preview writes nothing
+
+    form.get_by_role("button", name="Import these changes").click()
+    page.wait_for_function("() => document.querySelector('#import-summary').textContent.startsWith('Imported')")
+    idle(page)
+    assert slot(page, site, "/tools/3")["kind"] == "workpiece"
+    assert "Door panel LH" in page.locator("#tool-table").inner_text()
+
+    # the ABB module over it: tool 3 becomes tPen, a tool; three declarations are skipped
+    form.locator("#import-file").set_input_files(str(DATA / "abb_cell7.mod"))
+    form.get_by_role("button", name="Preview").click()
+    page.wait_for_function("() => document.querySelector('#import-skipped').children.length === 3")
+    changed = preview.locator("#import-diff tbody tr.kind-change")
+    assert "workpiece -> tool" in changed.first.inner_text()
+    assert "line 39: tCopy" in preview.locator("#import-skipped").inner_text()
+    form.get_by_role("button", name="Cancel").click()
+    assert preview.is_hidden()
+    assert slot(page, site, "/tools/3")["name"] == "Door panel LH"
+
+    # a file cut short: refused with its line, nothing written
+    cut = DATA / "abb_cell7.mod"
+    text = cut.read_text()
+    form.locator("#import-file").set_input_files(files=[{
+        "name": "cut.mod", "mimeType": "text/plain",
+        "buffer": text[:text.index("ENDMODULE")].encode()}])
+    form.get_by_role("button", name="Preview").click()
+    err = form.locator("#import-err")
+    page.wait_for_function("() => document.querySelector('#import-err').textContent.length > 0")
+    assert "ENDMODULE" in err.inner_text() and "cut short" in err.inner_text()
