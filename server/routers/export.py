@@ -13,6 +13,7 @@ from fastapi import APIRouter, Response
 from db import crud
 from db.models import FrameEntry as SlotRow
 from server.deps import SessionDep
+from server.preconditions import IfMatch
 from server.schemas import ExportFormat, ImportIn, ImportOut
 from solvers.errors import CalibrationError
 from solvers.frames import Pose
@@ -72,12 +73,16 @@ def export(controller_id: int, db: SessionDep, format: ExportFormat = "kuka") ->
 
 
 @router.post("/import")
-def import_tables(controller_id: int, body: ImportIn, db: SessionDep) -> ImportOut:
+def import_tables(controller_id: int, body: ImportIn, db: SessionDep,
+                  if_match: IfMatch = None) -> ImportOut:
     """Read a KUKA ``$config.dat``, an ABB RAPID module or a JSON backup into the tables.
 
     Controller files overwrite the slots they name (each change recorded in history); a
-    JSON backup replaces the tables, history and sessions of this controller."""
-    c = crud.get_controller(db, controller_id)
+    JSON backup replaces the tables, history and sessions of this controller. ``If-Match``
+    (the controller's ETag) is honoured: 412 when the controller changed since."""
+    from server.routers.controllers import changing
+
+    c = changing(db, controller_id, if_match)
     if body.format == "json":
         from server.backup import parse_backup
         from server.routers.common import robot_of
