@@ -75,5 +75,8 @@ def fresh_url(tmp_path: Path, backend: str | None = None, migrated: bool = True)
 
 
 def backends() -> list[str]:
-    """The backends a multi-process test runs on: SQLite always, PostgreSQL when reachable."""
+    """The backends a multi-process test runs on: the suite's PostgreSQL pass runs them on
+    PostgreSQL; otherwise SQLite, and PostgreSQL too when a server is reachable."""
+    if BACKEND == "postgresql":
+        return ["postgresql"]
     return ["sqlite", "postgresql"] if pg_available() else ["sqlite"]
