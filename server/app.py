@@ -20,7 +20,7 @@ from db import crud
 from db.session import (make_engine, make_sessionmaker, migration_lock, schema_status, upgrade,
                         write_session)
 from server import deps, errors, idempotency
-from server.emulator import DEMO_ROBOT, home_joints
+from emulator import DEMO_ROBOT, home_joints
 from server.routers import (analysis, base, controllers, export, fixed_tool, robot, sessions, tool,
                             workpiece)
 from server.settings import Settings

@@ -14,7 +14,7 @@ import pytest
 from fastapi.testclient import TestClient
 
 from server.app import create_app
-from server.emulator import Cell, cell_for
+from emulator import Cell, cell_for
 from server.settings import Settings
 from solvers.frames import Pose
 from solvers.robots import ROBOTS

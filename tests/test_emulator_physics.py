@@ -14,7 +14,7 @@ import pytest
 from api_helpers import *  # noqa: F403  (fixtures client, db_url)
 from api_helpers import C, CELL, TRUE_TCP_MM, approach, make_client, ok, open_session, pose_array
 from api_helpers import walk
-from server.emulator import THERMAL_WARMUP_S
+from emulator import THERMAL_WARMUP_S
 from server.recording import parse_recording
 from solvers.physics import Imperfections, true_tcp_positions
 

@@ -8,7 +8,7 @@ from db import crud
 from db.models import Controller
 from server.deps import SessionDep
 from server.preconditions import IfMatch, check, set_etag
-from server.emulator import (THERMAL_WARMUP_S, home_joints, imperfections_document,
+from emulator import (THERMAL_WARMUP_S, home_joints, imperfections_document,
                              imperfections_from_document, robot_from_custom)
 from server.routers.common import cell_of, robot_of
 from server.schemas import (CellOut, ClockIn, ClockOut, ControllerIn, ControllerOut, PhysicsIn,

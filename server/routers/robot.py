@@ -1,19 +1,19 @@
 """Robot: the emulated arm's joints, jogging, active tool and base, and the approach motion.
 
 Every motion moves the commanded joints (what the controller shows), turns the backlash
-flanks of the joints that moved and advances the emulated clock (server.emulator)."""
+flanks of the joints that moved and advances the emulated clock (emulator)."""
 
 from __future__ import annotations
 
 import numpy as np
 from fastapi import APIRouter, Response
 
+import emulator
 from db import crud
 from db.models import Controller
-from server import emulator
 from server.deps import SessionDep
 from server.preconditions import IfMatch, check, set_etag
-from server.routers.common import active_frames, cell_of, robot_of
+from server.routers.common import active_frames, cell_of, robot_of, state_of, store_state
 from server.schemas import ActiveIn, ApproachIn, JogIn, JointsIn, PoseOut, RobotStateOut
 from solvers.dh import check_joint_limits, forward_kinematics
 from solvers.errors import CalibrationError
@@ -52,15 +52,8 @@ def physics_of(db: SessionDep, c: Controller) -> emulator.RobotPhysics:
 
 def move_to(c: Controller, q: object, extra_s: float = 0.0) -> None:
     """Command joints ``q``: the joints that moved turn their flank, the clock advances by the
-    move's time plus ``extra_s``."""
-    robot = robot_of(c)
-    q_new = [float(x) for x in q]  # type: ignore[union-attr]
-    signs = np.zeros(robot.dof) if c.motion_sign is None else np.array(c.motion_sign, float)
-    c.motion_sign = emulator.updated_signs(signs, c.joints_deg, q_new).tolist()
-    c.clock_s = float(c.clock_s or 0.0) + emulator.motion_duration_s(robot, c.joints_deg, q_new) \
-        + extra_s
-    c.motion_count = int(c.motion_count or 0) + 1
-    c.joints_deg = q_new
+    move's time plus ``extra_s`` (:func:`emulator.moved` on the typed state)."""
+    store_state(c, emulator.moved(robot_of(c), state_of(c), q, extra_s))
 
 
 def _controller(db: SessionDep, controller_id: int, if_match: str | None) -> Controller:

@@ -11,14 +11,14 @@ from typing import Any
 import numpy as np
 from fastapi import APIRouter, Body, Response
 
+import emulator
 from db import crud
-from server import emulator
 from server.deps import SessionDep
 from server.preconditions import IfMatch, check, set_etag
 from server.methods import METHODS, PARAM_HELP
 from server.routers.common import (cell_of, check_step, entry_matrix, entry_out, flange_pose_of,
                                    next_step, resolve_inputs, robot_of, session_out, spec_of,
-                                   step_out, taught_data)
+                                   state_of, step_out, store_state, taught_data)
 from server.routers.robot import physics_of
 from server.schemas import (EntryOut, ReportOut, RunCycleOut, SessionIn, SessionOut, TouchUpIn,
                             jsonable)
@@ -106,7 +106,7 @@ def touch_up(controller_id: int, session_id: int, db: SessionDep, response: Resp
     sign = c.motion_sign if source == "touch_up" else None  # the emulated arm's flanks
     crud.put_point(db, s, step, source, pose.as_array(), joints, t_s=float(c.clock_s or 0.0),
                    motion_sign=sign)
-    c.clock_s = float(c.clock_s or 0.0) + emulator.TOUCH_UP_S
+    store_state(c, emulator.touched_up(state_of(c)))
     set_etag(response, db, s)
     return session_out(s)
 
@@ -243,10 +243,7 @@ def run_cycle(controller_id: int, session_id: int, db: SessionDep, response: Res
         crud.put_point(db, s, k, "beam", pose, run.trigger_joints_deg[k], ev.beam_id, ev.edge,
                        ev.tcp_velocity_mm_s, t_s=float(run.trigger_t_s[k]),
                        motion_sign=run.trigger_signs[k])
-    c.joints_deg = [float(q) for q in run.joints_deg]
-    c.motion_sign = [float(v) for v in run.motion_sign]
-    c.clock_s = float(run.clock_s)
-    c.motion_count = int(c.motion_count or 0) + 1
+    store_state(c, emulator.after_cycle(state_of(c), run))
     set_etag(response, db, s)
     return RunCycleOut(triggers=len(run.triggers), passes=run.passes, session=session_out(s))
 
