@@ -2,6 +2,7 @@
 
     pendant serve [--host 127.0.0.1] [--port 8000] [--db URL] [--workers N] [--no-migrate]
     pendant db upgrade [--db URL]
+    pendant slot tool|base N [--name ..] [--pose x,y,z,a,b,c] [--url URL]   (sends If-Match)
     pendant calibrate METHOD FILE [--robot KEY] [--tcp X,Y,Z] [--json]
     pendant export CONTROLLER --format kuka|abb|fanuc|ur|json [--db URL]
 
@@ -22,6 +23,7 @@ from typing import Any, Sequence
 import numpy as np
 
 from server.analysis_cli import add_analysis_commands
+from server.slot_cli import add_slot_command
 from server.methods import METHODS, MethodInputs, TaughtData
 from server.schemas import ReportOut
 from solvers.errors import CalibrationError
@@ -182,6 +184,7 @@ def build_parser() -> argparse.ArgumentParser:
     e.add_argument("--db", help="database URL")
 
     add_analysis_commands(sub)
+    add_slot_command(sub)
     return p
 
 

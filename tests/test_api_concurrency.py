@@ -157,3 +157,25 @@ def test_db_upgrade_then_serve_without_migrating(tmp_path, capsys):  # noqa: ANN
     assert main(["db", "upgrade", "--db", url]) == 0
     assert "nothing to do" in capsys.readouterr().out
     create_app(Settings(db_url=url, migrate=False))  # the schema is the code's: it serves
+
+
+def test_the_cli_edits_a_slot_with_if_match(tmp_path, capsys):  # noqa: ANN001
+    """``pendant slot`` against a running service: reads the ETag, writes with If-Match, and
+    refuses (exit 3, nothing written) when the ETag it is given is stale."""
+    import httpx
+
+    from browser_helpers import serve
+    from db_backends import fresh_url
+    from server.cli import main
+
+    with serve(fresh_url(tmp_path)) as url:
+        first = httpx.get(f"{url}{C}/tools/8").headers["ETag"]
+        assert main(["slot", "tool", "8", "--url", url, "--name", "pointer",
+                     "--pose", "1,2,180,0,0,0"]) == 0
+        assert "'pointer'" in capsys.readouterr().out
+        assert main(["slot", "tool", "8", "--url", url, "--name", "late", "--etag", first]) == 3
+        err = capsys.readouterr().err
+        assert "changed since it was read" in err and "'pointer'" in err
+        assert httpx.get(f"{url}{C}/tools/8").json()["name"] == "pointer"
+        assert main(["slot", "tool", "8", "--url", url]) == 0
+        assert "z 180.000" in capsys.readouterr().out
