@@ -27,7 +27,7 @@ import numpy as np
 ROOT = Path(__file__).resolve().parent.parent
 sys.path.insert(0, str(ROOT))
 
-from server.emulator import approach, cell_for, home_joints  # noqa: E402
+from emulator import approach, cell_for, home_joints  # noqa: E402
 from solvers.robots import ROBOTS  # noqa: E402
 
 ORIENTATIONS = ((0.0, 0.0, 0.0), (30.0, 0.0, 0.0), (30.0, 120.0, 90.0), (30.0, 240.0, -90.0))

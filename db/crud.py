@@ -11,6 +11,7 @@ from datetime import datetime
 from typing import Any
 
 from sqlalchemy import select
+from sqlalchemy.exc import IntegrityError
 from sqlalchemy.orm import Session
 
 from db.models import (BASE_SLOTS, TOOL_SLOTS, CalibSession, Controller, ControllerFile,
@@ -18,6 +19,7 @@ from db.models import (BASE_SLOTS, TOOL_SLOTS, CalibSession, Controller, Control
 
 SLOTS = {"tool": TOOL_SLOTS, "base": BASE_SLOTS}
 MAX_ID = 2**63 - 1  # SQLite INTEGER: a larger id cannot be a row (and would overflow the driver)
+MAX_ID_OF = {"postgresql": 2**31 - 1}  # INTEGER primary keys of other backends (PostgreSQL int4)
 DEFAULT_KIND = {"tool": "tool", "base": "base"}
 KINDS_OF_TABLE = {"tool": ("tool", "workpiece"),
                   "base": ("base", "fixed_tool", "coordinated_base")}
@@ -54,18 +56,39 @@ def create_controller(db: Session, name: str, robot_key: str | None, custom_robo
             e.set_pose_values((0.0,) * 6)
             c.entries.append(e)
     db.add(c)
-    db.flush()
+    try:
+        with db.begin_nested():
+            db.flush()
+    except IntegrityError:  # another process created the same name meanwhile
+        raise StateConflict(("body", "name"), f"a controller named {name!r} exists already") \
+            from None
     return c
 
 
-def _row_id(value: int) -> int | None:
-    """``value`` if it can be a row id, else None (not found, not an overflow in the driver)."""
-    return value if -MAX_ID <= value <= MAX_ID else None
+def max_id(db: Session) -> int:
+    """The largest row id of this backend (ids are INTEGER primary keys)."""
+    return MAX_ID_OF.get(db.get_bind().dialect.name, MAX_ID)
+
+
+def _row_id(value: int, db: Session | None = None) -> int | None:
+    """``value`` if it can be a row id of ``db``'s backend, else None (not found, rather than an
+    overflow in the driver or the server)."""
+    limit = MAX_ID if db is None else max_id(db)
+    return value if -limit <= value <= limit else None
 
 
 def _get(db: Session, model: type, row_id: int) -> Any:
-    rid = _row_id(row_id)
+    rid = _row_id(row_id, db)
     return None if rid is None else db.get(model, rid)
+
+
+def lock_controller(db: Session, controller_id: int) -> None:
+    """Start the request's write: lock the controller's row until commit (``SELECT ... FOR
+    UPDATE`` on PostgreSQL; on SQLite the transaction's ``BEGIN IMMEDIATE`` already locks the
+    database). Everything the request then reads of this controller is what it will change."""
+    rid = _row_id(controller_id, db)
+    if rid is not None:
+        db.execute(select(Controller.id).where(Controller.id == rid).with_for_update())
 
 
 def get_controller(db: Session, controller_id: int) -> Controller:
@@ -97,7 +120,7 @@ def delete_controller(db: Session, controller: Controller) -> None:
 def get_entry(db: Session, controller_id: int, table: str, number: int) -> FrameEntry:
     if not 1 <= number <= SLOTS[table]:
         raise NotFound(("number",), f"{table} slots are numbered 1..{SLOTS[table]}, got {number}")
-    if _row_id(controller_id) is None:
+    if _row_id(controller_id, db) is None:
         raise NotFound(("controller_id",), f"no controller {controller_id}")
     e = db.scalar(select(FrameEntry).where(FrameEntry.controller_id == controller_id,
                                            FrameEntry.entry_table == table,
@@ -168,13 +191,19 @@ def history(db: Session, controller_id: int, table: str | None = None,
     return list(db.scalars(q.order_by(EntryHistory.id)))
 
 
-def restore_entry(db: Session, e: FrameEntry, history_id: int) -> EntryHistory:
-    """Put the slot back to the state *before* history row ``history_id`` (recorded as a change)."""
+def get_history(db: Session, e: FrameEntry, history_id: int) -> EntryHistory:
+    """History row ``history_id`` of slot ``e``; NotFound naming ``history_id`` otherwise."""
     h = _get(db, EntryHistory, history_id)
     slot = (e.controller_id, e.entry_table, e.number)
     if h is None or (h.controller_id, h.entry_table, h.number) != slot:
         raise NotFound(("history_id",),
                        f"no history entry {history_id} for {e.entry_table} {e.number}")
+    return h
+
+
+def restore_entry(db: Session, e: FrameEntry, history_id: int) -> EntryHistory:
+    """Put the slot back to the state *before* history row ``history_id`` (recorded as a change)."""
+    h = get_history(db, e, history_id)
     values = {f: h.before[f] for f in ENTRY_FIELDS if f in h.before and f != "updated_at"}
     return change_entry(db, e, values, reason="restore", session_id=h.session_id)
 
@@ -254,6 +283,11 @@ def put_point(db: Session, s: CalibSession, step: int, source: str, pose_values:
     return p
 
 
+def touch_session(s: CalibSession) -> None:
+    """Mark a change of the session (its points too): bumps its version (the ETag)."""
+    s.updated_at = utcnow()
+
+
 def delete_point(db: Session, s: CalibSession, step: int) -> None:
     require_open(s)
     p = next((p for p in s.points if p.step == step), None)
@@ -272,6 +306,7 @@ def clear_points(db: Session, s: CalibSession) -> None:
 
 
 def _stale(s: CalibSession) -> None:
+    touch_session(s)
     if s.state == "computed":
         s.state = "open"
         s.report = None
@@ -285,6 +320,7 @@ def store_result(db: Session, s: CalibSession, pose_values: Sequence[float],
     s.report = report
     s.state = "computed"
     s.computed_at = utcnow()
+    touch_session(s)
     db.flush()
     return s
 
@@ -292,6 +328,7 @@ def store_result(db: Session, s: CalibSession, pose_values: Sequence[float],
 def close_session(db: Session, s: CalibSession, state: str) -> None:
     s.state = state
     s.closed_at = utcnow()
+    touch_session(s)
     db.flush()
 
 

@@ -9,8 +9,8 @@ from __future__ import annotations
 from datetime import datetime, timezone
 from typing import Any
 
-from sqlalchemy import (JSON, DateTime, ForeignKey, MetaData, String, Text, TypeDecorator,
-                        UniqueConstraint)
+from sqlalchemy import (JSON, BigInteger, DateTime, ForeignKey, LargeBinary, MetaData, String, Text,
+                        TypeDecorator, UniqueConstraint)
 from sqlalchemy.orm import DeclarativeBase, Mapped, mapped_column, relationship
 
 NAMING_CONVENTION = {
@@ -80,7 +80,7 @@ class Controller(Base):
     name: Mapped[str] = mapped_column(String(64), unique=True)
     robot_key: Mapped[str | None] = mapped_column(String(64))  # solvers.robots.ROBOTS key
     custom_robot: Mapped[dict[str, Any] | None]  # custom DH table (a document, not a frame)
-    cell_seed: Mapped[int] = mapped_column(default=1)  # the emulated cell's hidden truth
+    cell_seed: Mapped[int] = mapped_column(BigInteger, default=1)  # the cell's hidden truth
     joints_deg: Mapped[list[float]]  # the emulated robot's current joint values
     active_tool_no: Mapped[int] = mapped_column(default=0)  # 0 = flange
     active_base_no: Mapped[int] = mapped_column(default=0)  # 0 = world (robot base)
@@ -93,8 +93,12 @@ class Controller(Base):
     motion_sign: Mapped[list[float] | None]
     motion_count: Mapped[int] = mapped_column(default=0, server_default="0")
 
+    # revision 0003: bumped by every UPDATE of the row (the ETag of controller and robot)
+    version: Mapped[int] = mapped_column(default=1, server_default="1")
+
     entries: Mapped[list[FrameEntry]] = relationship(back_populates="controller",
                                                      cascade="all, delete-orphan")
+    __mapper_args__ = {"version_id_col": version}
 
 
 class FrameEntry(PoseColumns, Base):
@@ -131,8 +135,10 @@ class FrameEntry(PoseColumns, Base):
     error_max_mm: Mapped[float | None]
     error_rms_mm: Mapped[float | None]
     updated_at: Mapped[datetime | None]
+    version: Mapped[int] = mapped_column(default=1, server_default="1")  # 0003: the slot's ETag
 
     controller: Mapped[Controller] = relationship(back_populates="entries")
+    __mapper_args__ = {"version_id_col": version}
 
 
 class EntryHistory(Base):
@@ -177,10 +183,17 @@ class CalibSession(Base):
     result_b_deg: Mapped[float | None]
     result_c_deg: Mapped[float | None]
     report: Mapped[dict[str, Any] | None]
+    # revision 0003: the session's ETag (bumped by every change, taught points included via
+    # updated_at) and the target slot's version when the result was computed (save refuses a
+    # slot that changed since)
+    version: Mapped[int] = mapped_column(default=1, server_default="1")
+    updated_at: Mapped[datetime | None]
+    target_version: Mapped[int | None]
 
     points: Mapped[list[TaughtPoint]] = relationship(back_populates="session",
                                                      order_by="TaughtPoint.step",
                                                      cascade="all, delete-orphan")
+    __mapper_args__ = {"version_id_col": version}
 
     def result_values(self) -> tuple[float, ...] | None:
         v = (self.result_x_mm, self.result_y_mm, self.result_z_mm, self.result_a_deg,
@@ -232,6 +245,7 @@ class StoredDocument(Base):
     created_at: Mapped[datetime] = mapped_column(default=utcnow)
 
 
+<<<<<<< HEAD
 class ControllerFile(Base):
     """The controller file last imported in a format, kept as sent (revision 0003_files).
 
@@ -247,3 +261,23 @@ class ControllerFile(Base):
     format: Mapped[str] = mapped_column(String(8))  # kuka | abb | fanuc | ur
     text: Mapped[str] = mapped_column(Text)
     imported_at: Mapped[datetime] = mapped_column(default=utcnow)
+=======
+class IdempotencyKey(Base):
+    """A POST that carried ``Idempotency-Key``: its fingerprint and, once answered, the response.
+
+    The row is inserted in the request's own transaction (so it exists only if the command's
+    changes were committed) and the response is stored right after it is sent; see
+    :mod:`server.idempotency`.
+    """
+
+    __tablename__ = "idempotency_key"
+
+    key: Mapped[str] = mapped_column(String(255), primary_key=True)
+    fingerprint: Mapped[str] = mapped_column(String(64))  # sha256 of method, path and body
+    method: Mapped[str] = mapped_column(String(8))
+    path: Mapped[str] = mapped_column(String(512))
+    status: Mapped[int | None]
+    headers: Mapped[dict[str, Any] | None]
+    body: Mapped[bytes | None] = mapped_column(LargeBinary)
+    created_at: Mapped[datetime] = mapped_column(default=utcnow, index=True)
+>>>>>>> scaleout

@@ -1,15 +1,33 @@
-"""Engine and sessions: SQLite in WAL mode by default, Alembic migrations run at startup."""
+"""Engine, sessions and the schema step.
+
+SQLite runs in WAL mode; SQLAlchemy's pysqlite recipe hands transactions to SQLite itself so a
+writing request can start with ``BEGIN IMMEDIATE`` (it takes the database's write lock first,
+across processes, before it reads what it will change). PostgreSQL writers lock the rows they
+change with ``SELECT ... FOR UPDATE`` instead (see :func:`lock_for_write`).
+
+Migrations are a step of their own (``pendant db upgrade``): :func:`upgrade` runs Alembic
+under a database-wide lock (``pg_advisory_lock`` on PostgreSQL, an exclusive ``flock`` on a
+file beside the SQLite database), so several processes starting on one fresh database migrate
+it once; :func:`schema_status` tells ``serve`` whether the schema is the code's.
+"""
 
 from __future__ import annotations
 
+import contextlib
+import fcntl
+from collections.abc import Iterator
 from pathlib import Path
 
 from alembic import command
 from alembic.config import Config
-from sqlalchemy import Engine, create_engine, event
+from alembic.runtime.migration import MigrationContext
+from alembic.script import ScriptDirectory
+from sqlalchemy import Engine, create_engine, event, text
 from sqlalchemy.orm import Session, sessionmaker
 
 DB_DIR = Path(__file__).resolve().parent
+WRITE = {"sqlite_begin": "BEGIN IMMEDIATE"}  # execution options of a writing session
+MIGRATION_LOCK_ID = 0x70656E64  # "pend": the pg_advisory_lock key of the schema step
 
 
 def make_engine(url: str) -> Engine:
@@ -17,22 +35,41 @@ def make_engine(url: str) -> Engine:
     is_sqlite = url.startswith("sqlite")
     connect_args = {"check_same_thread": False, "timeout": 30} if is_sqlite else {}
     engine = create_engine(url, connect_args=connect_args, pool_size=30 if is_sqlite else 5,
-                           max_overflow=10)
+                           max_overflow=10, pool_pre_ping=not is_sqlite)
     if is_sqlite:
         @event.listens_for(engine, "connect")
         def _pragmas(dbapi_conn, _record) -> None:  # noqa: ANN001
+            dbapi_conn.isolation_level = None  # pysqlite emits no BEGIN of its own: _begin does
             cur = dbapi_conn.cursor()
             cur.execute("PRAGMA journal_mode=WAL")
             cur.execute("PRAGMA synchronous=NORMAL")
             cur.execute("PRAGMA foreign_keys=ON")
             cur.execute("PRAGMA busy_timeout=30000")
             cur.close()
+
+        @event.listens_for(engine, "begin")
+        def _begin(conn) -> None:  # noqa: ANN001
+            # a writer takes SQLite's write lock now (BEGIN IMMEDIATE), not at its first
+            # write: so what it read cannot be changed by another process before it writes
+            conn.exec_driver_sql(conn.get_execution_options().get("sqlite_begin", "BEGIN"))
     return engine
 
 
 def make_sessionmaker(engine: Engine) -> sessionmaker[Session]:
     return sessionmaker(bind=engine, expire_on_commit=False)
 
+
+def write_session(maker: sessionmaker[Session]) -> Session:
+    """A session whose transaction is a writer's: ``BEGIN IMMEDIATE`` on SQLite."""
+    return maker(bind=maker.kw["bind"].execution_options(**WRITE))
+
+
+def is_postgres(db: Session | Engine) -> bool:
+    bind = db.get_bind() if isinstance(db, Session) else db
+    return bind.dialect.name == "postgresql"
+
+
+# ------------------------------------------------------------------------------- schema
 
 def alembic_config(url: str) -> Config:
     cfg = Config(str(DB_DIR / "alembic.ini"))
@@ -41,9 +78,60 @@ def alembic_config(url: str) -> Config:
     return cfg
 
 
+def _url(engine: Engine) -> str:
+    return engine.url.render_as_string(hide_password=False)
+
+
+def head_revision(engine: Engine) -> str:
+    return ScriptDirectory.from_config(alembic_config(_url(engine))).get_current_head()
+
+
+def schema_status(engine: Engine) -> tuple[str | None, str]:
+    """(the database's Alembic revision or None when empty, the code's head revision)."""
+    with engine.connect() as conn:
+        current = MigrationContext.configure(conn).get_current_revision()
+    return current, head_revision(engine)
+
+
+@contextlib.contextmanager
+def migration_lock(engine: Engine) -> Iterator[None]:
+    """One schema step at a time per database: ``pg_advisory_lock`` on PostgreSQL (held by a
+    connection, released when it ends), an exclusive ``flock`` on ``<db>.migrate.lock`` beside
+    a SQLite file (an in-memory database belongs to one process anyway)."""
+    if engine.dialect.name == "postgresql":
+        with engine.connect() as conn:
+            conn.execute(text("SELECT pg_advisory_lock(:k)"), {"k": MIGRATION_LOCK_ID})
+            conn.commit()
+            try:
+                yield
+            finally:
+                conn.execute(text("SELECT pg_advisory_unlock(:k)"), {"k": MIGRATION_LOCK_ID})
+                conn.commit()
+        return
+    path = engine.url.database
+    if engine.dialect.name != "sqlite" or not path or path == ":memory:":
+        yield
+        return
+    with open(f"{path}.migrate.lock", "a+b") as f:
+        fcntl.flock(f, fcntl.LOCK_EX)
+        try:
+            yield
+        finally:
+            fcntl.flock(f, fcntl.LOCK_UN)
+
+
 def run_migrations(engine: Engine) -> None:
-    """Bring the schema to the newest Alembic revision (``alembic upgrade head``)."""
-    cfg = alembic_config(str(engine.url.render_as_string(hide_password=False)))
+    """Bring the schema to the newest Alembic revision (``alembic upgrade head``), unlocked."""
+    cfg = alembic_config(_url(engine))
     with engine.begin() as connection:
         cfg.attributes["connection"] = connection
         command.upgrade(cfg, "head")
+
+
+def upgrade(engine: Engine) -> tuple[str | None, str]:
+    """``pendant db upgrade``: migrate to head under :func:`migration_lock`; (from, to)."""
+    with migration_lock(engine):
+        current, head = schema_status(engine)
+        if current != head:
+            run_migrations(engine)
+        return current, head

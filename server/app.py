@@ -1,13 +1,15 @@
 """The FastAPI application: routers per menu, error handlers, the DB, the pendant page.
 
-``create_app(settings)`` migrates the DB (Alembic ``upgrade head``), creates the demo
-controller "cell-1" (KUKA KR 6 R900 sixx) in an empty DB and serves ``web/`` at ``/``.
-``uvicorn server.app:app`` uses the default settings (``PENDANT_DB_URL`` or the user data dir).
+``create_app(settings)`` checks the DB's schema: an old one is migrated (Alembic ``upgrade
+head``) under a database-wide lock when ``settings.migrate`` (the default, so the README's
+``pendant serve`` works on a fresh machine), else refused naming ``pendant db upgrade``. It
+creates the demo controller "cell-1" (KUKA KR 6 R900 sixx) in an empty DB and serves ``web/``
+at ``/``. ``uvicorn server.app:app`` uses the default settings (``PENDANT_DB_URL`` or the user
+data dir); ``pendant serve --workers N`` starts N such processes on one database.
 """
 
 from __future__ import annotations
 
-import asyncio
 from pathlib import Path
 
 from fastapi import FastAPI
@@ -15,9 +17,10 @@ from fastapi.responses import FileResponse, HTMLResponse
 from fastapi.staticfiles import StaticFiles
 
 from db import crud
-from db.session import make_engine, make_sessionmaker, run_migrations
-from server import errors
-from server.emulator import DEMO_ROBOT, home_joints
+from db.session import (make_engine, make_sessionmaker, migration_lock, schema_status, upgrade,
+                        write_session)
+from server import deps, errors, idempotency
+from emulator import DEMO_ROBOT, home_joints
 from server.routers import (analysis, base, controllers, export, fixed_tool, robot, sessions, tool,
                             workpiece)
 from server.settings import Settings
@@ -43,13 +46,29 @@ PLACEHOLDER = """<!doctype html><html><head><meta charset="utf-8"><title>pendant
 at <a href="/docs">/docs</a>.</p></body></html>"""
 
 
+class SchemaOutOfDate(RuntimeError):
+    """The DB's schema is not the code's and ``serve`` was told not to migrate."""
+
+
 def ensure_demo(app: FastAPI) -> None:
-    """An empty DB gets the demo controller "cell-1" so the pendant page has something to show."""
-    with app.state.sessionmaker() as db:
+    """An empty DB gets the demo controller "cell-1" so the pendant page has something to show
+    (under the schema lock: N workers starting on a fresh DB create it once)."""
+    with migration_lock(app.state.engine), write_session(app.state.sessionmaker) as db:
         if not crud.list_controllers(db):
             joints = home_joints(ROBOTS[DEMO_ROBOT])
             crud.create_controller(db, "cell-1", DEMO_ROBOT, None, 1, joints)
-            db.commit()
+        db.commit()
+
+
+def check_schema(engine, migrate: bool) -> None:  # noqa: ANN001
+    """Migrate an old schema under the lock, or refuse naming the command (``migrate=False``)."""
+    if migrate:
+        upgrade(engine)
+        return
+    current, head = schema_status(engine)
+    if current != head:
+        raise SchemaOutOfDate(f"the database is at schema {current or 'empty'}, this pendant "
+                              f"needs {head}: run `pendant db upgrade` first")
 
 
 def create_app(settings: Settings | None = None) -> FastAPI:
@@ -58,12 +77,14 @@ def create_app(settings: Settings | None = None) -> FastAPI:
                   description="A controller-side teach-pendant emulator: tool, base, "
                               "fixed-tool and workpiece calibration menus as a REST service.")
     engine = make_engine(settings.db_url)
-    run_migrations(engine)
+    check_schema(engine, settings.migrate)
     app.state.engine = engine
     app.state.sessionmaker = make_sessionmaker(engine)
-    app.state.write_lock = asyncio.Lock()  # one writer at a time (SQLite); see deps.get_session
     app.state.settings = settings
+    deps.install(app)
     errors.install(app)
+    idempotency.install(app)
+    _install_health(app)
     for module in (controllers, robot, tool, base, fixed_tool, workpiece, sessions, export,
                    analysis):
         app.include_router(module.router)
@@ -71,6 +92,15 @@ def create_app(settings: Settings | None = None) -> FastAPI:
         ensure_demo(app)
     _mount_web(app, Path(settings.web_dir))
     return app
+
+
+def _install_health(app: FastAPI) -> None:
+    @app.get("/healthz", tags=["Controllers"], summary="Liveness and readiness: the DB answers")
+    def healthz() -> dict[str, str]:
+        """``{"status": "ok", "schema": <revision>}`` when the database answers (load
+        balancers and compose health checks poll this)."""
+        current, _ = schema_status(app.state.engine)
+        return {"status": "ok", "schema": current or ""}
 
 
 def _mount_web(app: FastAPI, web: Path) -> None:

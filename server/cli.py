@@ -1,6 +1,8 @@
 """The ``pendant`` command: serve the pendant, calibrate from a file, export a controller's tables.
 
-    pendant serve [--host 127.0.0.1] [--port 8000] [--db URL]
+    pendant serve [--host 127.0.0.1] [--port 8000] [--db URL] [--workers N] [--no-migrate]
+    pendant db upgrade [--db URL]
+    pendant slot tool|base N [--name ..] [--pose x,y,z,a,b,c] [--url URL]   (sends If-Match)
     pendant calibrate METHOD FILE [--robot KEY] [--tcp X,Y,Z] [--json]
     pendant export CONTROLLER --format kuka|abb|fanuc|ur|json [--db URL]
     pendant import FILE --controller NAME [--format kuka|abb|fanuc|ur] [--dry-run] [--db URL]
@@ -22,6 +24,7 @@ from typing import Any, Sequence
 import numpy as np
 
 from server.analysis_cli import add_analysis_commands
+from server.slot_cli import add_slot_command
 from server.methods import METHODS, MethodInputs, TaughtData
 from server.schemas import ReportOut
 from solvers.errors import CalibrationError
@@ -159,6 +162,16 @@ def build_parser() -> argparse.ArgumentParser:
     s.add_argument("--port", type=int, default=8000)
     s.add_argument("--db", help="database URL (default: PENDANT_DB_URL, else a SQLite file in "
                                 "the user data dir)")
+    s.add_argument("--workers", type=int, default=1,
+                   help="API processes on this port (uvicorn workers; all share the database)")
+    s.add_argument("--no-migrate", action="store_true",
+                   help="refuse an old schema instead of migrating it (run `pendant db upgrade`)")
+
+    d = sub.add_parser("db", help="the database's schema")
+    dsub = d.add_subparsers(dest="db_command", required=True)
+    up = dsub.add_parser("upgrade", help="migrate the schema to this version's (Alembic upgrade "
+                                         "head, under a database-wide lock)")
+    up.add_argument("--db", help="database URL")
 
     c = sub.add_parser("calibrate",
                        help="solve a calibration menu from taught poses in a JSON/CSV file")
@@ -187,6 +200,7 @@ def build_parser() -> argparse.ArgumentParser:
     i.add_argument("--db", help="database URL")
 
     add_analysis_commands(sub)
+    add_slot_command(sub)
     return p
 
 
@@ -238,15 +252,55 @@ def _settings(db: str | None):  # noqa: ANN202
     return Settings(db_url=db) if db else Settings()
 
 
+class SchemaOutOfDate(RuntimeError):
+    """Raised by ``serve --no-migrate`` on an old schema (server.app.SchemaOutOfDate)."""
+
+
+def serve(args: argparse.Namespace) -> int:
+    """Run the service: one process, or ``--workers N`` uvicorn processes on one database.
+
+    The schema is checked once here, before any worker starts (migrated under the database
+    lock, or refused with ``--no-migrate``); each worker checks it again."""
+    import os
+
+    import uvicorn
+
+    from server import app as app_module
+    from server.settings import ENV_DB_URL, ENV_MIGRATE
+
+    settings = _settings(args.db)
+    if args.workers < 1:
+        raise CalibrationError(("--workers",), f"must be >= 1, got {args.workers}")
+    try:
+        if args.workers == 1:
+            from dataclasses import replace
+
+            application = app_module.create_app(replace(settings, migrate=not args.no_migrate))
+            uvicorn.run(application, host=args.host, port=args.port)
+            return 0
+        from db.session import make_engine
+
+        app_module.check_schema(make_engine(settings.db_url), not args.no_migrate)
+    except app_module.SchemaOutOfDate as err:
+        raise SchemaOutOfDate(str(err)) from None
+    os.environ[ENV_DB_URL] = settings.db_url  # the workers build server.app:app from these
+    os.environ[ENV_MIGRATE] = "0" if args.no_migrate else "1"
+    uvicorn.run("server.app:app", host=args.host, port=args.port, workers=args.workers)
+    return 0
+
+
 def main(argv: Sequence[str] | None = None) -> int:
     args = build_parser().parse_args(argv)
     try:
         if args.command == "serve":
-            import uvicorn
+            return serve(args)
+        if args.command == "db":
+            from db.session import make_engine, upgrade
 
-            from server.app import create_app
-
-            uvicorn.run(create_app(_settings(args.db)), host=args.host, port=args.port)
+            url = _settings(args.db).db_url
+            before, head = upgrade(make_engine(url))
+            print(f"pendant: schema {before or 'empty'} -> {head}" if before != head
+                  else f"pendant: schema is {head} (nothing to do)")
             return 0
         if args.command == "calibrate":
             given = (("tcp_mm", args.tcp), ("reference_tcp_mm", args.reference_tcp),
@@ -270,6 +324,9 @@ def main(argv: Sequence[str] | None = None) -> int:
         if args.command == "import":
             return import_file(args)
         return int(args.func(args) or 0) if hasattr(args, "func") else 2
+    except SchemaOutOfDate as err:
+        print(f"pendant: {err}", file=sys.stderr)
+        return 2
     except CalibrationError as err:
         print(f"pendant: {'.'.join(str(x) for x in err.loc)}: {err.reason}", file=sys.stderr)
         return 2

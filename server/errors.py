@@ -12,9 +12,11 @@ import logging
 from fastapi import FastAPI, Request
 from fastapi.exceptions import RequestValidationError
 from fastapi.responses import JSONResponse
+from sqlalchemy.orm.exc import StaleDataError
 from starlette.exceptions import HTTPException
 
 from db.crud import NotFound, StateConflict
+from server.preconditions import PreconditionFailed, PreconditionRequired, etag
 from solvers.errors import CalibrationError, KinematicsError
 
 log = logging.getLogger("pendant")
@@ -71,6 +73,29 @@ def install(app: FastAPI) -> None:
     @app.exception_handler(StateConflict)
     async def _conflict(_: Request, exc: StateConflict) -> JSONResponse:
         return JSONResponse(status_code=409, content=detail(exc.loc, exc.reason, "conflict"))
+
+    @app.exception_handler(PreconditionFailed)
+    async def _stale(_: Request, exc: PreconditionFailed) -> JSONResponse:
+        msg = (f"{exc.what} changed since you read it: If-Match {exc.sent} but its ETag is now "
+               f"{etag(exc.version)}; nothing was written. Its current value is in 'current'")
+        content = {**detail(("header", "If-Match"), msg, "precondition_failed"),
+                   "current": exc.current}
+        return JSONResponse(status_code=412, content=content, headers={"ETag": etag(exc.version)})
+
+    @app.exception_handler(PreconditionRequired)
+    async def _required(_: Request, exc: PreconditionRequired) -> JSONResponse:
+        msg = (f"writing {exc.what} needs If-Match: GET it, then send its ETag (or * to "
+               "overwrite whatever it holds)")
+        return JSONResponse(status_code=428, content=detail(("header", "If-Match"), msg,
+                                                            "precondition_required"))
+
+    @app.exception_handler(StaleDataError)
+    async def _lost_race(_: Request, exc: StaleDataError) -> JSONResponse:
+        # a row's version changed under this write (cannot happen under the row lock, but a
+        # version check that fails must never be a silent overwrite)
+        return JSONResponse(status_code=409, content=detail(
+            (), "the row changed while this request ran; nothing was written: read and retry",
+            "conflict"))
 
     @app.exception_handler(Exception)
     async def _unexpected(request: Request, exc: Exception) -> JSONResponse:

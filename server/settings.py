@@ -10,6 +10,7 @@ import platformdirs
 
 ROOT = Path(__file__).resolve().parent.parent
 ENV_DB_URL = "PENDANT_DB_URL"
+ENV_MIGRATE = "PENDANT_MIGRATE"  # "0": serve refuses an old schema instead of migrating it
 
 
 def default_db_url() -> str:
@@ -27,3 +28,5 @@ class Settings:
     db_url: str = field(default_factory=default_db_url)
     web_dir: Path = ROOT / "web"
     demo_controller: bool = True  # create "cell-1" (KUKA KR 6 R900 sixx) in an empty DB
+    migrate: bool = field(default_factory=lambda: os.environ.get(ENV_MIGRATE, "1") != "0")
+    # migrate an old schema at start (under the DB lock); False: refuse, name `pendant db upgrade`

@@ -14,7 +14,7 @@ import pytest
 from fastapi.testclient import TestClient
 
 from server.app import create_app
-from server.emulator import Cell, cell_for
+from emulator import Cell, cell_for
 from server.settings import Settings
 from solvers.frames import Pose
 from solvers.robots import ROBOTS
@@ -31,7 +31,10 @@ def make_client(db_url: str) -> TestClient:
 
 @pytest.fixture
 def db_url(tmp_path: Path) -> str:
-    return f"sqlite:///{tmp_path / 'pendant.db'}"
+    """A fresh database: a SQLite file, or PostgreSQL in the suite's PostgreSQL pass."""
+    from db_backends import fresh_url
+
+    return fresh_url(tmp_path)
 
 
 @pytest.fixture
@@ -45,6 +48,18 @@ def ok(r):  # noqa: ANN001, ANN201
     assert r.status_code < 300, \
         f"{r.request.method} {r.request.url.path} -> {r.status_code}: {r.text}"
     return r.json()
+
+
+def edit_slot(client: TestClient, path: str, body: dict):  # noqa: ANN201
+    """PUT a slot as a person does: read it (its ETag), then write with ``If-Match``."""
+    etag = client.get(path).headers["ETag"]
+    return client.put(path, json=body, headers={"If-Match": etag})
+
+
+def restore_slot(client: TestClient, path: str, history_id: int):  # noqa: ANN201
+    """POST ``{path}/restore/{history_id}`` with the slot's current ETag as ``If-Match``."""
+    etag = client.get(path).headers.get("ETag", "*")
+    return client.post(f"{path}/restore/{history_id}", headers={"If-Match": etag})
 
 
 def open_session(client: TestClient, method: str, target_no: int = 1, controller: str = C,
@@ -107,5 +122,6 @@ def calibrated_pointer(client: TestClient, number: int = 1) -> dict:
 
 
 __all__ = ["C", "CELL", "TRUE_TCP_MM", "make_client", "db_url", "client", "ok", "open_session",
+           "edit_slot", "restore_slot",
            "approach", "walk", "calibrate", "pose_array", "pose_matrix", "angle_deg",
            "calibrated_pointer"]

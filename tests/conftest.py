@@ -22,11 +22,12 @@ def robot(request):
 
 @pytest.fixture(scope="module")
 def site(tmp_path_factory: pytest.TempPathFactory):  # noqa: ANN201
-    """The real service (uvicorn, loopback, free port) on a fresh SQLite file per module."""
+    """The real service (uvicorn, loopback, free port) on a fresh database per module."""
     from browser_helpers import serve
 
-    db = tmp_path_factory.mktemp("site") / "pendant.db"
-    with serve(f"sqlite:///{db}") as url:
+    from db_backends import fresh_url
+
+    with serve(fresh_url(tmp_path_factory.mktemp("site"))) as url:
         yield url
 
 

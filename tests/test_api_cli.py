@@ -9,7 +9,7 @@ import pytest
 
 from api_helpers import CELL, TRUE_TCP_MM
 from server.cli import main
-from server.emulator import approach, home_joints
+from emulator import approach, home_joints
 from solvers.dh import forward_kinematics
 from solvers.frames import Pose
 from solvers.robots import ROBOTS

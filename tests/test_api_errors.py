@@ -134,6 +134,6 @@ def test_walk_refuses_a_step_beyond_the_menu(client):
 
 
 def test_slot_kind_must_fit_its_table(client):
-    d = _detail(client.put(f"{C}/tools/1", json={"kind": "fixed_tool"}))
+    d = _detail(edit_slot(client, f"{C}/tools/1", {"kind": "fixed_tool"}))
     assert d["loc"] == ["body", "kind"] and "tool or workpiece" in d["msg"]
-    assert ok(client.put(f"{C}/tools/1", json={"kind": "workpiece"}))["kind"] == "workpiece"
+    assert ok(edit_slot(client, f"{C}/tools/1", {"kind": "workpiece"}))["kind"] == "workpiece"

@@ -10,22 +10,22 @@ from api_helpers import C, TRUE_TCP_MM, calibrate, ok, pose_array
 
 def test_history_records_before_after_and_restore(client):
     calibrate(client, "tool.xyz_4point", 1)
-    ok(client.put(f"{C}/tools/1", json={"name": "pointer", "load": {"mass_kg": 1.2, "com_mm": [0, 0, 60]}}))
+    ok(edit_slot(client, f"{C}/tools/1", {"name": "pointer", "load": {"mass_kg": 1.2, "com_mm": [0, 0, 60]}}))
     hist = ok(client.get(f"{C}/tools/1/history"))
     assert [h["reason"] for h in hist] == ["calibration", "edit"]
     assert hist[0]["before"]["z_mm"] == 0.0 and hist[0]["after"]["z_mm"] == pytest.approx(TRUE_TCP_MM[2], abs=1e-3)
     assert hist[0]["session_id"] is not None
-    slot = ok(client.post(f"{C}/tools/1/restore/{hist[0]['id']}"))  # back to before the calibration
+    slot = ok(restore_slot(client, f"{C}/tools/1", hist[0]['id']))  # back to before the calibration
     assert pose_array(slot["pose"]) == pytest.approx([0] * 6)
     assert len(ok(client.get(f"{C}/tools/1/history"))) == 3
-    assert client.post(f"{C}/tools/2/restore/{hist[0]['id']}").status_code == 404
+    assert restore_slot(client, f"{C}/tools/2", hist[0]['id']).status_code == 404
 
 
 @pytest.mark.parametrize("fmt", ["kuka", "abb", "fanuc", "ur"])
 def test_export_controller_files(client, fmt):
-    ok(client.put(f"{C}/tools/1", json={"name": "pointer", "pose": {"x": 1, "y": 2, "z": 180},
+    ok(edit_slot(client, f"{C}/tools/1", {"name": "pointer", "pose": {"x": 1, "y": 2, "z": 180},
                                         "load": {"mass_kg": 1.0, "com_mm": [0, 0, 50]}}))
-    ok(client.put(f"{C}/bases/3", json={"name": "table", "pose": {"x": 500, "z": 20, "a": 30}}))
+    ok(edit_slot(client, f"{C}/bases/3", {"name": "table", "pose": {"x": 500, "z": 20, "a": 30}}))
     r = client.get(f"{C}/export", params={"format": fmt})
     assert r.status_code == 200, r.text
     assert "attachment" in r.headers["content-disposition"] and "cell-1" in r.headers["content-disposition"]
@@ -34,8 +34,8 @@ def test_export_controller_files(client, fmt):
 
 @pytest.mark.parametrize("fmt", ["kuka", "abb"])
 def test_import_round_trip(client, fmt):
-    ok(client.put(f"{C}/tools/4", json={"name": "pointer", "pose": {"x": 1.5, "y": -2, "z": 180, "a": 10}}))
-    ok(client.put(f"{C}/bases/6", json={"name": "fixture", "kind": "fixed_tool", "pose": {"x": 600, "y": 10, "z": 30}}))
+    ok(edit_slot(client, f"{C}/tools/4", {"name": "pointer", "pose": {"x": 1.5, "y": -2, "z": 180, "a": 10}}))
+    ok(edit_slot(client, f"{C}/bases/6", {"name": "fixture", "kind": "fixed_tool", "pose": {"x": 600, "y": 10, "z": 30}}))
     text = client.get(f"{C}/export", params={"format": fmt}).text
     other = ok(client.post("/controllers", json={"name": "other"}))
     res = ok(client.post(f"/controllers/{other['id']}/import", json={"format": fmt, "text": text}))

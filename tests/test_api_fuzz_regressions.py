@@ -40,7 +40,7 @@ def test_id_beyond_64_bit_is_not_found(client, url, loc):  # noqa: ANN001
 
 
 def test_restore_of_a_huge_history_id_is_not_found(client):  # noqa: ANN001
-    assert_named(client.post(f"{C}/tools/1/restore/{HUGE_ID}"), 404, "path", "history_id")
+    assert_named(restore_slot(client, f"{C}/tools/1", HUGE_ID), 404, "path", "history_id")
 
 
 def test_touch_up_and_analyze_with_huge_ids_are_not_found(client):  # noqa: ANN001
@@ -97,7 +97,7 @@ def test_physics_with_huge_values_is_refused_and_approach_still_works(client):  
     ({"load": {"mass_kg": 1.0, "com_mm": [1e308, 0.0, 0.0]}}, ("load", "com_mm", 0)),
 ])
 def test_slot_with_huge_numbers_is_refused(client, body, loc):  # noqa: ANN001
-    assert_named(client.put(f"{C}/tools/1", json=body), 422, "body", *loc)
+    assert_named(edit_slot(client, f"{C}/tools/1", body), 422, "body", *loc)
     assert ok(client.get(f"{C}/tools/1"))["pose"]["x"] == 0.0
     assert "1.0E+308" not in client.get(f"{C}/export?format=kuka").text
 

@@ -36,7 +36,7 @@ def test_world_jog_moves_the_flange_along_world_axes(client, mode, axis, expect)
 
 
 def test_tool_jog_moves_along_the_active_tool_axis(client):
-    ok(client.put(f"{C}/tools/2", json={"name": "long", "pose": {"z": 200, "b": 30}}))
+    ok(edit_slot(client, f"{C}/tools/2", {"name": "long", "pose": {"z": 200, "b": 30}}))
     ok(client.put(f"{C}/robot/active", json={"tool_no": 2}))
     s0 = ok(client.get(f"{C}/robot"))
     s1 = ok(client.post(f"{C}/robot/jog", json={"mode": "tool", "axis": "Z", "increment": 4}))

@@ -14,7 +14,7 @@ import pytest
 from api_helpers import *  # noqa: F403  (fixtures client, db_url)
 from api_helpers import C, CELL, TRUE_TCP_MM, approach, make_client, ok, open_session, pose_array
 from api_helpers import walk
-from server.emulator import THERMAL_WARMUP_S
+from emulator import THERMAL_WARMUP_S
 from server.recording import parse_recording
 from solvers.physics import Imperfections, true_tcp_positions
 
@@ -187,7 +187,7 @@ def test_thermal_drift_follows_the_clock(client):
     """The same approach from the same joints: cold (clock 0) and warm (after the warm-up
     hour) the shown TCP differs by the drift the true base has grown."""
     ok(client.put(f"{C}/cell/physics", json={"thermal_drift_mm": 0.5}))
-    ok(client.put(f"{C}/tools/1", json={"pose": {"x": float(TRUE_TCP_MM[0]),
+    ok(edit_slot(client, f"{C}/tools/1", {"pose": {"x": float(TRUE_TCP_MM[0]),
                                                  "y": float(TRUE_TCP_MM[1]),
                                                  "z": float(TRUE_TCP_MM[2])}}))
     ok(client.put(f"{C}/robot/active", json={"tool_no": 1}))

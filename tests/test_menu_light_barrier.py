@@ -47,7 +47,7 @@ def beam_recording(client) -> dict:
     steps = ok(client.post(f"{first}/run-cycle"))["session"]["steps"]
     robot = ROBOTS["kuka_kr6_r900_sixx"]
     samples = []
-    from server.emulator import solve_ik
+    from emulator import solve_ik
     q = np.array(ok(client.get(f"{C}/robot"))["joints_deg"])
     for k, st in enumerate(steps):
         T = pose_matrix(st["point"]["flange_pose"])

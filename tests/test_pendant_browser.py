@@ -17,7 +17,7 @@ import pytest
 
 from browser_helpers import (VIEWPORT, compute, idle, kuka_frame, open_menu, open_pendant, save, walk_steps,
                              wizard)
-from server.emulator import cell_for
+from emulator import cell_for
 from solvers.robots import ROBOTS
 
 CELL = cell_for(ROBOTS["kuka_kr6_r900_sixx"], 1)  # the demo cell's hidden truth, for the asserts only

@@ -4,13 +4,31 @@
 // A refused request answers {"detail": [{"loc": ["body", ...field], "msg": reason}]}; request()
 // throws it as an ApiError carrying that detail, so each page can show every msg beside its field.
 
-/** A request the service refused (status, the response's `detail`), or did not answer (status 0). */
+/**
+ * A request the service refused (status, the response's `detail`), or did not answer (status 0).
+ * A 412 (someone changed the slot or session since this page read it) also carries `current`,
+ * the value it holds now.
+ */
 export class ApiError extends Error {
-  constructor(status, detail) {
+  constructor(status, detail, current) {
     super(typeof detail === "string" ? detail : JSON.stringify(detail));
     this.status = status;
     this.detail = detail;
+    this.current = current;
   }
+}
+
+// Optimistic concurrency, done for the person at the page: the ETag of each slot and session
+// this page has read (or written) is kept, and a later write to it sends it as If-Match. A
+// write that would overwrite someone else's change then fails with 412 instead of winning
+// silently. Robot motions (jog, approach) are relative commands and go without it.
+const RESOURCE = /^\/controllers\/\d+\/(?:tools|bases|sessions)\/\d+/;
+const etags = new Map();
+
+/** The slot or session `path` acts on (`/controllers/1/sessions/5/save` -> `.../sessions/5`). */
+export function resourceOf(path) {
+  const m = RESOURCE.exec(path.split("?")[0]);
+  return m ? m[0] : null;
 }
 
 /**
@@ -30,6 +48,8 @@ export async function request(method, path, { body, bodyText, onStart, onEnd } =
   onStart?.();
   try {
     const init = { method, headers: {} };
+    const resource = resourceOf(path);
+    if (method !== "GET" && resource && etags.has(resource)) init.headers["If-Match"] = etags.get(resource);
     const text = body !== undefined ? JSON.stringify(body) : bodyText;
     if (text !== undefined) {
       init.headers["Content-Type"] = "application/json";
@@ -44,9 +64,11 @@ export async function request(method, path, { body, bodyText, onStart, onEnd } =
     const answer = await r.text();
     let data = null;
     try { data = answer ? JSON.parse(answer) : null; } catch { data = answer; }
+    const etag = r.headers.get("ETag");
+    if (resource && etag) etags.set(resource, etag);
     if (!r.ok) {
       const detail = data && data.detail !== undefined ? data.detail : `${r.status} ${r.statusText}`;
-      throw new ApiError(r.status, detail);
+      throw new ApiError(r.status, detail, data && data.current);
     }
     return data;
   } finally {

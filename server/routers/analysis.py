@@ -8,10 +8,10 @@
 - ``GET /analysis/{analysis_id}``: a stored report (with its ``id``).
 
 Documents live in the database (``stored_document``, :func:`db.crud.store_document` /
-:func:`db.crud.load_document`), so they survive a restart. ``analyze`` does not hold the
-app's write lock while it computes (up to a second for a large recording, and jogging or
-a touch-up must not wait for it): it reads the recording in one short session, analyses
-outside any session, and stores the report in a second short session under the lock.
+:func:`db.crud.load_document`), so they survive a restart. ``analyze`` holds no transaction
+while it computes (up to a second for a large recording, and jogging or a touch-up must not
+wait for it): it reads the recording in one short session, analyses outside any session, and
+stores the report in a second short writing session.
 """
 
 from __future__ import annotations
@@ -22,6 +22,7 @@ from fastapi import APIRouter, Body, Query, Request
 from starlette.concurrency import run_in_threadpool
 
 from db.crud import load_document, store_document
+from db.session import write_session
 from server.deps import SessionDep
 from server.recording import parse_recording
 from solvers.analysis import analyze
@@ -49,7 +50,7 @@ def _read(request: Request, collection: str, doc_id: int, loc: str) -> dict[str,
 
 
 def _write(request: Request, collection: str, doc: dict[str, Any]) -> int:
-    db = request.app.state.sessionmaker()
+    db = write_session(request.app.state.sessionmaker)
     try:
         new_id = store_document(db, collection, doc)
         db.commit()
@@ -72,7 +73,7 @@ async def analyze_recording(request: Request, recording_id: int,
     doc = await run_in_threadpool(_read, request, "recordings", recording_id, "recording_id")
     report = await run_in_threadpool(lambda: analyze(parse_recording(doc), folds=folds, seed=seed))
     report["recording_id"] = recording_id
-    async with request.app.state.write_lock:  # one writer at a time (see server.deps)
+    async with request.app.state.writers:  # the writers' bulkhead (server.deps)
         report["id"] = await run_in_threadpool(_write, request, "analyses", report)
     return report
 

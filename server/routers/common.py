@@ -8,7 +8,7 @@ from sqlalchemy.orm import Session
 
 from db import crud
 from db.models import CalibSession, Controller, FrameEntry, TaughtPoint
-from server.emulator import Cell, cell_for, robot_from_custom
+from emulator import Cell, ControllerState, cell_for, robot_from_custom
 from server.methods import METHODS, MethodInputs, MethodSpec, Step, TaughtData
 from server.schemas import (EntryOut, LoadOut, PointOut, PoseOut, ProvenanceOut, ReportOut,
                             SessionOut, StepOut)
@@ -26,6 +26,22 @@ def robot_of(c: Controller) -> RobotModel:
 
 def cell_of(c: Controller) -> Cell:
     return cell_for(robot_of(c), c.cell_seed)
+
+
+def state_of(c: Controller) -> ControllerState:
+    """The emulated controller's typed state, loaded from its row (the request holds the row
+    lock: server.deps)."""
+    sign = None if c.motion_sign is None else tuple(float(v) for v in c.motion_sign)
+    return ControllerState(tuple(float(q) for q in c.joints_deg), float(c.clock_s or 0.0), sign,
+                           int(c.motion_count or 0))
+
+
+def store_state(c: Controller, s: ControllerState) -> None:
+    """Save the state into the row (committed with the request)."""
+    c.joints_deg = list(s.joints_deg)
+    c.clock_s = s.clock_s
+    c.motion_sign = None if s.motion_sign is None else list(s.motion_sign)
+    c.motion_count = s.motion_count
 
 
 def entry_matrix(e: FrameEntry | None) -> np.ndarray:

@@ -7,7 +7,8 @@ from fastapi import APIRouter, Response
 from db import crud
 from db.models import Controller
 from server.deps import SessionDep
-from server.emulator import (THERMAL_WARMUP_S, home_joints, imperfections_document,
+from server.preconditions import IfMatch, check, set_etag
+from emulator import (THERMAL_WARMUP_S, home_joints, imperfections_document,
                              imperfections_from_document, robot_from_custom)
 from server.routers.common import cell_of, robot_of
 from server.schemas import (CellOut, ClockIn, ClockOut, ControllerIn, ControllerOut, PhysicsIn,
@@ -48,15 +49,26 @@ def create_controller(body: ControllerIn, db: SessionDep) -> ControllerOut:
     return controller_out(c)
 
 
+def changing(db: SessionDep, controller_id: int, if_match: str | None) -> Controller:
+    """The controller a write changes; 412 (with the controller) when ``If-Match`` is stale."""
+    c = crud.get_controller(db, controller_id)
+    check(if_match, c.version, lambda: controller_out(c), f"controller {c.id}")
+    return c
+
+
 @router.get("/{controller_id}")
-def get_controller(controller_id: int, db: SessionDep) -> ControllerOut:
-    return controller_out(crud.get_controller(db, controller_id))
+def get_controller(controller_id: int, db: SessionDep, response: Response) -> ControllerOut:
+    """The controller; its ``ETag`` (bumped by every motion and setting) goes with a later
+    write as ``If-Match``."""
+    c = crud.get_controller(db, controller_id)
+    set_etag(response, db, c)
+    return controller_out(c)
 
 
 @router.delete("/{controller_id}", status_code=204)
-def delete_controller(controller_id: int, db: SessionDep) -> Response:
+def delete_controller(controller_id: int, db: SessionDep, if_match: IfMatch = None) -> Response:
     """Remove a controller with its tables, history and sessions."""
-    crud.delete_controller(db, crud.get_controller(db, controller_id))
+    crud.delete_controller(db, changing(db, controller_id, if_match))
     return Response(status_code=204)
 
 
@@ -81,13 +93,15 @@ def get_physics(controller_id: int, db: SessionDep) -> PhysicsOut:
 
 
 @router.put("/{controller_id}/cell/physics")
-def put_physics(controller_id: int, body: PhysicsIn, db: SessionDep) -> PhysicsOut:
+def put_physics(controller_id: int, body: PhysicsIn, db: SessionDep, response: Response,
+                if_match: IfMatch = None) -> PhysicsOut:
     """Give the emulated arm imperfections (``{}`` = the rigid arm again). Checked against the
     arm: per-joint lists need one value per joint; backlash, compliance, latency, bending and
     noise must be >= 0; DH deltas name a_mm, d_mm or alpha_deg of a joint 1..n."""
-    c = crud.get_controller(db, controller_id)
+    c = changing(db, controller_id, if_match)
     imp = imperfections_from_document(body.model_dump(), robot_of(c).dof)
     c.physics = None if imp == Imperfections() else imperfections_document(imp)
+    set_etag(response, db, c)
     return physics_out(c)
 
 
@@ -99,8 +113,10 @@ def get_clock(controller_id: int, db: SessionDep) -> ClockOut:
 
 
 @router.put("/{controller_id}/cell/clock")
-def put_clock(controller_id: int, body: ClockIn, db: SessionDep) -> ClockOut:
+def put_clock(controller_id: int, body: ClockIn, db: SessionDep, response: Response,
+              if_match: IfMatch = None) -> ClockOut:
     """Set the clock: 0 = just powered (cold), ``thermal_warmup_s`` or more = warm."""
-    c = crud.get_controller(db, controller_id)
+    c = changing(db, controller_id, if_match)
     c.clock_s = float(body.clock_s)
+    set_etag(response, db, c)
     return ClockOut(clock_s=c.clock_s, thermal_warmup_s=THERMAL_WARMUP_S)

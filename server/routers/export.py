@@ -13,6 +13,7 @@ from fastapi import APIRouter, Response
 from db import crud
 from server.controller_files import ImportResult, apply_import, export_file, parse_file
 from server.deps import SessionDep
+from server.preconditions import IfMatch
 from server.schemas import ExportFormat, ImportIn, ImportOut, SkippedOut, SlotChangeOut
 from solvers.errors import CalibrationError
 
@@ -53,15 +54,19 @@ def export(controller_id: int, db: SessionDep, format: ExportFormat = "kuka") ->
 
 
 @router.post("/import")
-def import_tables(controller_id: int, body: ImportIn, db: SessionDep) -> ImportOut:
+def import_tables(controller_id: int, body: ImportIn, db: SessionDep,
+                  if_match: IfMatch = None) -> ImportOut:
     """Read a controller file (KUKA ``$config.dat``, ABB RAPID module, pendant's FANUC or UR
     export) or a JSON backup into the tables.
 
     A controller file replaces each slot it names whole (each change recorded in history)
     and is kept, so that a later export in that format patches only changed values into it.
     ``dry_run`` returns, per slot, before -> after, kind changes and skipped declarations,
-    and writes nothing. A JSON backup replaces the tables, history and sessions."""
-    c = crud.get_controller(db, controller_id)
+    and writes nothing. A JSON backup replaces the tables, history and sessions.
+    ``If-Match`` (the controller's ETag) is honoured: 412 when the controller changed since."""
+    from server.routers.controllers import changing
+
+    c = changing(db, controller_id, if_match)
     if body.format == "json":
         from server.backup import parse_backup
         from server.routers.common import robot_of

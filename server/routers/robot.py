@@ -1,18 +1,19 @@
 """Robot: the emulated arm's joints, jogging, active tool and base, and the approach motion.
 
 Every motion moves the commanded joints (what the controller shows), turns the backlash
-flanks of the joints that moved and advances the emulated clock (server.emulator)."""
+flanks of the joints that moved and advances the emulated clock (emulator)."""
 
 from __future__ import annotations
 
 import numpy as np
-from fastapi import APIRouter
+from fastapi import APIRouter, Response
 
+import emulator
 from db import crud
 from db.models import Controller
-from server import emulator
 from server.deps import SessionDep
-from server.routers.common import active_frames, cell_of, robot_of
+from server.preconditions import IfMatch, check, set_etag
+from server.routers.common import active_frames, cell_of, robot_of, state_of, store_state
 from server.schemas import ActiveIn, ApproachIn, JogIn, JointsIn, PoseOut, RobotStateOut
 from solvers.dh import check_joint_limits, forward_kinematics
 from solvers.errors import CalibrationError
@@ -51,48 +52,58 @@ def physics_of(db: SessionDep, c: Controller) -> emulator.RobotPhysics:
 
 def move_to(c: Controller, q: object, extra_s: float = 0.0) -> None:
     """Command joints ``q``: the joints that moved turn their flank, the clock advances by the
-    move's time plus ``extra_s``."""
-    robot = robot_of(c)
-    q_new = [float(x) for x in q]  # type: ignore[union-attr]
-    signs = np.zeros(robot.dof) if c.motion_sign is None else np.array(c.motion_sign, float)
-    c.motion_sign = emulator.updated_signs(signs, c.joints_deg, q_new).tolist()
-    c.clock_s = float(c.clock_s or 0.0) + emulator.motion_duration_s(robot, c.joints_deg, q_new) \
-        + extra_s
-    c.motion_count = int(c.motion_count or 0) + 1
-    c.joints_deg = q_new
+    move's time plus ``extra_s`` (:func:`emulator.moved` on the typed state)."""
+    store_state(c, emulator.moved(robot_of(c), state_of(c), q, extra_s))
+
+
+def _controller(db: SessionDep, controller_id: int, if_match: str | None) -> Controller:
+    """The controller a command moves; 412 (with the robot's state) when ``If-Match`` (the
+    controller's ETag) is stale. Jogs are relative, so they usually go without it."""
+    c = crud.get_controller(db, controller_id)
+    check(if_match, c.version, lambda: state_out(db, c), f"controller {c.id}")
+    return c
+
+
+def _answer(db: SessionDep, c: Controller, response: Response) -> RobotStateOut:
+    set_etag(response, db, c)
+    return state_out(db, c)
 
 
 @router.get("")
-def get_robot(controller_id: int, db: SessionDep) -> RobotStateOut:
-    """Joints, limits, active tool/base, flange pose (world) and TCP pose (active base)."""
-    return state_out(db, crud.get_controller(db, controller_id))
+def get_robot(controller_id: int, db: SessionDep, response: Response) -> RobotStateOut:
+    """Joints, limits, active tool/base, flange pose (world) and TCP pose (active base); the
+    ``ETag`` is the controller's version."""
+    return _answer(db, crud.get_controller(db, controller_id), response)
 
 
 @router.put("/joints")
-def set_joints(controller_id: int, body: JointsIn, db: SessionDep) -> RobotStateOut:
+def set_joints(controller_id: int, body: JointsIn, db: SessionDep, response: Response,
+        if_match: IfMatch = None) -> RobotStateOut:
     """Move to joint values (deg); refused naming joint, value and limit outside the limits."""
-    c = crud.get_controller(db, controller_id)
+    c = _controller(db, controller_id, if_match)
     robot = robot_of(c)
     if len(body.joints_deg) != robot.dof:
         raise CalibrationError(("joints_deg",), f"has {len(body.joints_deg)} values; the robot has "
                                f"{robot.dof} joints")
     check_joint_limits(robot, body.joints_deg)
     move_to(c, body.joints_deg)
-    return state_out(db, c)
+    return _answer(db, c, response)
 
 
 @router.post("/home")
-def home(controller_id: int, db: SessionDep) -> RobotStateOut:
+def home(controller_id: int, db: SessionDep, response: Response,
+        if_match: IfMatch = None) -> RobotStateOut:
     """Move to HOME (flange pointing down in front of the arm)."""
-    c = crud.get_controller(db, controller_id)
+    c = _controller(db, controller_id, if_match)
     move_to(c, emulator.home_joints(robot_of(c)))
-    return state_out(db, c)
+    return _answer(db, c, response)
 
 
 @router.post("/jog")
-def jog(controller_id: int, body: JogIn, db: SessionDep) -> RobotStateOut:
+def jog(controller_id: int, body: JogIn, db: SessionDep, response: Response,
+        if_match: IfMatch = None) -> RobotStateOut:
     """One increment in joint, world, base or tool coordinates (active tool and base)."""
-    c = crud.get_controller(db, controller_id)
+    c = _controller(db, controller_id, if_match)
     robot = robot_of(c)
     if body.mode == "joint" and (not body.axis.startswith("A") or len(body.axis) != 2):
         raise CalibrationError(("axis",), f"joint mode jogs A1..A{robot.dof}, got {body.axis!r}")
@@ -103,30 +114,32 @@ def jog(controller_id: int, body: JogIn, db: SessionDep) -> RobotStateOut:
                                f"{body.mode} mode jogs X, Y, Z, A, B, C, got {body.axis!r}")
     tool, base = active_frames(db, c)
     move_to(c, emulator.jog(robot, c.joints_deg, body.mode, body.axis, body.increment, tool, base))
-    return state_out(db, c)
+    return _answer(db, c, response)
 
 
 @router.put("/active")
-def set_active(controller_id: int, body: ActiveIn, db: SessionDep) -> RobotStateOut:
+def set_active(controller_id: int, body: ActiveIn, db: SessionDep, response: Response,
+        if_match: IfMatch = None) -> RobotStateOut:
     """Select the active tool (0 = flange) and base (0 = world)."""
-    c = crud.get_controller(db, controller_id)
+    c = _controller(db, controller_id, if_match)
     if body.tool_no is not None:
         c.active_tool_no = body.tool_no
     if body.base_no is not None:
         c.active_base_no = body.base_no
-    return state_out(db, c)
+    return _answer(db, c, response)
 
 
 @router.post("/approach")
-def approach(controller_id: int, body: ApproachIn, db: SessionDep) -> RobotStateOut:
+def approach(controller_id: int, body: ApproachIn, db: SessionDep, response: Response,
+        if_match: IfMatch = None) -> RobotStateOut:
     """Careful jogging, done for you: the physical tip (true tool, or a mark of the held
     workpiece) onto a cell target from tilt/around; ``fixed_tool_align`` aligns the flange
     with the fixed tool. Refused (422) when the pose is out of reach or limits. On an
     imperfect arm (``.../cell/physics``) the TRUE tip goes onto the target, so the joints
     shown differ from the nominal solution."""
-    c = crud.get_controller(db, controller_id)
+    c = _controller(db, controller_id, if_match)
     q = emulator.approach(robot_of(c), cell_of(c), c.joints_deg, body.target, body.tilt_deg,
                           body.around_deg, body.spin_deg, body.tool_point_mm, body.miss_mm,
                           physics=physics_of(db, c))
     move_to(c, q, emulator.APPROACH_S)
-    return state_out(db, c)
+    return _answer(db, c, response)

@@ -9,15 +9,16 @@ from __future__ import annotations
 from typing import Any
 
 import numpy as np
-from fastapi import APIRouter, Body
+from fastapi import APIRouter, Body, Response
 
+import emulator
 from db import crud
-from server import emulator
 from server.deps import SessionDep
+from server.preconditions import IfMatch, check, set_etag
 from server.methods import METHODS, PARAM_HELP
 from server.routers.common import (cell_of, check_step, entry_matrix, entry_out, flange_pose_of,
                                    next_step, resolve_inputs, robot_of, session_out, spec_of,
-                                   step_out, taught_data)
+                                   state_of, step_out, store_state, taught_data)
 from server.routers.robot import physics_of
 from server.schemas import (EntryOut, ReportOut, RunCycleOut, SessionIn, SessionOut, TouchUpIn,
                             jsonable)
@@ -28,6 +29,15 @@ from solvers.frames import Pose
 router = APIRouter(tags=["Sessions"])
 PREFIX = "/controllers/{controller_id}/sessions"
 POSE_KEYS = ("x_mm", "y_mm", "z_mm", "a_deg", "b_deg", "c_deg")
+
+
+def _session(db: SessionDep, controller_id: int, session_id: int,
+             if_match: str | None = None):  # noqa: ANN202
+    """The session a command acts on; 412 (with the session) when ``If-Match`` is stale."""
+    s = crud.get_session(db, controller_id, session_id)
+    check(if_match, s.version, lambda: session_out(s),
+          f"session {s.id} of controller {controller_id}")
+    return s
 
 
 @router.get("/methods")
@@ -41,7 +51,8 @@ def list_methods() -> list[dict[str, Any]]:
 
 
 @router.post(PREFIX, status_code=201)
-def open_session(controller_id: int, body: SessionIn, db: SessionDep) -> SessionOut:
+def open_session(controller_id: int, body: SessionIn, db: SessionDep,
+                 response: Response) -> SessionOut:
     """Open a menu run on a target slot; the params the method needs are checked now."""
     c = crud.get_controller(db, controller_id)
     spec = METHODS[body.method]
@@ -53,6 +64,7 @@ def open_session(controller_id: int, body: SessionIn, db: SessionDep) -> Session
         raise CalibrationError(("target_no",),
                                f"{spec.name} writes a tool slot (1..16), got {body.target_no}")
     s = crud.open_session(db, c, spec.name, spec.table, body.target_no, jsonable(params))
+    set_etag(response, db, s)
     return session_out(s)
 
 
@@ -63,19 +75,23 @@ def list_sessions(controller_id: int, db: SessionDep, state: str | None = None) 
 
 
 @router.get(PREFIX + "/{session_id}")
-def get_session(controller_id: int, session_id: int, db: SessionDep) -> SessionOut:
-    """The steps with their prompts, which are filled, and the report once computed."""
-    return session_out(crud.get_session(db, controller_id, session_id))
+def get_session(controller_id: int, session_id: int, db: SessionDep,
+                response: Response) -> SessionOut:
+    """The steps with their prompts, which are filled, and the report once computed. Its
+    ``ETag`` may go with a later command as ``If-Match`` (412 if the session changed)."""
+    s = crud.get_session(db, controller_id, session_id)
+    set_etag(response, db, s)
+    return session_out(s)
 
 
 @router.post(PREFIX + "/{session_id}/touch-up")
-def touch_up(controller_id: int, session_id: int, db: SessionDep,
-             body: TouchUpIn | None = Body(None)) -> SessionOut:
+def touch_up(controller_id: int, session_id: int, db: SessionDep, response: Response,
+             body: TouchUpIn | None = Body(None), if_match: IfMatch = None) -> SessionOut:
     """Fill a step (default: the next empty one) with the emulated robot's current joints, or
     with ``joints_deg`` / ``flange_pose`` recorded on a real controller."""
     body = body or TouchUpIn()
     c = crud.get_controller(db, controller_id)
-    s = crud.get_session(db, controller_id, session_id)
+    s = _session(db, controller_id, session_id, if_match)
     crud.require_open(s)
     if body.joints_deg is not None and body.flange_pose is not None:
         raise CalibrationError(("flange_pose",), "give joints_deg or flange_pose, not both")
@@ -90,22 +106,27 @@ def touch_up(controller_id: int, session_id: int, db: SessionDep,
     sign = c.motion_sign if source == "touch_up" else None  # the emulated arm's flanks
     crud.put_point(db, s, step, source, pose.as_array(), joints, t_s=float(c.clock_s or 0.0),
                    motion_sign=sign)
-    c.clock_s = float(c.clock_s or 0.0) + emulator.TOUCH_UP_S
+    store_state(c, emulator.touched_up(state_of(c)))
+    set_etag(response, db, s)
     return session_out(s)
 
 
 @router.delete(PREFIX + "/{session_id}/points/{step}")
-def delete_point(controller_id: int, session_id: int, step: int, db: SessionDep) -> SessionOut:
+def delete_point(controller_id: int, session_id: int, step: int, db: SessionDep,
+                 response: Response, if_match: IfMatch = None) -> SessionOut:
     """Forget one taught step (to re-teach it)."""
-    s = crud.get_session(db, controller_id, session_id)
+    s = _session(db, controller_id, session_id, if_match)
     crud.delete_point(db, s, step)
+    set_etag(response, db, s)
     return session_out(s)
 
 
 @router.post(PREFIX + "/{session_id}/compute")
-def compute(controller_id: int, session_id: int, db: SessionDep) -> ReportOut:
-    """Solve from the session's touch-ups; nothing is written into the table yet."""
-    s = crud.get_session(db, controller_id, session_id)
+def compute(controller_id: int, session_id: int, db: SessionDep, response: Response,
+            if_match: IfMatch = None) -> ReportOut:
+    """Solve from the session's touch-ups; nothing is written into the table yet. The target
+    slot's version is kept: saving refuses a slot that changed after this compute."""
+    s = _session(db, controller_id, session_id, if_match)
     crud.require_open(s)
     spec, points = spec_of(s), taught_data(s)
     spec.check_taught(points, s.params)
@@ -113,19 +134,24 @@ def compute(controller_id: int, session_id: int, db: SessionDep) -> ReportOut:
     report = ReportOut.from_result(result)
     frame = Pose.from_matrix(result.frame).as_array()
     crud.store_result(db, s, frame, report.model_dump(mode="json"))
+    s.target_version = crud.get_entry(db, controller_id, s.target_table, s.target_no).version
+    set_etag(response, db, s)
     return report
 
 
 @router.post(PREFIX + "/{session_id}/save")
-def save(controller_id: int, session_id: int, db: SessionDep) -> EntryOut:
+def save(controller_id: int, session_id: int, db: SessionDep, response: Response,
+         if_match: IfMatch = None) -> EntryOut:
     """Write the computed frame into the target slot (XYZ menus keep A, B, C), with provenance
-    and a history row."""
-    s = crud.get_session(db, controller_id, session_id)
+    and a history row. Refused (409, saying what changed) when the target slot changed after
+    the compute: compute again on the slot as it is now. ``If-Match`` is the session's ETag."""
+    s = _session(db, controller_id, session_id, if_match)
     if s.state != "computed":
         raise crud.StateConflict(("path", "session_id"),
                                  f"session {s.id} is {s.state}: compute it before saving")
     spec = spec_of(s)
     e = crud.get_entry(db, controller_id, s.target_table, s.target_no)
+    _check_target_unchanged(db, s, e)
     r = s.result_values()
     keys = POSE_KEYS[:3] if spec.writes == "xyz" else POSE_KEYS  # XYZ menus keep A, B, C
     values: dict[str, Any] = dict(zip(keys, r))  # type: ignore[arg-type]
@@ -136,22 +162,41 @@ def save(controller_id: int, session_id: int, db: SessionDep) -> EntryOut:
         values["name"] = f"{spec.kind}{s.target_no}"
     crud.change_entry(db, e, values, reason="calibration", session_id=s.id)
     crud.close_session(db, s, "saved")
+    set_etag(response, db, s)
     return entry_out(e)
 
 
+def _check_target_unchanged(db: SessionDep, s, e) -> None:  # noqa: ANN001
+    """409 naming the change when slot ``e`` is not the version session ``s`` computed on."""
+    if s.target_version is None or e.version == s.target_version:
+        return
+    changes = crud.history(db, s.controller_id, e.entry_table, e.number)
+    last = changes[-1] if changes else None
+    what = "" if last is None else (
+        f": last changed by {last.reason}"
+        + (f" of session {last.session_id}" if last.session_id else "")
+        + f" at {last.changed_at.isoformat(timespec='seconds')} (history {last.id})")
+    raise crud.StateConflict(("path", "session_id"), f"{e.entry_table} {e.number} changed after "
+                             f"session {s.id} was computed{what}; saving would overwrite it "
+                             "blind: compute again (or discard)")
+
+
 @router.post(PREFIX + "/{session_id}/discard")
-def discard(controller_id: int, session_id: int, db: SessionDep) -> SessionOut:
+def discard(controller_id: int, session_id: int, db: SessionDep, response: Response,
+            if_match: IfMatch = None) -> SessionOut:
     """Close the session without writing anything."""
-    s = crud.get_session(db, controller_id, session_id)
+    s = _session(db, controller_id, session_id, if_match)
     crud.require_open(s)
     crud.close_session(db, s, "discarded")
+    set_etag(response, db, s)
     return session_out(s)
 
 
 # ------------------------------------------------------------------------- light barrier
 
-def _light_barrier_session(db: SessionDep, controller_id: int, session_id: int):  # noqa: ANN202
-    s = crud.get_session(db, controller_id, session_id)
+def _light_barrier_session(db: SessionDep, controller_id: int, session_id: int,
+                           if_match: str | None = None):  # noqa: ANN202
+    s = _session(db, controller_id, session_id, if_match)
     crud.require_open(s)
     if s.method != "tool.light_barrier":
         raise CalibrationError(("method",), f"session {s.id} is {s.method}; the cycle belongs to "
@@ -171,11 +216,12 @@ def _nominal_tool(db: SessionDep, s) -> np.ndarray:  # noqa: ANN001
 
 
 @router.post(PREFIX + "/{session_id}/run-cycle")
-def run_cycle(controller_id: int, session_id: int, db: SessionDep) -> RunCycleOut:
+def run_cycle(controller_id: int, session_id: int, db: SessionDep, response: Response,
+              if_match: IfMatch = None) -> RunCycleOut:
     """Run the light-barrier measuring cycle on the emulated robot and sensor; every beam
     trigger becomes a taught point (replacing earlier ones)."""
     c = crud.get_controller(db, controller_id)
-    s = _light_barrier_session(db, controller_id, session_id)
+    s = _light_barrier_session(db, controller_id, session_id, if_match)
     cell = cell_of(c)
     params = dict(s.params)
     if not params.get("beams"):
@@ -197,21 +243,20 @@ def run_cycle(controller_id: int, session_id: int, db: SessionDep) -> RunCycleOu
         crud.put_point(db, s, k, "beam", pose, run.trigger_joints_deg[k], ev.beam_id, ev.edge,
                        ev.tcp_velocity_mm_s, t_s=float(run.trigger_t_s[k]),
                        motion_sign=run.trigger_signs[k])
-    c.joints_deg = [float(q) for q in run.joints_deg]
-    c.motion_sign = [float(v) for v in run.motion_sign]
-    c.clock_s = float(run.clock_s)
-    c.motion_count = int(c.motion_count or 0) + 1
+    store_state(c, emulator.after_cycle(state_of(c), run))
+    set_etag(response, db, s)
     return RunCycleOut(triggers=len(run.triggers), passes=run.passes, session=session_out(s))
 
 
 @router.post(PREFIX + "/{session_id}/beam-recording")
-def post_beam_recording(controller_id: int, session_id: int, db: SessionDep,
-                        recording: dict[str, Any] = Body(...)) -> SessionOut:
+def post_beam_recording(controller_id: int, session_id: int, db: SessionDep, response: Response,
+                        recording: dict[str, Any] = Body(...),
+                        if_match: IfMatch = None) -> SessionOut:
     """Take the triggers of a ``robot-recording/1`` document of kind ``beam`` (a real
     controller's cycle) as the session's points; its sensor block becomes the params."""
     from server.recording import parse_recording
 
-    s = _light_barrier_session(db, controller_id, session_id)
+    s = _light_barrier_session(db, controller_id, session_id, if_match)
     rec = parse_recording(recording)
     if rec.kind != "beam":
         raise CalibrationError(("kind",),
@@ -227,6 +272,7 @@ def post_beam_recording(controller_id: int, session_id: int, db: SessionDep,
         vel = None if rec.tcp_velocity_mm_s is None else rec.tcp_velocity_mm_s[k]
         crud.put_point(db, s, k, "beam", Pose.from_matrix(T[k]).as_array(), rec.joints_deg[k],
                        str(rec.beam_ids[k]), str(rec.edges[k]), vel, t_s=float(rec.t_s[k]))
+    set_etag(response, db, s)
     return session_out(s)
 
 

@@ -2,11 +2,12 @@
 
 from __future__ import annotations
 
-from fastapi import APIRouter
+from fastapi import APIRouter, Response
 
 from db import crud
-from db.models import EntryHistory
+from db.models import EntryHistory, FrameEntry
 from server.deps import SessionDep
+from server.preconditions import IfMatch, check, set_etag
 from server.routers.common import entry_out, load_values
 from server.schemas import EntryIn, EntryOut, HistoryOut
 from solvers.errors import CalibrationError
@@ -16,6 +17,12 @@ def history_out(h: EntryHistory) -> HistoryOut:
     return HistoryOut(id=h.id, table=h.entry_table, number=h.number, reason=h.reason,
                       session_id=h.session_id, changed_at=h.changed_at, before=h.before,
                       after=h.after)
+
+
+def _precondition(e: FrameEntry, if_match: str | None) -> None:
+    """A slot write needs If-Match (428 without, 412 with the current slot when stale)."""
+    check(if_match, e.version, lambda: entry_out(e),
+          f"{e.entry_table} {e.number} of controller {e.controller_id}", required=True)
 
 
 def table_router(table: str, path: str, tag: str) -> APIRouter:
@@ -29,12 +36,17 @@ def table_router(table: str, path: str, tag: str) -> APIRouter:
         return [entry_out(e) for e in crud.list_entries(db, controller_id, table, kind)]
 
     @router.get("/{number}", name=f"get_{table}", summary=f"One {label} slot")
-    def get_slot(controller_id: int, number: int, db: SessionDep) -> EntryOut:
-        return entry_out(crud.get_entry(db, controller_id, table, number))
+    def get_slot(controller_id: int, number: int, db: SessionDep, response: Response) -> EntryOut:
+        """The slot; its ``ETag`` is what a later edit sends as ``If-Match``."""
+        e = crud.get_entry(db, controller_id, table, number)
+        set_etag(response, db, e)
+        return entry_out(e)
 
     @router.put("/{number}", name=f"edit_{table}",
                 summary=f"Edit a {label} slot by hand (recorded in history)")
-    def edit_slot(controller_id: int, number: int, body: EntryIn, db: SessionDep) -> EntryOut:
+    def edit_slot(controller_id: int, number: int, body: EntryIn, db: SessionDep,
+                  response: Response, if_match: IfMatch = None) -> EntryOut:
+        """``If-Match`` is required: 428 without it, 412 (with the current slot) if stale."""
         e = crud.get_entry(db, controller_id, table, number)
         values: dict = {}
         if body.name is not None:
@@ -56,7 +68,9 @@ def table_router(table: str, path: str, tag: str) -> APIRouter:
                               body.pose.to_pose().as_array().tolist()))
             values.update(method="numeric", session_id=None, error_max_mm=None, error_rms_mm=None)
         values.update(load_values(body.load))
+        _precondition(e, if_match)  # after the body's checks: a wrong body is a 422 either way
         crud.change_entry(db, e, values, reason="edit")
+        set_etag(response, db, e)
         return entry_out(e)
 
     @router.get("/{number}/history", name=f"history_{table}",
@@ -67,9 +81,14 @@ def table_router(table: str, path: str, tag: str) -> APIRouter:
 
     @router.post("/{number}/restore/{history_id}", name=f"restore_{table}",
                  summary="Put the slot back as it was before that change (recorded as a change)")
-    def restore(controller_id: int, number: int, history_id: int, db: SessionDep) -> EntryOut:
+    def restore(controller_id: int, number: int, history_id: int, db: SessionDep,
+                response: Response, if_match: IfMatch = None) -> EntryOut:
+        """``If-Match`` is required, as for an edit."""
         e = crud.get_entry(db, controller_id, table, number)
+        crud.get_history(db, e, history_id)  # 404 first: an unknown change is not a race
+        _precondition(e, if_match)
         crud.restore_entry(db, e, history_id)
+        set_etag(response, db, e)
         return entry_out(e)
 
     return router

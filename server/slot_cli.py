@@ -1,0 +1,103 @@
+"""``pendant slot``: read or edit one tool/base slot of a running service, with If-Match.
+
+    pendant slot tool 3 [--url http://127.0.0.1:8000] [--controller 1]
+    pendant slot tool 3 --name pointer --pose 1.5,-2,180,0,0,0 [--etag '"4"']
+
+It reads the slot (and its ``ETag``), then writes it with ``If-Match`` so an edit never
+overwrites a change someone else made in between: the service answers 412, and this command
+prints what the slot holds now and exits 3 without writing. ``--etag`` sends the ETag of an
+earlier read instead (what you saw, not what is there now).
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import sys
+import urllib.error
+import urllib.request
+from typing import Any
+
+EXIT_STALE = 3
+
+
+def _call(method: str, url: str, body: dict | None = None,
+          headers: dict[str, str] | None = None) -> tuple[int, Any, Any]:
+    data = None if body is None else json.dumps(body).encode()
+    req = urllib.request.Request(url, data=data, method=method, headers={
+        **({"Content-Type": "application/json"} if data else {}), **(headers or {})})
+    try:
+        with urllib.request.urlopen(req, timeout=30) as r:
+            return r.status, r.headers, json.loads(r.read() or b"null")
+    except urllib.error.HTTPError as err:
+        return err.code, err.headers, json.loads(err.read() or b"null")
+
+
+def _pose(text: str) -> dict[str, float]:
+    try:
+        v = [float(x) for x in text.split(",")]
+    except ValueError:
+        v = []
+    if len(v) != 6:
+        raise SystemExit(f"pendant: --pose: needs x,y,z,a,b,c (6 numbers), got {text!r}")
+    return dict(zip("xyzabc", v))
+
+
+def _show(slot: dict, etag: str | None) -> str:
+    p = slot["pose"]
+    return (f"{slot['table']} {slot['number']} {slot['name']!r} ({slot['kind']})  "
+            f"x {p['x']:.3f} y {p['y']:.3f} z {p['z']:.3f} mm  a {p['a']:.3f} b {p['b']:.3f} "
+            f"c {p['c']:.3f} deg  ETag {etag}")
+
+
+def run_slot(args: argparse.Namespace) -> int:
+    path = "tools" if args.table == "tool" else "bases"
+    url = f"{args.url.rstrip('/')}/controllers/{args.controller}/{path}/{args.number}"
+    try:
+        status, headers, slot = _call("GET", url)
+    except (urllib.error.URLError, OSError) as err:
+        print(f"pendant: --url: the service at {args.url} did not answer ({err})", file=sys.stderr)
+        return 2
+    if status != 200:
+        print(f"pendant: {status}: {json.dumps(slot)}", file=sys.stderr)
+        return 2
+    body: dict[str, Any] = {}
+    if args.name is not None:
+        body["name"] = args.name
+    if args.kind is not None:
+        body["kind"] = args.kind
+    if args.pose is not None:
+        body["pose"] = _pose(args.pose)
+    if not body:
+        print(_show(slot, headers.get("ETag")))
+        return 0
+    etag = args.etag or headers.get("ETag")
+    status, headers, answer = _call("PUT", url, body, {"If-Match": etag})
+    if status == 412:
+        print(f"pendant: not written: {args.table} {args.number} changed since it was read "
+              f"(If-Match {etag}). It holds now:\n  {_show(answer['current'], headers.get('ETag'))}",
+              file=sys.stderr)
+        return EXIT_STALE
+    if status != 200:
+        msgs = "; ".join(f"{'.'.join(str(x) for x in d.get('loc', []))}: {d.get('msg')}"
+                         for d in answer.get("detail", [])) if isinstance(answer, dict) else answer
+        print(f"pendant: {status}: {msgs}", file=sys.stderr)
+        return 2
+    print(_show(answer, headers.get("ETag")))
+    return 0
+
+
+def add_slot_command(subparsers: Any) -> None:
+    """Register ``slot`` on the ``pendant`` command's subparsers."""
+    s = subparsers.add_parser("slot", help="read or edit a tool/base slot of a running service "
+                                           "(sends If-Match: never a blind overwrite)")
+    s.add_argument("table", choices=["tool", "base"])
+    s.add_argument("number", type=int)
+    s.add_argument("--url", default="http://127.0.0.1:8000", help="the service")
+    s.add_argument("--controller", default="1", help="controller id (1 = cell-1)")
+    s.add_argument("--name")
+    s.add_argument("--kind", choices=["tool", "workpiece", "base", "fixed_tool"])
+    s.add_argument("--pose", help="x,y,z,a,b,c (mm, deg)")
+    s.add_argument("--etag", help='If-Match to send (an ETag you read earlier, e.g. \'"4"\'); '
+                                  "default: the one read just now")
+    s.set_defaults(func=run_slot)
