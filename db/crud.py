@@ -381,6 +381,14 @@ def store_document(db: Session, collection: str, doc: dict[str, Any]) -> int:
     return row.id
 
 
+def exists_document(db: Session, collection: str, doc_id: int) -> bool:
+    """Whether ``doc_id`` is a document of ``collection`` (without loading it)."""
+    rid = _row_id(doc_id)
+    return rid is not None and db.scalar(
+        select(StoredDocument.id).where(StoredDocument.id == rid,
+                                        StoredDocument.collection == collection)) is not None
+
+
 def load_document(db: Session, collection: str, doc_id: int, loc: str) -> dict[str, Any]:
     """The document ``doc_id`` of ``collection``; NotFound naming ``loc`` if absent."""
     row = _get(db, StoredDocument, doc_id)

@@ -18,8 +18,8 @@ from db import crud
 from db.session import make_engine, make_sessionmaker, run_migrations
 from server import errors
 from server.emulator import DEMO_ROBOT, home_joints
-from server.routers import (analysis, base, controllers, export, fixed_tool, robot, sessions, tool,
-                            workpiece)
+from server.routers import (analysis, base, controllers, export, fixed_tool, jobs, robot, sessions,
+                            tool, workpiece)
 from server.settings import Settings
 from solvers.robots import ROBOTS
 
@@ -36,6 +36,8 @@ TAGS = [
                                         "discard."},
     {"name": "Export", "description": "Controller files (KUKA, ABB, FANUC, UR) and JSON "
                                       "backup/restore."},
+    {"name": "Jobs", "description": "Analyses and restores run by the worker processes: state, "
+                                    "progress, cancel, result."},
 ]
 
 PLACEHOLDER = """<!doctype html><html><head><meta charset="utf-8"><title>pendant</title></head>
@@ -65,7 +67,7 @@ def create_app(settings: Settings | None = None) -> FastAPI:
     app.state.settings = settings
     errors.install(app)
     for module in (controllers, robot, tool, base, fixed_tool, workpiece, sessions, export,
-                   analysis):
+                   analysis, jobs):
         app.include_router(module.router)
     if settings.demo_controller:
         ensure_demo(app)

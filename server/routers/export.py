@@ -10,9 +10,10 @@ import json
 
 from fastapi import APIRouter, Response
 
-from db import crud
+from db import crud, jobs
 from db.models import FrameEntry as SlotRow
 from server.deps import SessionDep
+from server.routers.jobs import JobOut, accepted
 from server.schemas import ExportFormat, ImportIn, ImportOut
 from solvers.errors import CalibrationError
 from solvers.frames import Pose
@@ -71,12 +72,16 @@ def export(controller_id: int, db: SessionDep, format: ExportFormat = "kuka") ->
                     headers={"Content-Disposition": f'attachment; filename="{name}-{filename}"'})
 
 
-@router.post("/import")
-def import_tables(controller_id: int, body: ImportIn, db: SessionDep) -> ImportOut:
+@router.post("/import", responses={202: {"model": JobOut,
+                                         "description": "JSON backup: the restore job"}})
+def import_tables(controller_id: int, body: ImportIn, db: SessionDep,
+                  response: Response) -> ImportOut | JobOut:
     """Read a KUKA ``$config.dat``, an ABB RAPID module or a JSON backup into the tables.
 
-    Controller files overwrite the slots they name (each change recorded in history); a
-    JSON backup replaces the tables, history and sessions of this controller."""
+    Controller files overwrite the slots they name (each change recorded in history), and
+    the answer is 200 with the count. A JSON backup replaces the tables, history and sessions
+    of this controller: it is checked at once (422 naming the field), then restored by a job
+    (202, ``Location: /jobs/{id}``; the job's result is ``{"format", "entries", "history"}``)."""
     c = crud.get_controller(db, controller_id)
     if body.format == "json":
         from server.backup import parse_backup
@@ -95,12 +100,9 @@ def import_tables(controller_id: int, body: ImportIn, db: SessionDep) -> ImportO
                 check_joint_limits(robot, joints)
             except CalibrationError as err:
                 raise CalibrationError(loc + tuple(err.loc[1:]), err.reason) from None
-        try:
-            n, h = crud.restore_backup(db, c, doc)
-        except (KeyError, TypeError, ValueError) as err:
-            raise CalibrationError(("text",),
-                                   f"malformed backup: {type(err).__name__} {err}") from None
-        return ImportOut(format="json", entries=n, history=h)
+        response.status_code = 202  # the restore itself is a job (server.job_kinds)
+        return accepted(response, jobs.enqueue(db, "restore", {"controller_id": c.id,
+                                                               "doc": doc}))
     from server import formats
 
     reader = formats.import_kuka if body.format == "kuka" else formats.import_abb
