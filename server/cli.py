@@ -1,6 +1,7 @@
 """The ``pendant`` command: serve the pendant, calibrate from a file, export a controller's tables.
 
-    pendant serve [--host 127.0.0.1] [--port 8000] [--db URL]
+    pendant serve [--host 127.0.0.1] [--port 8000] [--db URL] [--job-workers 2]
+    pendant worker [--processes 2] [--db URL] [--job-time-s 600] [--job-memory-mb 2048]
     pendant calibrate METHOD FILE [--robot KEY] [--tcp X,Y,Z] [--json]
     pendant export CONTROLLER --format kuka|abb|fanuc|ur|json [--db URL]
 
@@ -14,6 +15,8 @@ import argparse
 import csv
 import io
 import json
+import os
+import subprocess
 import sys
 from pathlib import Path
 from typing import Any, Sequence
@@ -154,6 +157,19 @@ def build_parser() -> argparse.ArgumentParser:
     s.add_argument("--db", help="database URL (default: PENDANT_DB_URL, else a SQLite file in "
                                 "the user data dir)")
 
+    s.add_argument("--job-workers", type=int, default=2, metavar="N",
+                   help="job worker processes started with the service (analyses, restores); "
+                        "0: none here, run `pendant worker` elsewhere (default 2)")
+    _job_limits(s)
+
+    w = sub.add_parser("worker", help="run queued jobs (analyses, restores) in a bounded pool of "
+                                      "processes; any number of hosts may share one database")
+    w.add_argument("--processes", type=int, default=2, metavar="N",
+                   help="jobs run at once, one process each (default 2)")
+    w.add_argument("--db", help="database URL")
+    w.add_argument("--exit-with-parent", action="store_true", help=argparse.SUPPRESS)
+    _job_limits(w)
+
     c = sub.add_parser("calibrate",
                        help="solve a calibration menu from taught poses in a JSON/CSV file")
     c.add_argument("method", choices=sorted(METHODS))
@@ -174,6 +190,46 @@ def build_parser() -> argparse.ArgumentParser:
     return p
 
 
+def _job_limits(p: argparse.ArgumentParser) -> None:
+    from server.worker import DEFAULT_MEMORY_MB, DEFAULT_TIME_S
+
+    p.add_argument("--job-time-s", type=float, default=DEFAULT_TIME_S,
+                   help=f"a job running longer is stopped and fails (default {DEFAULT_TIME_S:g})")
+    p.add_argument("--job-memory-mb", type=int, default=DEFAULT_MEMORY_MB,
+                   help=f"address space of a job's process (default {DEFAULT_MEMORY_MB})")
+
+
+def _positive(value: int | float, option: str) -> None:
+    if value <= 0:
+        raise CalibrationError((option,), f"must be > 0, got {value}")
+
+
+def start_job_workers(db_url: str, args: argparse.Namespace) -> subprocess.Popen | None:
+    """``pendant worker`` as a child of ``serve`` (stops when serve stops); None for 0."""
+    if args.job_workers <= 0:
+        return None
+    cmd = [sys.executable, "-m", "server.cli", "worker", "--db", db_url, "--exit-with-parent",
+           "--processes", str(args.job_workers), "--job-time-s", str(args.job_time_s),
+           "--job-memory-mb", str(args.job_memory_mb)]
+    return subprocess.Popen(cmd)
+
+
+def run_worker(args: argparse.Namespace) -> int:
+    import logging
+
+    from server.worker import Limits, Pool
+
+    _positive(args.processes, "--processes")
+    _positive(args.job_time_s, "--job-time-s")
+    _positive(args.job_memory_mb, "--job-memory-mb")
+    logging.basicConfig(level=logging.INFO, format="%(asctime)s %(name)s %(message)s")
+    pool = Pool(_settings(args.db).db_url, args.processes,
+                Limits(args.job_time_s, args.job_memory_mb),
+                parent_pid=os.getppid() if args.exit_with_parent else None)
+    pool.run()
+    return 0
+
+
 def _settings(db: str | None):  # noqa: ANN202
     from server.settings import Settings
 
@@ -188,8 +244,20 @@ def main(argv: Sequence[str] | None = None) -> int:
 
             from server.app import create_app
 
-            uvicorn.run(create_app(_settings(args.db)), host=args.host, port=args.port)
+            _positive(args.job_time_s, "--job-time-s")
+            _positive(args.job_memory_mb, "--job-memory-mb")
+            settings = _settings(args.db)
+            app = create_app(settings)  # migrated before any job worker looks at the DB
+            workers = start_job_workers(settings.db_url, args)
+            try:
+                uvicorn.run(app, host=args.host, port=args.port)
+            finally:
+                if workers is not None:
+                    workers.terminate()
+                    workers.wait(timeout=30)
             return 0
+        if args.command == "worker":
+            return run_worker(args)
         if args.command == "calibrate":
             given = (("tcp_mm", args.tcp), ("reference_tcp_mm", args.reference_tcp),
                      ("fixed_tcp_mm", args.fixed_tcp))

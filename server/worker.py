@@ -152,6 +152,7 @@ class Pool:
     limits: Limits = field(default_factory=Limits)
     poll_s: float = 0.2
     name: str = field(default_factory=lambda: f"{socket.gethostname()}:{os.getpid()}")
+    parent_pid: int | None = None  # stop when this process is gone (pendant serve's pool)
 
     def __post_init__(self) -> None:
         if self.processes < 1:
@@ -172,6 +173,8 @@ class Pool:
                  self.processes, self.limits.time_s, self.limits.memory_mb)
         last_renew = 0.0
         while not self.stopping:
+            if self.parent_pid is not None and os.getppid() != self.parent_pid:
+                break
             self._reap()
             now = time.monotonic()
             if self.running and now - last_renew >= RENEW_S:
