@@ -18,6 +18,7 @@ from db import crud
 from db.session import make_engine, make_sessionmaker, run_migrations
 from server import errors
 from server.emulator import DEMO_ROBOT, home_joints
+from server.limits import BodyLimits
 from server.routers import (analysis, base, controllers, export, fixed_tool, jobs, robot, sessions,
                             tool, workpiece)
 from server.settings import Settings
@@ -66,6 +67,7 @@ def create_app(settings: Settings | None = None) -> FastAPI:
     app.state.write_lock = asyncio.Lock()  # one writer at a time (SQLite); see deps.get_session
     app.state.settings = settings
     errors.install(app)
+    app.add_middleware(BodyLimits)
     for module in (controllers, robot, tool, base, fixed_tool, workpiece, sessions, export,
                    analysis, jobs):
         app.include_router(module.router)
