@@ -1,24 +1,38 @@
-"""Benchmark of the pendant service: touch-up and compute under 20 concurrent clients.
+"""Benchmark of the pendant service as a user meets it: Debian's ``wrk`` against uvicorn.
 
-Starts ``pendant serve`` (uvicorn, one process) on loopback with a temporary SQLite file, opens
-one XYZ 4-point session per client, then each client (a thread with its own httpx client)
-re-teaches its steps (``POST .../touch-up`` with recorded joints) and computes
-(``POST .../compute``) a bounded number of times within a time limit. Prints a table of
-requests/s and latency percentiles; the last line is ``rps=<touch-up req/s> p99_ms=<touch-up p99>``.
+For each uvicorn worker count (``--workers 1,2``) the script migrates a fresh SQLite file,
+starts ``uvicorn server.app:app --workers N`` on loopback (no job workers: nothing else takes
+CPU), opens one XYZ 4-point session per connection with four touch-ups, and drives three
+phases with ``wrk`` (C, two threads, ``--connections`` 20):
 
-    python benchmarks/api.py [--clients 20] [--requests 40] [--seconds 30]
+- ``touch-up``: ``POST .../sessions/{sid}/touch-up`` with recorded joints (a Lua script cycles
+  sessions and steps: every request is a real re-teach that writes the point);
+- ``controllers``: ``GET /controllers``;
+- ``tool``: ``GET /controllers/1/tools/1``.
+
+It prints requests/s and wrk's latency percentiles per phase, and any non-2xx answer. Then, with
+PostgreSQL (Debian's ``pg_virtualenv`` makes a throw-away cluster; ``--no-pg`` skips it), the
+touch-up phase again at the best worker count. The last line is
+``rps=<touch-up req/s, SQLite, best worker count> p99_ms=<its p99> pg_rps=<touch-up req/s on
+PostgreSQL, or n/a>``.
+
+    python benchmarks/api.py [--workers 1,2] [--connections 20] [--seconds 10] [--no-pg]
+
+Needs ``wrk`` (``apt-get install wrk``) and, for pg_rps, ``postgresql`` and psycopg.
 """
 
 from __future__ import annotations
 
 import argparse
+import json
+import os
+import re
+import shutil
 import socket
 import subprocess
 import sys
 import tempfile
-import threading
 import time
-from collections.abc import Callable
 from pathlib import Path
 
 import httpx
@@ -31,6 +45,20 @@ from emulator import approach, cell_for, home_joints  # noqa: E402
 from solvers.robots import ROBOTS  # noqa: E402
 
 ORIENTATIONS = ((0.0, 0.0, 0.0), (30.0, 0.0, 0.0), (30.0, 120.0, 90.0), (30.0, 240.0, -90.0))
+UNITS = {"us": 1e-3, "ms": 1.0, "s": 1e3}
+
+TOUCH_LUA = """
+local paths = {%(paths)s}
+local bodies = {%(bodies)s}
+local headers = {["Content-Type"] = "application/json"}
+local n = 0
+request = function()
+  local s = n %% #paths
+  local k = math.floor(n / #paths) %% #bodies
+  n = n + 1
+  return wrk.format("POST", paths[s + 1], headers, bodies[k + 1])
+end
+"""
 
 
 def free_port() -> int:
@@ -49,7 +77,7 @@ def touch_joints() -> list[list[float]]:
     return out
 
 
-def wait_ready(base: str, proc: subprocess.Popen, timeout_s: float = 60.0) -> None:
+def wait_ready(base: str, proc: subprocess.Popen, timeout_s: float = 90.0) -> None:
     t0 = time.perf_counter()
     while time.perf_counter() - t0 < timeout_s:
         if proc.poll() is not None:
@@ -62,96 +90,159 @@ def wait_ready(base: str, proc: subprocess.Popen, timeout_s: float = 60.0) -> No
     raise RuntimeError("the service did not start in time")
 
 
-Request = Callable[[httpx.Client, str, int], httpx.Response]
+def prepare(db_url: str) -> None:
+    """Migrate ``db_url`` and make the demo controller once, before N workers share it."""
+    from server.app import create_app
+    from server.settings import Settings
+
+    create_app(Settings(db_url=db_url)).state.engine.dispose()
 
 
-def run_phase(base: str, urls: list[str], make_request: Request, n_requests: int,
-              seconds: float) -> tuple[list[float], int, float]:
-    """Each client sends up to n_requests (or until ``seconds``).
+def start(db_url: str, port: int, workers: int) -> subprocess.Popen:
+    env = {**os.environ, "PENDANT_DB_URL": db_url,
+           "PYTHONPATH": f"{ROOT}{os.pathsep}{os.environ.get('PYTHONPATH', '')}"}
+    cmd = [sys.executable, "-m", "uvicorn", "server.app:app", "--port", str(port),
+           "--workers", str(workers), "--log-level", "warning", "--no-access-log"]
+    return subprocess.Popen(cmd, cwd=ROOT, env=env, stdout=subprocess.DEVNULL)
 
-    Returns the latencies (s), the count of non-2xx answers and the wall time (s)."""
-    lat: list[float] = []
-    errors = [0]
-    lock = threading.Lock()
-    deadline = time.perf_counter() + seconds
 
-    def client(url: str) -> None:
-        mine: list[float] = []
-        bad = 0
-        with httpx.Client(base_url=base, timeout=30.0) as http:
-            for k in range(n_requests):
-                if time.perf_counter() > deadline:
-                    break
-                t0 = time.perf_counter()
-                r = make_request(http, url, k)
-                mine.append(time.perf_counter() - t0)
-                bad += r.status_code >= 300
-        with lock:
-            lat.extend(mine)
-            errors[0] += bad
+def stop(proc: subprocess.Popen) -> None:
+    proc.terminate()
+    try:
+        proc.wait(timeout=20)
+    except subprocess.TimeoutExpired:
+        proc.kill()
+        proc.wait()
 
-    threads = [threading.Thread(target=client, args=(u,)) for u in urls]
-    t0 = time.perf_counter()
-    for t in threads:
-        t.start()
-    for t in threads:
-        t.join()
-    return lat, errors[0], time.perf_counter() - t0
+
+def parse_wrk(out: str) -> dict[str, float]:
+    """requests/s, p50/p90/p99 (ms) and non-2xx count from ``wrk --latency`` output."""
+    res: dict[str, float] = {"rps": float(re.search(r"Requests/sec:\s+([\d.]+)", out).group(1))}
+    for pct in ("50", "90", "99"):
+        m = re.search(rf"^\s+{pct}%\s+([\d.]+)(us|ms|s)\s*$", out, re.M)
+        res[f"p{pct}_ms"] = float(m.group(1)) * UNITS[m.group(2)]
+    m = re.search(r"Non-2xx or 3xx responses:\s+(\d+)", out)
+    res["non2xx"] = float(m.group(1)) if m else 0.0
+    m = re.search(r"(\d+) requests in", out)
+    res["requests"] = float(m.group(1))
+    errs = re.search(r"Socket errors:.*", out)
+    res["socket_errors"] = errs.group(0) if errs else ""  # type: ignore[assignment]
+    return res
+
+
+def wrk(url: str, connections: int, seconds: float, script: Path | None = None) -> dict:
+    cmd = ["wrk", "-t2", f"-c{connections}", f"-d{seconds:g}s", "--latency", "--timeout", "10s"]
+    if script is not None:
+        cmd += ["-s", str(script)]
+    out = subprocess.run(cmd + [url], check=True, capture_output=True, text=True).stdout
+    return parse_wrk(out)
+
+
+def touch_script(base: str, n_sessions: int, joints: list[list[float]], tmp: Path) -> Path:
+    paths = []
+    with httpx.Client(base_url=base, timeout=30.0) as http:
+        for _ in range(n_sessions):
+            s = http.post("/controllers/1/sessions",
+                          json={"method": "tool.xyz_4point", "target_no": 1})
+            s.raise_for_status()
+            url = f"/controllers/1/sessions/{s.json()['id']}"
+            for k, q in enumerate(joints):
+                http.post(f"{url}/touch-up", json={"step": k, "joints_deg": q}).raise_for_status()
+            paths.append(f"{url}/touch-up")
+    bodies = [json.dumps({"step": k, "joints_deg": q}) for k, q in enumerate(joints)]
+    path = tmp / "touch.lua"
+    path.write_text(TOUCH_LUA % {"paths": ", ".join(json.dumps(p) for p in paths),
+                                 "bodies": ", ".join(json.dumps(b) for b in bodies)})
+    return path
+
+
+def run_service(db_url: str, workers: int, args: argparse.Namespace, phases: tuple[str, ...],
+                joints: list[list[float]], tmp: Path) -> dict[str, dict]:
+    port = free_port()
+    base = f"http://127.0.0.1:{port}"
+    prepare(db_url)
+    proc = start(db_url, port, workers)
+    try:
+        wait_ready(base, proc)
+        script = touch_script(base, args.connections, joints, tmp)
+        urls = {"touch-up": (base, script), "controllers": (f"{base}/controllers", None),
+                "tool": (f"{base}/controllers/1/tools/1", None)}
+        out = {}
+        for name in phases:
+            url, s = urls[name]
+            wrk(url, args.connections, min(2.0, args.seconds), s)  # warm-up
+            out[name] = wrk(url, args.connections, args.seconds, s)
+        return out
+    finally:
+        stop(proc)
+
+
+def pg_url_from_env() -> str:
+    e = os.environ
+    return (f"postgresql+psycopg://{e['PGUSER']}:{e.get('PGPASSWORD', '')}@{e['PGHOST']}:"
+            f"{e['PGPORT']}/{e['PGDATABASE']}")
+
+
+def pg_touch_rps(workers: int, args: argparse.Namespace) -> str:
+    """Touch-up req/s on PostgreSQL (a pg_virtualenv cluster), or 'n/a' with the reason."""
+    if args.no_pg:
+        return "n/a"
+    if shutil.which("pg_virtualenv") is None:
+        print("pg_rps: pg_virtualenv not found (apt-get install postgresql)", file=sys.stderr)
+        return "n/a"
+    cmd = ["pg_virtualenv", "-t", sys.executable, __file__, "--pg-inner", "--workers", str(workers),
+           "--connections", str(args.connections), "--seconds", str(args.seconds)]
+    r = subprocess.run(cmd, capture_output=True, text=True, cwd=ROOT)
+    m = re.search(r"^pg_inner_rps=([\d.]+)", r.stdout, re.M)
+    if r.returncode != 0 or m is None:
+        tail = (r.stderr or r.stdout).strip().splitlines()[-3:]
+        print(f"pg_rps: the PostgreSQL run failed: {' | '.join(tail)}", file=sys.stderr)
+        return "n/a"
+    print(r.stdout.split("pg_inner_rps=")[0], end="")
+    return m.group(1)
+
+
+def show(title: str, rows: dict[str, dict]) -> None:
+    print(title)
+    print(f"  {'phase':12s} {'requests':>9s} {'non2xx':>7s} {'req/s':>8s} {'p50_ms':>7s} "
+          f"{'p90_ms':>7s} {'p99_ms':>7s}")
+    for name, r in rows.items():
+        print(f"  {name:12s} {r['requests']:9.0f} {r['non2xx']:7.0f} {r['rps']:8.1f} "
+              f"{r['p50_ms']:7.1f} {r['p90_ms']:7.1f} {r['p99_ms']:7.1f}  {r['socket_errors']}")
 
 
 def main() -> int:
     ap = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
-    ap.add_argument("--clients", type=int, default=20)
-    ap.add_argument("--requests", type=int, default=40, help="per client and phase")
-    ap.add_argument("--seconds", type=float, default=30.0, help="time limit per phase")
+    ap.add_argument("--workers", default="1,2", help="uvicorn worker counts to try (1,2)")
+    ap.add_argument("--connections", type=int, default=20)
+    ap.add_argument("--seconds", type=float, default=10.0, help="per phase")
+    ap.add_argument("--no-pg", action="store_true", help="skip the PostgreSQL run")
+    ap.add_argument("--pg-inner", action="store_true", help=argparse.SUPPRESS)
     args = ap.parse_args()
-
+    if shutil.which("wrk") is None:
+        print("benchmarks/api.py needs wrk: apt-get install wrk", file=sys.stderr)
+        return 2
     joints = touch_joints()
-    port = free_port()
-    base = f"http://127.0.0.1:{port}"
-    with tempfile.TemporaryDirectory() as tmp:
-        db = f"sqlite:///{Path(tmp) / 'bench.db'}"
-        cmd = [sys.executable, "-m", "server.cli", "serve", "--port", str(port), "--db", db]
-        proc = subprocess.Popen(cmd, cwd=ROOT, stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL)
-        try:
-            wait_ready(base, proc)
-            urls = []
-            with httpx.Client(base_url=base, timeout=30.0) as http:
-                for _ in range(args.clients):
-                    s = http.post("/controllers/1/sessions",
-                                  json={"method": "tool.xyz_4point", "target_no": 1})
-                    url = f"/controllers/1/sessions/{s.json()['id']}"
-                    for k, q in enumerate(joints):
-                        r = http.post(f"{url}/touch-up", json={"step": k, "joints_deg": q})
-                        r.raise_for_status()
-                    urls.append(url)
-
-            def touch(http: httpx.Client, url: str, k: int) -> httpx.Response:
-                body = {"step": k % 4, "joints_deg": joints[k % 4]}
-                return http.post(f"{url}/touch-up", json=body)
-
-            def compute(http: httpx.Client, url: str, k: int) -> httpx.Response:
-                return http.post(f"{url}/compute")
-
-            rows = []
-            for name, fn in (("touch-up", touch), ("compute", compute)):
-                lat, errors, wall = run_phase(base, urls, fn, args.requests, args.seconds)
-                ms = np.array(lat) * 1e3
-                p50, p90, p99 = np.percentile(ms, [50, 90, 99])
-                rows.append((name, len(lat), errors, len(lat) / wall, p50, p90, p99, ms.max()))
-        finally:
-            proc.terminate()
-            try:
-                proc.wait(timeout=10)
-            except subprocess.TimeoutExpired:
-                proc.kill()
-
-    print(f"pendant API, {args.clients} concurrent clients, uvicorn 1 process, SQLite WAL")
-    print(f"{'endpoint':10s} {'requests':>8s} {'errors':>6s} {'req/s':>8s} {'p50_ms':>8s} "
-          f"{'p90_ms':>8s} {'p99_ms':>8s} {'max_ms':>8s}")
-    for name, n, err, rps, p50, p90, p99, mx in rows:
-        print(f"{name:10s} {n:8d} {err:6d} {rps:8.1f} {p50:8.1f} {p90:8.1f} {p99:8.1f} {mx:8.1f}")
-    print(f"rps={rows[0][3]:.1f} p99_ms={rows[0][6]:.1f}")
+    counts = [int(w) for w in args.workers.split(",")]
+    with tempfile.TemporaryDirectory() as tmp_s:
+        tmp = Path(tmp_s)
+        if args.pg_inner:
+            rows = run_service(pg_url_from_env(), counts[0], args, ("touch-up",), joints, tmp)
+            show(f"PostgreSQL, uvicorn --workers {counts[0]}, {args.connections} connections",
+                 rows)
+            print(f"pg_inner_rps={rows['touch-up']['rps']:.1f}")
+            return 0
+        results = {}
+        for n in counts:
+            db = f"sqlite:///{tmp / f'bench-{n}.db'}"
+            results[n] = run_service(db, n, args, ("touch-up", "controllers", "tool"), joints, tmp)
+            show(f"SQLite WAL, uvicorn --workers {n}, {args.connections} connections, wrk -t2",
+                 results[n])
+    best = max(counts, key=lambda n: results[n]["touch-up"]["rps"])
+    pg = pg_touch_rps(best, args)
+    t = results[best]["touch-up"]
+    print(f"best worker count for touch-up: {best}")
+    print(f"rps={t['rps']:.1f} p99_ms={t['p99_ms']:.1f} pg_rps={pg}")
     return 0
 
 

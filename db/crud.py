@@ -266,18 +266,20 @@ def put_point(db: Session, s: CalibSession, step: int, source: str, pose_values:
     ``t_s`` is the emulated clock at the touch-up and ``motion_sign`` the direction each
     joint last moved before it (both for the session's ``robot-recording/1`` export)."""
     require_open(s)
-    old = next((p for p in s.points if p.step == step), None)
-    if old is not None:
-        s.points.remove(old)
-        db.flush()
-    joints = None if joints_deg is None else [float(q) for q in joints_deg]
-    p = TaughtPoint(step=step, source=source, joints_deg=joints, beam_id=beam_id, edge=edge,
-                    t_s=None if t_s is None else float(t_s),
-                    motion_sign=None if motion_sign is None else [float(v) for v in motion_sign])
+    p = next((p for p in s.points if p.step == step), None)
+    if p is None:
+        p = TaughtPoint(step=step)
+        s.points.append(p)
+    else:  # a re-teach: the row is overwritten in place (one UPDATE, not DELETE + INSERT)
+        p.created_at = utcnow()
+    p.source = source
+    p.joints_deg = None if joints_deg is None else [float(q) for q in joints_deg]
+    p.beam_id, p.edge = beam_id, edge
+    p.t_s = None if t_s is None else float(t_s)
+    p.motion_sign = None if motion_sign is None else [float(v) for v in motion_sign]
     p.set_pose_values(pose_values)
-    if velocity_mm_s is not None:
-        p.vx_mm_s, p.vy_mm_s, p.vz_mm_s = (float(v) for v in velocity_mm_s)
-    s.points.append(p)
+    p.vx_mm_s, p.vy_mm_s, p.vz_mm_s = ((None, None, None) if velocity_mm_s is None
+                                       else (float(v) for v in velocity_mm_s))
     _stale(s)
     db.flush()
     return p
@@ -436,6 +438,14 @@ def store_document(db: Session, collection: str, doc: dict[str, Any]) -> int:
     db.add(row)
     db.flush()
     return row.id
+
+
+def exists_document(db: Session, collection: str, doc_id: int) -> bool:
+    """Whether ``doc_id`` is a document of ``collection`` (without loading it)."""
+    rid = _row_id(doc_id)
+    return rid is not None and db.scalar(
+        select(StoredDocument.id).where(StoredDocument.id == rid,
+                                        StoredDocument.collection == collection)) is not None
 
 
 def load_document(db: Session, collection: str, doc_id: int, loc: str) -> dict[str, Any]:

@@ -245,7 +245,6 @@ class StoredDocument(Base):
     created_at: Mapped[datetime] = mapped_column(default=utcnow)
 
 
-<<<<<<< HEAD
 class ControllerFile(Base):
     """The controller file last imported in a format, kept as sent (revision 0003_files).
 
@@ -261,7 +260,8 @@ class ControllerFile(Base):
     format: Mapped[str] = mapped_column(String(8))  # kuka | abb | fanuc | ur
     text: Mapped[str] = mapped_column(Text)
     imported_at: Mapped[datetime] = mapped_column(default=utcnow)
-=======
+
+
 class IdempotencyKey(Base):
     """A POST that carried ``Idempotency-Key``: its fingerprint and, once answered, the response.
 
@@ -280,4 +280,34 @@ class IdempotencyKey(Base):
     headers: Mapped[dict[str, Any] | None]
     body: Mapped[bytes | None] = mapped_column(LargeBinary)
     created_at: Mapped[datetime] = mapped_column(default=utcnow, index=True)
->>>>>>> scaleout
+
+
+class Job(Base):
+    """Heavy work off the request path: an analysis, a JSON restore (see :mod:`db.jobs`).
+
+    ``state`` goes queued -> running -> done | failed | cancelled. A worker process claims a
+    queued job (``worker``, ``lease_until``: it renews the lease while it runs; a job whose
+    lease ran out is claimed again), reports ``progress`` (0..1) and ``message``, and stores
+    ``result`` (what the job made, e.g. ``{"analysis_id": 7}``) or ``error`` (the
+    ``{"status", "detail"}`` the request would have answered).
+    """
+
+    __tablename__ = "job"
+
+    id: Mapped[int] = mapped_column(primary_key=True)
+    kind: Mapped[str] = mapped_column(String(32))  # analysis | restore
+    state: Mapped[str] = mapped_column(String(16), default="queued", index=True)
+    params: Mapped[dict[str, Any]]
+    progress: Mapped[float] = mapped_column(default=0.0)
+    message: Mapped[str] = mapped_column(String(200), default="")
+    result: Mapped[dict[str, Any] | None]
+    error: Mapped[dict[str, Any] | None]
+    cancel_requested: Mapped[bool] = mapped_column(default=False)
+    worker: Mapped[str | None] = mapped_column(String(128))
+    attempts: Mapped[int] = mapped_column(default=0)
+    created_at: Mapped[datetime] = mapped_column(default=utcnow)
+    started_at: Mapped[datetime | None]
+    finished_at: Mapped[datetime | None]
+    lease_until: Mapped[datetime | None]
+
+

@@ -1,6 +1,6 @@
 """``pendant analyze`` and ``pendant simulate``: the analysis from the command line.
 
-    pendant analyze RECORDING.json [--json] [--folds K] [--seed S]
+    pendant analyze RECORDING.json [--json] [--folds K] [--seed S] [--service URL]
     pendant simulate KIND --robot KEY [--effect NAME[:JOINT]=VALUE ...] [--noise MM]
                      [--payload KG] [--n N] [--seed S] -o FILE
 
@@ -71,16 +71,69 @@ def parse_effects(specs: list[str], n_joints: int, noise_mm: float):  # noqa: AN
                          noise_mm=noise_mm, **scalar)
 
 
+def _call(base: str, method: str, path: str, body: bytes | None = None) -> Any:
+    """One request to the service; its JSON answer, or CalibrationError with its named error."""
+    import urllib.error
+    import urllib.request
+
+    req = urllib.request.Request(base.rstrip("/") + path, data=body, method=method,
+                                 headers={"content-type": "application/json"})
+    try:
+        with urllib.request.urlopen(req, timeout=60) as r:
+            return json.loads(r.read() or b"null")
+    except urllib.error.HTTPError as err:
+        try:
+            item = json.loads(err.read())["detail"][0]
+            loc, msg = tuple(str(x) for x in item["loc"]) or ("service",), item["msg"]
+        except (ValueError, KeyError, IndexError, TypeError):
+            loc, msg = ("service",), f"{err.code} {err.reason}"
+        raise CalibrationError(loc, f"{msg} ({err.code})") from None
+    except urllib.error.URLError as err:
+        raise CalibrationError(("--service",), f"no answer from {base}: {err.reason}") from None
+
+
+def analyze_on_service(base: str, text: str, folds: int, seed: int,
+                       poll_s: float = 0.3) -> dict[str, Any]:
+    """Store the recording on the service, queue its analysis (202: a job), follow the job
+    with its progress on stderr, and return the stored report. Ctrl-C cancels the job."""
+    import time
+
+    rec = _call(base, "POST", "/recordings", text.encode("utf-8"))
+    job = _call(base, "POST", f"/recordings/{rec['id']}/analyze?folds={folds}&seed={seed}")
+    try:
+        while job["state"] not in ("done", "failed", "cancelled"):
+            print(f"job {job['id']}: {job['state']} {100 * job['progress']:.0f} % "
+                  f"{job['message']}", file=sys.stderr)
+            time.sleep(poll_s)
+            job = _call(base, "GET", job["links"]["self"])
+    except KeyboardInterrupt:
+        _call(base, "POST", job["links"]["cancel"])
+        print(f"job {job['id']}: cancel requested", file=sys.stderr)
+        raise
+    if job["state"] == "cancelled":
+        raise CalibrationError(("job", job["id"]), "was cancelled")
+    if job["state"] == "failed":
+        item = job["error"]["detail"][0]
+        raise CalibrationError(tuple(item["loc"]) or ("job", job["id"]),
+                               f"{item['msg']} ({job['error']['status']})")
+    return _call(base, "GET", job["links"]["result"])
+
+
 def run_analyze(args: argparse.Namespace) -> int:
-    from server.recording import parse_recording
-    from solvers.analysis import analyze, render_text
+    from solvers.analysis import render_text
 
     text = Path(args.file).read_text(encoding="utf-8")
     try:
         doc = json.loads(text)
     except json.JSONDecodeError as err:
         raise CalibrationError(("file",), f"not JSON: {err.msg} at line {err.lineno}") from None
-    report = analyze(parse_recording(doc), folds=args.folds, seed=args.seed)
+    if args.service:
+        report = analyze_on_service(args.service, text, args.folds, args.seed)
+    else:
+        from server.recording import parse_recording
+        from solvers.analysis import analyze
+
+        report = analyze(parse_recording(doc), folds=args.folds, seed=args.seed)
     print(json.dumps(report, indent=1) if args.json else render_text(report))
     return 0
 
@@ -106,6 +159,9 @@ def add_analysis_commands(subparsers: Any) -> None:
     a.add_argument("--json", action="store_true", help="print the analysis-report/1 JSON")
     a.add_argument("--folds", type=int, default=5, help="K of the K-fold cross-validation (5)")
     a.add_argument("--seed", type=int, default=0, help="seed of the fold assignment (0)")
+    a.add_argument("--service", metavar="URL", help="analyse on a pendant service (e.g. "
+                   "http://127.0.0.1:8000): the recording and report are stored there, the "
+                   "analysis runs as a job in its workers (Ctrl-C cancels it)")
     a.set_defaults(func=run_analyze)
 
     s = subparsers.add_parser("simulate", help="write a simulated robot-recording/1 with hidden effects")

@@ -19,10 +19,11 @@ from fastapi.staticfiles import StaticFiles
 from db import crud
 from db.session import (make_engine, make_sessionmaker, migration_lock, schema_status, upgrade,
                         write_session)
-from server import deps, errors, idempotency
 from emulator import DEMO_ROBOT, home_joints
-from server.routers import (analysis, base, controllers, export, fixed_tool, robot, sessions, tool,
-                            workpiece)
+from server import deps, errors, idempotency
+from server.limits import BodyLimits
+from server.routers import (analysis, base, controllers, export, fixed_tool, jobs, robot, sessions,
+                            tool, workpiece)
 from server.settings import Settings
 from solvers.robots import ROBOTS
 
@@ -39,6 +40,8 @@ TAGS = [
                                         "discard."},
     {"name": "Export", "description": "Controller files (KUKA, ABB, FANUC, UR) and JSON "
                                       "backup/restore."},
+    {"name": "Jobs", "description": "Analyses and restores run by the worker processes: state, "
+                                    "progress, cancel, result."},
 ]
 
 PLACEHOLDER = """<!doctype html><html><head><meta charset="utf-8"><title>pendant</title></head>
@@ -85,8 +88,9 @@ def create_app(settings: Settings | None = None) -> FastAPI:
     errors.install(app)
     idempotency.install(app)
     _install_health(app)
+    app.add_middleware(BodyLimits)
     for module in (controllers, robot, tool, base, fixed_tool, workpiece, sessions, export,
-                   analysis):
+                   analysis, jobs):
         app.include_router(module.router)
     if settings.demo_controller:
         ensure_demo(app)

@@ -1,7 +1,9 @@
 """The ``pendant`` command: serve the pendant, calibrate from a file, export a controller's tables.
 
     pendant serve [--host 127.0.0.1] [--port 8000] [--db URL] [--workers N] [--no-migrate]
+                  [--job-workers 2]
     pendant db upgrade [--db URL]
+    pendant worker [--processes 2] [--db URL] [--job-time-s 600] [--job-memory-mb 2048]
     pendant slot tool|base N [--name ..] [--pose x,y,z,a,b,c] [--url URL]   (sends If-Match)
     pendant calibrate METHOD FILE [--robot KEY] [--tcp X,Y,Z] [--json]
     pendant export CONTROLLER --format kuka|abb|fanuc|ur|json [--db URL]
@@ -17,6 +19,8 @@ import argparse
 import csv
 import io
 import json
+import os
+import subprocess
 import sys
 from pathlib import Path
 from typing import Any, Sequence
@@ -173,6 +177,19 @@ def build_parser() -> argparse.ArgumentParser:
                                          "head, under a database-wide lock)")
     up.add_argument("--db", help="database URL")
 
+    s.add_argument("--job-workers", type=int, default=2, metavar="N",
+                   help="job worker processes started with the service (analyses, restores); "
+                        "0: none here, run `pendant worker` elsewhere (default 2)")
+    _job_limits(s)
+
+    w = sub.add_parser("worker", help="run queued jobs (analyses, restores) in a bounded pool of "
+                                      "processes; any number of hosts may share one database")
+    w.add_argument("--processes", type=int, default=2, metavar="N",
+                   help="jobs run at once, one process each (default 2)")
+    w.add_argument("--db", help="database URL")
+    w.add_argument("--exit-with-parent", action="store_true", help=argparse.SUPPRESS)
+    _job_limits(w)
+
     c = sub.add_parser("calibrate",
                        help="solve a calibration menu from taught poses in a JSON/CSV file")
     c.add_argument("method", choices=sorted(METHODS))
@@ -246,6 +263,46 @@ def import_file(args: argparse.Namespace) -> int:
     return 0
 
 
+def _job_limits(p: argparse.ArgumentParser) -> None:
+    from server.worker import DEFAULT_MEMORY_MB, DEFAULT_TIME_S
+
+    p.add_argument("--job-time-s", type=float, default=DEFAULT_TIME_S,
+                   help=f"a job running longer is stopped and fails (default {DEFAULT_TIME_S:g})")
+    p.add_argument("--job-memory-mb", type=int, default=DEFAULT_MEMORY_MB,
+                   help=f"address space of a job's process (default {DEFAULT_MEMORY_MB})")
+
+
+def _positive(value: int | float, option: str) -> None:
+    if value <= 0:
+        raise CalibrationError((option,), f"must be > 0, got {value}")
+
+
+def start_job_workers(db_url: str, args: argparse.Namespace) -> subprocess.Popen | None:
+    """``pendant worker`` as a child of ``serve`` (stops when serve stops); None for 0."""
+    if args.job_workers <= 0:
+        return None
+    cmd = [sys.executable, "-m", "server.cli", "worker", "--db", db_url, "--exit-with-parent",
+           "--processes", str(args.job_workers), "--job-time-s", str(args.job_time_s),
+           "--job-memory-mb", str(args.job_memory_mb)]
+    return subprocess.Popen(cmd)
+
+
+def run_worker(args: argparse.Namespace) -> int:
+    import logging
+
+    from server.worker import Limits, Pool
+
+    _positive(args.processes, "--processes")
+    _positive(args.job_time_s, "--job-time-s")
+    _positive(args.job_memory_mb, "--job-memory-mb")
+    logging.basicConfig(level=logging.INFO, format="%(asctime)s %(name)s %(message)s")
+    pool = Pool(_settings(args.db).db_url, args.processes,
+                Limits(args.job_time_s, args.job_memory_mb),
+                parent_pid=os.getppid() if args.exit_with_parent else None)
+    pool.run()
+    return 0
+
+
 def _settings(db: str | None):  # noqa: ANN202
     from server.settings import Settings
 
@@ -271,21 +328,32 @@ def serve(args: argparse.Namespace) -> int:
     settings = _settings(args.db)
     if args.workers < 1:
         raise CalibrationError(("--workers",), f"must be >= 1, got {args.workers}")
+    _positive(args.job_time_s, "--job-time-s")
+    _positive(args.job_memory_mb, "--job-memory-mb")
+    application = None
     try:
         if args.workers == 1:
             from dataclasses import replace
 
             application = app_module.create_app(replace(settings, migrate=not args.no_migrate))
-            uvicorn.run(application, host=args.host, port=args.port)
-            return 0
-        from db.session import make_engine
+        else:
+            from db.session import make_engine
 
-        app_module.check_schema(make_engine(settings.db_url), not args.no_migrate)
+            app_module.check_schema(make_engine(settings.db_url), not args.no_migrate)
     except app_module.SchemaOutOfDate as err:
         raise SchemaOutOfDate(str(err)) from None
-    os.environ[ENV_DB_URL] = settings.db_url  # the workers build server.app:app from these
-    os.environ[ENV_MIGRATE] = "0" if args.no_migrate else "1"
-    uvicorn.run("server.app:app", host=args.host, port=args.port, workers=args.workers)
+    workers = start_job_workers(settings.db_url, args)  # the schema is current by now
+    try:
+        if application is not None:
+            uvicorn.run(application, host=args.host, port=args.port)
+        else:
+            os.environ[ENV_DB_URL] = settings.db_url  # the workers build server.app:app from these
+            os.environ[ENV_MIGRATE] = "0" if args.no_migrate else "1"
+            uvicorn.run("server.app:app", host=args.host, port=args.port, workers=args.workers)
+    finally:
+        if workers is not None:
+            workers.terminate()
+            workers.wait(timeout=30)
     return 0
 
 
@@ -302,6 +370,8 @@ def main(argv: Sequence[str] | None = None) -> int:
             print(f"pendant: schema {before or 'empty'} -> {head}" if before != head
                   else f"pendant: schema is {head} (nothing to do)")
             return 0
+        if args.command == "worker":
+            return run_worker(args)
         if args.command == "calibrate":
             given = (("tcp_mm", args.tcp), ("reference_tcp_mm", args.reference_tcp),
                      ("fixed_tcp_mm", args.fixed_tcp))

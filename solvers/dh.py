@@ -64,9 +64,29 @@ class RobotModel:
         return len(self.joints)
 
     def params(self) -> dict[str, FloatArray]:
-        """The DH table as arrays: ``a_mm, alpha_deg, d_mm, offset_deg, direction``."""
-        cols = ("a_mm", "alpha_deg", "d_mm", "offset_deg", "direction")
-        return {c: np.array([getattr(j, c) for j in self.joints], dtype=float) for c in cols}
+        """The DH table as arrays: ``a_mm, alpha_deg, d_mm, offset_deg, direction``.
+
+        Built once per model (the model is frozen) and shared: the arrays are read-only.
+        """
+        cached = self.__dict__.get("_params")
+        if cached is None:
+            cols = ("a_mm", "alpha_deg", "d_mm", "offset_deg", "direction")
+            cached = {c: np.array([getattr(j, c) for j in self.joints], dtype=float)
+                      for c in cols}
+            for v in cached.values():
+                v.setflags(write=False)
+            self.__dict__["_params"] = cached  # frozen: the cache bypasses __setattr__
+        return dict(cached)
+
+    def mount_matrices(self) -> tuple[FloatArray, FloatArray]:
+        """(T_world_base, T_dhn_flange) of ``base_pose`` and ``flange_pose``, read-only, cached."""
+        cached = self.__dict__.get("_mount")
+        if cached is None:
+            cached = (self.base_pose.as_matrix(), self.flange_pose.as_matrix())
+            for v in cached:
+                v.setflags(write=False)
+            self.__dict__["_mount"] = cached
+        return cached
 
     def coupling_matrix(self) -> FloatArray:
         return np.eye(self.dof) if self.coupling is None else np.array(self.coupling, dtype=float)
@@ -129,7 +149,7 @@ def joint_frames(robot: RobotModel, q_deg: object) -> FloatArray:
     links = link_matrices(robot.dh_convention, dh_angles_rad(robot, q), p["d_mm"], p["a_mm"],
                           np.radians(p["alpha_deg"]))
     frames = np.empty(q.shape[:-1] + (robot.dof + 1, 4, 4))
-    frames[..., 0, :, :] = robot.base_pose.as_matrix()
+    frames[..., 0, :, :] = robot.mount_matrices()[0]
     for i in range(robot.dof):
         frames[..., i + 1, :, :] = frames[..., i, :, :] @ links[..., i, :, :]
     return frames
@@ -145,7 +165,7 @@ def forward_kinematics(robot: RobotModel, q_deg: object, tool: FloatArray | None
     >>> np.round(T[:3, 3], 3).tolist()  # KR 6 R900 sixx, all axes zero
     [980.0, 0.0, 435.0]
     """
-    T = joint_frames(robot, q_deg)[..., -1, :, :] @ robot.flange_pose.as_matrix()
+    T = joint_frames(robot, q_deg)[..., -1, :, :] @ robot.mount_matrices()[1]
     return T if tool is None else T @ tool
 
 
@@ -167,7 +187,7 @@ def geometric_jacobian(robot: RobotModel, q_deg: object, tool: FloatArray | None
     the coupling so that columns are per controller joint. (..., 6, n) for a stack of q.
     """
     frames = joint_frames(robot, q_deg)
-    T = frames[..., -1, :, :] @ robot.flange_pose.as_matrix()
+    T = frames[..., -1, :, :] @ robot.mount_matrices()[1]
     if tool is not None:
         T = T @ tool
     z, o = joint_axes(robot, frames)

@@ -60,6 +60,23 @@ def restore_slot(client: TestClient, path: str, history_id: int):  # noqa: ANN20
     """POST ``{path}/restore/{history_id}`` with the slot's current ETag as ``If-Match``."""
     etag = client.get(path).headers.get("ETag", "*")
     return client.post(f"{path}/restore/{history_id}", headers={"If-Match": etag})
+def finish_job(client: TestClient, r) -> dict:  # noqa: ANN001
+    """The 202 answer ``r`` of a route that queued a job: run the queue here (what a
+    ``pendant worker`` does, in this process) and return the finished job."""
+    from server.worker import drain
+
+    assert r.status_code == 202, f"{r.request.method} {r.request.url.path} -> {r.status_code}: {r.text}"
+    job = r.json()
+    assert r.headers["location"] == f"/jobs/{job['id']}" == job["links"]["self"]
+    drain(client.app.state.sessionmaker)
+    return ok(client.get(f"/jobs/{job['id']}"))
+
+
+def analyze(client: TestClient, recording_id: int, **query) -> dict:
+    """POST .../analyze, run the job, and return the stored ``analysis-report/1`` (+ ``id``)."""
+    job = finish_job(client, client.post(f"/recordings/{recording_id}/analyze", params=query))
+    assert job["state"] == "done", job
+    return ok(client.get(job["links"]["result"]))
 
 
 def open_session(client: TestClient, method: str, target_no: int = 1, controller: str = C,
@@ -124,4 +141,4 @@ def calibrated_pointer(client: TestClient, number: int = 1) -> dict:
 __all__ = ["C", "CELL", "TRUE_TCP_MM", "make_client", "db_url", "client", "ok", "open_session",
            "edit_slot", "restore_slot",
            "approach", "walk", "calibrate", "pose_array", "pose_matrix", "angle_deg",
-           "calibrated_pointer"]
+           "calibrated_pointer", "finish_job", "analyze"]

@@ -44,7 +44,11 @@ def free_port() -> int:
 
 @contextmanager
 def serve(db_url: str) -> Iterator[str]:
-    """The real service (create_app on ``db_url``) under uvicorn in a thread; yields its URL."""
+    """The real service (create_app on ``db_url``) under uvicorn in a thread, with a
+    ``pendant worker`` process for its jobs (analyses, restores); yields its URL."""
+    import subprocess
+    import sys
+
     import uvicorn
 
     from server.app import create_app
@@ -63,9 +67,15 @@ def serve(db_url: str) -> Iterator[str]:
         ready.wait(0.01)
     if not server.started:
         raise RuntimeError(f"uvicorn did not start on 127.0.0.1:{port}")
+    root = Path(__file__).resolve().parent.parent
+    env = {**os.environ, "PYTHONPATH": f"{root}{os.pathsep}{os.environ.get('PYTHONPATH', '')}"}
+    worker = subprocess.Popen([sys.executable, "-m", "server.cli", "worker", "--db", db_url,
+                               "--processes", "1"], env=env)
     try:
         yield f"http://127.0.0.1:{port}"
     finally:
+        worker.terminate()
+        worker.wait(timeout=30)
         server.should_exit = True
         thread.join(timeout=10)
 

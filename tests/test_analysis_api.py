@@ -6,7 +6,7 @@ from __future__ import annotations
 import json
 
 import pytest
-from api_helpers import client, db_url, make_client, ok  # noqa: F401  (fixtures)
+from api_helpers import analyze, client, db_url, finish_job, make_client, ok  # noqa: F401
 
 from server.analysis_cli import parse_effects
 from server.cli import main
@@ -25,7 +25,7 @@ def compliant_ur10() -> dict:
 def test_store_analyze_and_read_back(client) -> None:  # noqa: F811
     rec = ok(client.post("/recordings", json=compliant_ur10()))
     assert rec["kind"] == "tracker" and rec["n_samples"] == 40
-    rep = ok(client.post(f"/recordings/{rec['id']}/analyze"))
+    rep = analyze(client, rec["id"])
     assert REPORT_KEYS <= set(rep) and rep["format"] == "analysis-report/1"
     assert rep["verdict"] == "explained"
     f = rep["findings"][0]
@@ -49,12 +49,12 @@ def test_recording_and_analysis_survive_a_restart(db_url) -> None:  # noqa: F811
     doc = compliant_ur10()
     with make_client(db_url) as first:
         rid = ok(first.post("/recordings", json=doc))["id"]
-        rep = ok(first.post(f"/recordings/{rid}/analyze"))
+        rep = analyze(first, rid)
         first.app.state.engine.dispose()
     with make_client(db_url) as second:  # a new process on the same SQLite file
         assert ok(second.get(f"/recordings/{rid}")) == doc
         assert ok(second.get(f"/analysis/{rep['id']}")) == rep
-        again = ok(second.post(f"/recordings/{rid}/analyze"))  # ids go on, not start over
+        again = analyze(second, rid)  # ids go on, not start over
         assert again["id"] != rep["id"] and again["findings"] == rep["findings"]
         second.app.state.engine.dispose()
 
@@ -77,8 +77,9 @@ def test_unknown_ids_are_404(client) -> None:  # noqa: F811
 def test_too_few_samples_is_422(client) -> None:  # noqa: F811
     doc = simulate_recording("tracker", "ur10", Imperfections(noise_mm=0.02), 5, seed=1)
     rid = ok(client.post("/recordings", json=doc))["id"]
-    r = client.post(f"/recordings/{rid}/analyze")
-    assert r.status_code == 422 and r.json()["detail"][0]["loc"] == ["body", "samples"]
+    job = finish_job(client, client.post(f"/recordings/{rid}/analyze"))
+    assert job["state"] == "failed" and job["links"]["result"] is None
+    assert job["error"]["status"] == 422 and job["error"]["detail"][0]["loc"] == ["body", "samples"]
 
 
 def test_cli_simulate_then_analyze(tmp_path, capsys) -> None:

@@ -141,7 +141,7 @@ def test_plots_draw_one_bar_per_sample_on_one_scale(page) -> None:
         rep["final"]["residuals_mm"] = after
         route.fulfill(json=rep)
 
-    page.route("**/recordings/*/analyze*", add_residuals)
+    page.route("**/analysis/*", add_residuals)  # the report, read from the job's result link
     page.get_by_role("button", name="Simulate example").click()
     idle(page)
     rep = page.evaluate("window.analysisPage.report")
@@ -187,6 +187,18 @@ def test_broken_recording_names_the_field_beside_the_upload_box(page, tmp_path, 
     assert "(422)" in box.inner_text()
     assert page.locator("#report").is_hidden()
     assert page.get_by_label("or paste the JSON").get_attribute("aria-invalid") == "true"
+
+
+def test_an_analysis_job_that_fails_names_the_field_and_hides_cancel(page) -> None:
+    """Five samples are a valid recording but too few to analyse: the job fails with a 422
+    naming ``samples``, shown as a refused request is; the job's Cancel button is gone."""
+    doc = simulate_recording("tracker", "ur10", Imperfections(noise_mm=0.02), 5, seed=1)
+    paste_and_analyse(page, json.dumps(doc))
+    box = page.locator("#upload-error")
+    assert box.is_visible() and "(422)" in box.inner_text()
+    assert box.locator("code.loc").first.inner_text() == "samples"
+    assert page.locator("#cancel-job").is_hidden()
+    assert page.locator("#report").is_hidden()
 
 
 def test_text_that_is_not_json_is_refused_with_its_line(page) -> None:

@@ -5,7 +5,7 @@ from __future__ import annotations
 import pytest
 
 from api_helpers import *  # noqa: F403
-from api_helpers import C, TRUE_TCP_MM, calibrate, ok, pose_array
+from api_helpers import C, TRUE_TCP_MM, calibrate, finish_job, ok, pose_array
 
 
 def test_history_records_before_after_and_restore(client):
@@ -52,8 +52,10 @@ def test_json_backup_restores_tables_history_and_sessions(client):
     backup = client.get(f"{C}/export", params={"format": "json"})
     assert backup.headers["content-type"].startswith("application/json")
     other = ok(client.post("/controllers", json={"name": "restored"}))
-    res = ok(client.post(f"/controllers/{other['id']}/import", json={"format": "json", "text": backup.text}))
-    assert res["entries"] == 48 and res["history"] == 1
+    job = finish_job(client, client.post(f"/controllers/{other['id']}/import",
+                                         json={"format": "json", "text": backup.text}))
+    assert job["state"] == "done" and job["links"]["result"] == f"/controllers/{other['id']}"
+    assert job["result"] == {"format": "json", "entries": 48, "history": 1}
     t1 = ok(client.get(f"/controllers/{other['id']}/tools/1"))
     assert pose_array(t1["pose"])[:3] == pytest.approx(TRUE_TCP_MM, abs=1e-3)
     sessions = ok(client.get(f"/controllers/{other['id']}/sessions"))

@@ -9,7 +9,7 @@ import json
 
 import pytest
 from api_helpers import *  # noqa: F401,F403
-from api_helpers import C, calibrate, ok, open_session, walk
+from api_helpers import C, calibrate, finish_job, ok, open_session, walk
 
 HUGE_ID = 10**20  # beyond SQLite's 64-bit INTEGER
 
@@ -128,7 +128,7 @@ def test_analyze_with_a_negative_seed_names_the_seed(client):  # noqa: ANN001
     walk(client, url, extra=4)
     rid = ok(client.post("/recordings", json=ok(client.get(f"{url}/recording"))))["id"]
     assert_named(client.post(f"/recordings/{rid}/analyze?seed=-1"), 422, "query", "seed")
-    ok(client.post(f"/recordings/{rid}/analyze?seed=7"))
+    assert client.post(f"/recordings/{rid}/analyze?seed=7").status_code == 202
 
 
 def test_recording_with_a_huge_velocity_is_refused_naming_the_sample(client):  # noqa: ANN001
@@ -197,8 +197,8 @@ def test_backup_with_nan_is_refused(client, backup):  # noqa: ANN001
 
 
 def test_valid_backup_still_round_trips(client, backup):  # noqa: ANN001
-    r = ok(_import(client, backup))
-    assert r["entries"] == 48
+    job = finish_job(client, _import(client, backup))
+    assert job["state"] == "done" and job["result"]["entries"] == 48, job
     _still_readable(client)
     assert json.loads(client.get(f"{C}/export?format=json").text)["entries"] == backup["entries"]
 

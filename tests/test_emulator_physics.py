@@ -13,7 +13,7 @@ import pytest
 
 from api_helpers import *  # noqa: F403  (fixtures client, db_url)
 from api_helpers import C, CELL, TRUE_TCP_MM, approach, make_client, ok, open_session, pose_array
-from api_helpers import walk
+from api_helpers import analyze, walk
 from emulator import THERMAL_WARMUP_S
 from server.recording import parse_recording
 from solvers.physics import Imperfections, true_tcp_positions
@@ -209,7 +209,7 @@ def test_the_pendant_recording_of_a_yielding_joint_2_is_analysed_back(client):
     doc = ok(client.get(f"{url}/recording"))
     assert len(doc["samples"]) == 12
     rid = ok(client.post("/recordings", json=doc))["id"]
-    report = ok(client.post(f"/recordings/{rid}/analyze"))
+    report = analyze(client, rid)
     first = report["findings"][0]
     assert (first["effect"], first["joint"]) == ("joint_compliance", 2), report["locate"]["summary"]
     assert first["parameters"]["compliance_deg_per_Nm"] == pytest.approx(0.002, rel=0.3)

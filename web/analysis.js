@@ -11,6 +11,11 @@
 // `residuals.baseline_mm` / `residuals.final_mm`): |r_k| in mm, one per sample, in sample
 // order. A report without them gets a note in place of the plot.
 //
+// The analysis is a job of the service: POST .../analyze answers 202 with the job; the page
+// polls GET /jobs/{id} (progress in the status line, a Cancel button) and, once it is done,
+// reads the report from the job's result link. A failed job's error is shown like a refused
+// request's.
+//
 // ?analysis=ID shows the stored report GET /analysis/ID.
 
 import { request, ApiError } from "/api.js";
@@ -62,6 +67,31 @@ async function busy(job) {
       $("#main").setAttribute("aria-busy", "false");
       for (const b of document.querySelectorAll("#input-panel button")) b.disabled = false;
     }
+  }
+}
+
+const FINAL = ["done", "failed", "cancelled"];
+const POLL_MS = 300;
+
+/** Follow a job (the 202 answer) until it ends, showing its progress; resolves to the job. */
+async function waitJob(job, what) {
+  const cancel = $("#cancel-job");
+  cancel.hidden = false;
+  cancel.disabled = false;
+  cancel.onclick = () => {
+    cancel.disabled = true;
+    request("POST", job.links.cancel).catch(() => {});
+  };
+  try {
+    while (!FINAL.includes(job.state)) {
+      setStatus(`${what}: ${job.state}, ${Math.round(100 * job.progress)} % (${job.message}) …`);
+      await new Promise((resolve) => setTimeout(resolve, POLL_MS));
+      job = await request("GET", job.links.self);
+    }
+    return job;
+  } finally {
+    cancel.hidden = true;
+    cancel.onclick = null;
   }
 }
 
@@ -193,11 +223,27 @@ async function analyseText(text) {
   showRecording(rec);
   setStatus(`Analysing recording ${rec.id} (${rec.n_samples} ${rec.kind} samples) …`);
   const q = new URLSearchParams({ folds: $("#folds").value || "5", seed: $("#seed").value || "0" });
-  let rep;
+  let job;
   try {
-    rep = await request("POST", `/recordings/${rec.id}/analyze?${q}`);
+    job = await request("POST", `/recordings/${rec.id}/analyze?${q}`);
+    job = await waitJob(job, `Analysing recording ${rec.id} (${rec.n_samples} ${rec.kind} samples)`);
   } catch (err) {
     showError(err, text, "The analysis");
+    return;
+  }
+  if (job.state === "cancelled") {
+    setStatus(`The analysis of recording ${rec.id} was cancelled; nothing was stored.`, "err");
+    return;
+  }
+  if (job.state !== "done") {
+    showError(new ApiError(job.error.status, job.error.detail), text, "The analysis");
+    return;
+  }
+  let rep;
+  try {
+    rep = await request("GET", job.links.result);
+  } catch (err) {
+    showError(err, text, "Reading the report");
     return;
   }
   render(rep);

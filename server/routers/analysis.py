@@ -3,29 +3,27 @@
 - ``POST /recordings``: store a ``robot-recording/1`` document (validated by
   :func:`server.recording.parse_recording`; a bad document is a 422 naming the field).
 - ``GET /recordings/{recording_id}``: the stored document.
-- ``POST /recordings/{recording_id}/analyze``: run :func:`solvers.analysis.analyze`, store the
-  report and return it (with its ``id``).
+- ``POST /recordings/{recording_id}/analyze``: queue a job (202, ``Location: /jobs/{id}``)
+  that runs :func:`solvers.analysis.analyze` in a worker process and stores the report.
 - ``GET /analysis/{analysis_id}``: a stored report (with its ``id``).
 
 Documents live in the database (``stored_document``, :func:`db.crud.store_document` /
-:func:`db.crud.load_document`), so they survive a restart. ``analyze`` holds no transaction
-while it computes (up to a second for a large recording, and jogging or a touch-up must not
-wait for it): it reads the recording in one short session, analyses outside any session, and
-stores the report in a second short writing session.
+:func:`db.crud.load_document`), so they survive a restart. The analysis runs off the request path
+(``server.job_kinds.run_analysis`` in a ``pendant worker`` process, bounded in time and
+memory): a flood of analyses queues up and never stalls jogging, touch-ups or reads.
 """
 
 from __future__ import annotations
 
 from typing import Any
 
-from fastapi import APIRouter, Body, Query, Request
-from starlette.concurrency import run_in_threadpool
+from fastapi import APIRouter, Body, Query, Response
 
-from db.crud import load_document, store_document
-from db.session import write_session
+from db import jobs
+from db.crud import NotFound, exists_document, load_document, store_document
 from server.deps import SessionDep
 from server.recording import parse_recording
-from solvers.analysis import analyze
+from server.routers.jobs import JobOut, accepted
 
 router = APIRouter(tags=["Analysis"])
 
@@ -44,38 +42,22 @@ def get_recording(db: SessionDep, recording_id: int) -> dict[str, Any]:
     return load_document(db, "recordings", recording_id, "recording_id")
 
 
-def _read(request: Request, collection: str, doc_id: int, loc: str) -> dict[str, Any]:
-    with request.app.state.sessionmaker() as db:
-        return load_document(db, collection, doc_id, loc)
+@router.post("/recordings/{recording_id}/analyze", status_code=202)
+def analyze_recording(response: Response, db: SessionDep, recording_id: int,
+                      folds: int = Query(5, ge=2, le=20,
+                                         description="K of the K-fold cross-validation"),
+                      seed: int = Query(0, ge=0, le=2**32 - 1,
+                                        description="seed of the fold assignment")) -> JobOut:
+    """Queue the analysis of the recording (a job): 202 and ``Location: /jobs/{id}``.
 
-
-def _write(request: Request, collection: str, doc: dict[str, Any]) -> int:
-    db = write_session(request.app.state.sessionmaker)
-    try:
-        new_id = store_document(db, collection, doc)
-        db.commit()
-        return new_id
-    except BaseException:
-        db.rollback()
-        raise
-    finally:
-        db.close()
-
-
-@router.post("/recordings/{recording_id}/analyze")
-async def analyze_recording(request: Request, recording_id: int,
-                            folds: int = Query(5, ge=2, le=20,
-                                               description="K of the K-fold cross-validation"),
-                            seed: int = Query(0, ge=0, le=2**32 - 1,
-                                              description="seed of the fold assignment")
-                            ) -> dict[str, Any]:
-    """Compare the recording with the rigid model; returns the ``analysis-report/1`` (+ ``id``)."""
-    doc = await run_in_threadpool(_read, request, "recordings", recording_id, "recording_id")
-    report = await run_in_threadpool(lambda: analyze(parse_recording(doc), folds=folds, seed=seed))
-    report["recording_id"] = recording_id
-    async with request.app.state.writers:  # the writers' bulkhead (server.deps)
-        report["id"] = await run_in_threadpool(_write, request, "analyses", report)
-    return report
+    The job's result is ``{"analysis_id": N}`` and ``links.result`` is ``/analysis/N``, the
+    ``analysis-report/1``. A recording the analysis cannot use fails the job with the 422 the
+    analysis gives (``error.status``, ``error.detail``)."""
+    if not exists_document(db, "recordings", recording_id):
+        raise NotFound(("recording_id",), f"no recording {recording_id}")
+    job = jobs.enqueue(db, "analysis", {"recording_id": recording_id, "folds": folds,
+                                        "seed": seed})
+    return accepted(response, job)
 
 
 @router.get("/analysis/{analysis_id}")

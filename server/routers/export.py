@@ -10,10 +10,11 @@ import json
 
 from fastapi import APIRouter, Response
 
-from db import crud
+from db import crud, jobs
 from server.controller_files import ImportResult, apply_import, export_file, parse_file
 from server.deps import SessionDep
 from server.preconditions import IfMatch
+from server.routers.jobs import JobOut, accepted
 from server.schemas import ExportFormat, ImportIn, ImportOut, SkippedOut, SlotChangeOut
 from solvers.errors import CalibrationError
 
@@ -53,16 +54,19 @@ def export(controller_id: int, db: SessionDep, format: ExportFormat = "kuka") ->
                     headers={"Content-Disposition": f'attachment; filename="{name}-{filename}"'})
 
 
-@router.post("/import")
-def import_tables(controller_id: int, body: ImportIn, db: SessionDep,
-                  if_match: IfMatch = None) -> ImportOut:
+@router.post("/import", responses={202: {"model": JobOut,
+                                         "description": "JSON backup: the restore job"}})
+def import_tables(controller_id: int, body: ImportIn, db: SessionDep, response: Response,
+                  if_match: IfMatch = None) -> ImportOut | JobOut:
     """Read a controller file (KUKA ``$config.dat``, ABB RAPID module, pendant's FANUC or UR
     export) or a JSON backup into the tables.
 
     A controller file replaces each slot it names whole (each change recorded in history)
-    and is kept, so that a later export in that format patches only changed values into it.
-    ``dry_run`` returns, per slot, before -> after, kind changes and skipped declarations,
-    and writes nothing. A JSON backup replaces the tables, history and sessions.
+    and is kept, so that a later export in that format patches only changed values into it;
+    the answer is 200. ``dry_run`` returns, per slot, before -> after, kind changes and
+    skipped declarations, and writes nothing. A JSON backup replaces the tables, history and
+    sessions: it is checked at once (422 naming the field), then restored by a job (202,
+    ``Location: /jobs/{id}``; the job's result is ``{"format", "entries", "history"}``).
     ``If-Match`` (the controller's ETag) is honoured: 412 when the controller changed since."""
     from server.routers.controllers import changing
 
@@ -86,12 +90,9 @@ def import_tables(controller_id: int, body: ImportIn, db: SessionDep,
                 raise CalibrationError(loc + tuple(err.loc[1:]), err.reason) from None
         if body.dry_run:
             return ImportOut(format="json", entries=len(doc["entries"]), dry_run=True)
-        try:
-            n, h = crud.restore_backup(db, c, doc)
-        except (KeyError, TypeError, ValueError) as err:
-            raise CalibrationError(("text",),
-                                   f"malformed backup: {type(err).__name__} {err}") from None
-        return ImportOut(format="json", entries=n, history=h)
+        response.status_code = 202  # the restore itself is a job (server.job_kinds)
+        return accepted(response, jobs.enqueue(db, "restore", {"controller_id": c.id,
+                                                               "doc": doc}))
     result = apply_import(db, c, body.format, body.text, parse_file(body.format, body.text),
                           body.dry_run)
     return import_out(result)

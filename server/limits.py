@@ -1,0 +1,104 @@
+"""Request bodies: size limits (413) and a client that leaves cancels its request.
+
+An ASGI middleware on every request that has a body (not GET, HEAD, OPTIONS):
+
+- **Size.** A body larger than its limit is refused with 413 naming the limit, from
+  ``Content-Length`` before any byte is read, or as soon as a chunked body passes it.
+  Recordings, beam recordings and imports may be ``UPLOAD_LIMIT_BYTES``; every other body
+  ``BODY_LIMIT_BYTES`` (docs/api.md, "Limits").
+- **Disconnect.** While the request runs, the middleware listens for the client leaving
+  (``http.disconnect`` before the answer was sent) and cancels the request. A route
+  computing in a worker thread finishes its step, then the cancellation reaches the request
+  and the session dependency rolls back: nothing the client was not told about is committed.
+"""
+
+from __future__ import annotations
+
+import json
+import math
+
+import anyio
+from starlette.types import ASGIApp, Message, Receive, Scope, Send
+
+BODY_LIMIT_BYTES = 1 * 2**20  # 1 MiB: any JSON command of the pendant is far below
+UPLOAD_LIMIT_BYTES = 16 * 2**20  # 16 MiB: ~70 000 tracker samples, or a large backup
+UPLOAD_SUFFIXES = ("/recordings", "/beam-recording", "/import")
+NO_BODY = ("GET", "HEAD", "OPTIONS")
+
+
+def limit_for(path: str) -> int:
+    """The body limit of ``path`` in bytes."""
+    return UPLOAD_LIMIT_BYTES if path.rstrip("/").endswith(UPLOAD_SUFFIXES) else BODY_LIMIT_BYTES
+
+
+def _mib(n: int) -> str:
+    return f"{n / 2**20:g} MiB"
+
+
+async def _too_large(send: Send, limit: int, path: str) -> None:
+    body = json.dumps({"detail": [{
+        "loc": ["body"], "type": "too_large",
+        "msg": f"is larger than the {_mib(limit)} limit of {path} (docs/api.md, Limits)"}]})
+    await send({"type": "http.response.start", "status": 413,
+                "headers": [(b"content-type", b"application/json"),
+                            (b"content-length", str(len(body)).encode()),
+                            (b"connection", b"close")]})
+    await send({"type": "http.response.body", "body": body.encode()})
+
+
+class BodyLimits:
+    """The middleware (``app.add_middleware(BodyLimits)``)."""
+
+    def __init__(self, app: ASGIApp) -> None:
+        self.app = app
+
+    async def __call__(self, scope: Scope, receive: Receive, send: Send) -> None:
+        if scope["type"] != "http" or scope["method"] in NO_BODY:
+            await self.app(scope, receive, send)
+            return
+        path = scope["path"]
+        limit = limit_for(path)
+        for name, value in scope["headers"]:
+            if name == b"content-length":
+                try:
+                    declared = int(value)
+                except ValueError:
+                    declared = 0
+                if declared > limit:
+                    await _too_large(send, limit, path)
+                    return
+        state = {"started": False, "done": False, "too_large": False}
+        to_app, from_pump = anyio.create_memory_object_stream[Message](math.inf)
+
+        async def app_send(message: Message) -> None:
+            if message["type"] == "http.response.start":
+                state["started"] = True
+            elif message["type"] == "http.response.body" and not message.get("more_body"):
+                state["done"] = True
+            await send(message)
+
+        async with anyio.create_task_group() as tg:
+            async def pump() -> None:
+                total = 0
+                while True:
+                    message = await receive()
+                    if message["type"] == "http.request":
+                        total += len(message.get("body", b""))
+                        if total > limit:
+                            state["too_large"] = True
+                            tg.cancel_scope.cancel()
+                            return
+                    elif message["type"] == "http.disconnect":
+                        if not state["done"]:
+                            tg.cancel_scope.cancel()  # the client left: cancel the request
+                        await to_app.send(message)
+                        return
+                    await to_app.send(message)
+
+            tg.start_soon(pump)
+            try:
+                await self.app(scope, from_pump.receive, app_send)
+            finally:
+                tg.cancel_scope.cancel()  # the answer is out: stop listening
+        if state["too_large"] and not state["started"]:
+            await _too_large(send, limit, path)
