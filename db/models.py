@@ -124,6 +124,7 @@ class FrameEntry(PoseColumns, Base):
     error_max_mm: Mapped[float | None]
     error_rms_mm: Mapped[float | None]
     updated_at: Mapped[datetime | None]
+    updated_by: Mapped[str | None] = mapped_column(String(64))  # revision 0003_auth: the user
 
     controller: Mapped[Controller] = relationship(back_populates="entries")
 
@@ -142,6 +143,7 @@ class EntryHistory(Base):
     changed_at: Mapped[datetime] = mapped_column(default=utcnow)
     before: Mapped[dict[str, Any]]
     after: Mapped[dict[str, Any]]
+    changed_by: Mapped[str | None] = mapped_column(String(64))  # revision 0003_auth: the user
 
 
 class CalibSession(Base):

@@ -10,13 +10,16 @@ from __future__ import annotations
 import asyncio
 from pathlib import Path
 
-from fastapi import FastAPI
+from fastapi import Depends, FastAPI
 from fastapi.responses import FileResponse, HTMLResponse
 from fastapi.staticfiles import StaticFiles
 
 from db import crud
 from db.session import make_engine, make_sessionmaker, run_migrations
 from server import errors
+from server.auth import audit, guard, tokens
+from server.auth import routes as auth_routes
+from server.auth.web import SiteGuard
 from server.emulator import DEMO_ROBOT, home_joints
 from server.routers import (analysis, base, controllers, export, fixed_tool, robot, sessions, tool,
                             workpiece)
@@ -36,6 +39,8 @@ TAGS = [
                                         "discard."},
     {"name": "Export", "description": "Controller files (KUKA, ABB, FANUC, UR) and JSON "
                                       "backup/restore."},
+    {"name": "Auth", "description": "Log in, users, API tokens, roles and the audit trail "
+                                    "(docs/security.md)."},
 ]
 
 PLACEHOLDER = """<!doctype html><html><head><meta charset="utf-8"><title>pendant</title></head>
@@ -52,11 +57,21 @@ def ensure_demo(app: FastAPI) -> None:
             db.commit()
 
 
+def bootstrap(app: FastAPI) -> None:
+    """First start: an Administrator and its token (``app.state.first_token`` if one was made)."""
+    with app.state.sessionmaker() as db:
+        made = tokens.bootstrap_admin(db, app.state.settings.bootstrap_token)
+        db.commit()
+    app.state.first_token = made if made and not app.state.settings.bootstrap_token else None
+
+
 def create_app(settings: Settings | None = None) -> FastAPI:
     settings = settings or Settings()
     app = FastAPI(title="pendant", version="0.1.0", openapi_tags=TAGS,
+                  dependencies=[Depends(guard.authorize)],
                   description="A controller-side teach-pendant emulator: tool, base, "
                               "fixed-tool and workpiece calibration menus as a REST service.")
+    audit.install()
     engine = make_engine(settings.db_url)
     run_migrations(engine)
     app.state.engine = engine
@@ -65,8 +80,17 @@ def create_app(settings: Settings | None = None) -> FastAPI:
     app.state.settings = settings
     errors.install(app)
     for module in (controllers, robot, tool, base, fixed_tool, workpiece, sessions, export,
-                   analysis):
+                   analysis, auth_routes):
         app.include_router(module.router)
+    bootstrap(app)
+    if settings.cors_origins:
+        from starlette.middleware.cors import CORSMiddleware
+
+        app.add_middleware(CORSMiddleware, allow_origins=list(settings.cors_origins),
+                           allow_methods=["*"], allow_headers=["authorization", "content-type",
+                                                               "x-csrf-token", "if-match"])
+    app.add_middleware(SiteGuard, allowed_hosts=settings.allowed_hosts,
+                       cors_origins=settings.cors_origins)
     if settings.demo_controller:
         ensure_demo(app)
     _mount_web(app, Path(settings.web_dir))

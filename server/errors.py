@@ -47,6 +47,9 @@ def install(app: FastAPI) -> None:
     async def _http(request: Request, exc: HTTPException) -> JSONResponse:
         # the framework's own refusals (a body that is not JSON text, an unknown route, a
         # method the route does not have) in the same shape as every other error
+        if isinstance(exc.detail, dict) and "msg" in exc.detail:  # server.auth's 401/403
+            return JSONResponse(status_code=exc.status_code, content={"detail": [exc.detail]},
+                                headers=getattr(exc, "headers", None))
         status, msg, loc = exc.status_code, str(exc.detail), ()
         if status == 400 and "parsing the body" in msg:
             status, loc = 422, ("body",)

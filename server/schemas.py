@@ -243,6 +243,7 @@ class ProvenanceOut(Out):
     error_max_mm: float | None
     error_rms_mm: float | None
     updated_at: datetime | None
+    updated_by: str | None = Field(None, description="the user who last changed the slot")
 
 
 class EntryIn(In):
@@ -273,6 +274,7 @@ class HistoryOut(Out):
     changed_at: datetime
     before: dict[str, Any]
     after: dict[str, Any]
+    changed_by: str | None = None  # the user (revision 0003_auth); None before it or restored
 
 
 # ---------------------------------------------------------------------------------- sessions

@@ -8,10 +8,12 @@ from __future__ import annotations
 
 import json
 
-from fastapi import APIRouter, Response
+from fastapi import APIRouter, Request, Response
 
 from db import crud
 from db.models import FrameEntry as SlotRow
+from server.auth.audit import mark_operation, record
+from server.auth.guard import require
 from server.deps import SessionDep
 from server.schemas import ExportFormat, ImportIn, ImportOut
 from solvers.errors import CalibrationError
@@ -61,9 +63,13 @@ def export_text(db: SessionDep, controller_id: int, fmt: str) -> str:
 
 @router.get("/export", response_class=Response,
             responses={200: {"content": {"text/plain": {}, "application/json": {}}}})
-def export(controller_id: int, db: SessionDep, format: ExportFormat = "kuka") -> Response:
+def export(controller_id: int, db: SessionDep, request: Request,
+           format: ExportFormat = "kuka") -> Response:
     """Download the tables as a controller file (``format=kuka|abb|fanuc|ur``) or the whole
-    controller as a JSON backup (``format=json``, incl. history and sessions)."""
+    controller as a JSON backup (``format=json``, incl. history and sessions; needs
+    ``backup:write``)."""
+    if format == "json":
+        require(request, "backup:write")
     text = export_text(db, controller_id, format)
     media, filename = MEDIA[format]
     name = crud.get_controller(db, controller_id).name
@@ -72,13 +78,17 @@ def export(controller_id: int, db: SessionDep, format: ExportFormat = "kuka") ->
 
 
 @router.post("/import")
-def import_tables(controller_id: int, body: ImportIn, db: SessionDep) -> ImportOut:
+def import_tables(controller_id: int, body: ImportIn, db: SessionDep,
+                  request: Request) -> ImportOut:
     """Read a KUKA ``$config.dat``, an ABB RAPID module or a JSON backup into the tables.
 
-    Controller files overwrite the slots they name (each change recorded in history); a
-    JSON backup replaces the tables, history and sessions of this controller."""
+    Controller files overwrite the slots they name (each change recorded in history and the
+    audit); a JSON backup (needs ``backup:restore``) replaces the tables, history and
+    sessions of this controller, and the audit keeps every earlier change."""
     c = crud.get_controller(db, controller_id)
     if body.format == "json":
+        require(request, "backup:restore")
+        mark_operation("backup.restore")
         from server.backup import parse_backup
         from server.routers.common import robot_of
         from solvers.dh import check_joint_limits
@@ -95,11 +105,14 @@ def import_tables(controller_id: int, body: ImportIn, db: SessionDep) -> ImportO
                 check_joint_limits(robot, joints)
             except CalibrationError as err:
                 raise CalibrationError(loc + tuple(err.loc[1:]), err.reason) from None
+        n_before = len(crud.history(db, c.id))
         try:
             n, h = crud.restore_backup(db, c, doc)
         except (KeyError, TypeError, ValueError) as err:
             raise CalibrationError(("text",),
                                    f"malformed backup: {type(err).__name__} {err}") from None
+        record(db, "backup.restore", controller_id=c.id, before={"history_rows": n_before},
+               after={"history_rows": h, "entries": n})
         return ImportOut(format="json", entries=n, history=h)
     from server import formats
 
