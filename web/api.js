@@ -30,6 +30,8 @@ export async function request(method, path, { body, bodyText, onStart, onEnd } =
   onStart?.();
   try {
     const init = { method, headers: {} };
+    const csrf = document.cookie.match(/(?:^|;\s*)pendant_csrf=([^;]*)/);  // web/auth.js's login
+    if (csrf && method !== "GET") init.headers["X-CSRF-Token"] = decodeURIComponent(csrf[1]);
     const text = body !== undefined ? JSON.stringify(body) : bodyText;
     if (text !== undefined) {
       init.headers["Content-Type"] = "application/json";
