@@ -1,6 +1,8 @@
 """The ``pendant`` command: serve the pendant, calibrate from a file, export a controller's tables.
 
-    pendant serve [--host 127.0.0.1] [--port 8000] [--db URL]
+    pendant serve [--host 127.0.0.1] [--port 8000] [--db URL] [--allow-host NAME]
+                  [--cors-origin URL] [--no-auth]
+    pendant users add|list|revoke ...; pendant tokens create USER; pendant roles add|list
     pendant calibrate METHOD FILE [--robot KEY] [--tcp X,Y,Z] [--json]
     pendant export CONTROLLER --format kuka|abb|fanuc|ur|json [--db URL]
 
@@ -21,6 +23,7 @@ from typing import Any, Sequence
 import numpy as np
 
 from server.analysis_cli import add_analysis_commands
+from server.auth.cli import add_auth_commands
 from server.methods import METHODS, MethodInputs, TaughtData
 from server.schemas import ReportOut
 from solvers.errors import CalibrationError
@@ -153,6 +156,13 @@ def build_parser() -> argparse.ArgumentParser:
     s.add_argument("--port", type=int, default=8000)
     s.add_argument("--db", help="database URL (default: PENDANT_DB_URL, else a SQLite file in "
                                 "the user data dir)")
+    s.add_argument("--allow-host", action="append", default=[], metavar="NAME",
+                   help="a Host name clients use besides the loopback names (repeatable; "
+                        "PENDANT_ALLOWED_HOSTS, comma-separated, adds more)")
+    s.add_argument("--cors-origin", action="append", default=[], metavar="URL",
+                   help="an origin whose pages may call the API (CORS; closed by default)")
+    s.add_argument("--no-auth", action="store_true",
+                   help="demo only: no login, everyone an Administrator; loopback hosts only")
 
     c = sub.add_parser("calibrate",
                        help="solve a calibration menu from taught poses in a JSON/CSV file")
@@ -171,6 +181,7 @@ def build_parser() -> argparse.ArgumentParser:
     e.add_argument("--db", help="database URL")
 
     add_analysis_commands(sub)
+    add_auth_commands(sub)
     return p
 
 
@@ -180,16 +191,50 @@ def _settings(db: str | None):  # noqa: ANN202
     return Settings(db_url=db) if db else Settings()
 
 
+def serve(args: argparse.Namespace) -> int:
+    """``pendant serve``: the service; on first start it prints the Administrator's login link."""
+    import dataclasses
+    import os
+
+    import uvicorn
+
+    from server.app import create_app
+    from server.settings import LOOPBACK_HOSTS
+
+    loopback = args.host in LOOPBACK_HOSTS
+    if args.no_auth and not loopback:
+        print(f"pendant: --host: --no-auth serves loopback only (127.0.0.1, localhost, ::1), "
+              f"not {args.host}", file=sys.stderr)
+        return 2
+    hosts = list(LOOPBACK_HOSTS) + args.allow_host + [
+        h.strip() for h in os.environ.get("PENDANT_ALLOWED_HOSTS", "").split(",") if h.strip()]
+    if not loopback and args.host not in ("0.0.0.0", "::"):
+        hosts.append(args.host)
+    settings = dataclasses.replace(_settings(args.db), auth=not args.no_auth,
+                                   allowed_hosts=tuple(hosts),
+                                   cors_origins=tuple(args.cors_origin))
+    app = create_app(settings)
+    shown = "localhost" if args.host in ("0.0.0.0", "::") else args.host
+    base = f"http://{'[::1]' if shown == '::1' else shown}:{args.port}"
+    if args.no_auth:
+        print("pendant: WARNING: --no-auth: NO LOGIN. Anyone who can reach this port may move "
+              "the robot and change every frame. A demo on loopback only.", file=sys.stderr)
+    elif app.state.first_token:
+        t = app.state.first_token
+        print(f"pendant: first start: created the Administrator \"admin\". Log in once with\n"
+              f"    {base}/login.html#token={t}\n"
+              f"(valid 24 h, shown only now; API: Authorization: Bearer {t}).\n"
+              f"More users: pendant users add NAME --role Expert; pendant tokens create NAME",
+              file=sys.stderr)
+    uvicorn.run(app, host=args.host, port=args.port)
+    return 0
+
+
 def main(argv: Sequence[str] | None = None) -> int:
     args = build_parser().parse_args(argv)
     try:
         if args.command == "serve":
-            import uvicorn
-
-            from server.app import create_app
-
-            uvicorn.run(create_app(_settings(args.db)), host=args.host, port=args.port)
-            return 0
+            return serve(args)
         if args.command == "calibrate":
             given = (("tcp_mm", args.tcp), ("reference_tcp_mm", args.reference_tcp),
                      ("fixed_tcp_mm", args.fixed_tcp))
