@@ -176,7 +176,7 @@ def install() -> None:
     """Hook every ORM session (idempotent)."""
     if not event.contains(Session, "before_flush", _before_flush):
         event.listen(Session, "before_flush", _before_flush)
-        event.listen(Session, "after_flush", _after_flush)
+        event.listen(Session, "after_flush_postexec", _after_flush)
 
 
 # ---------------------------------------------------------------------------------- reads
