@@ -12,6 +12,7 @@ requests/s and latency percentiles; the last line is ``rps=<touch-up req/s> p99_
 from __future__ import annotations
 
 import argparse
+import os
 import socket
 import subprocess
 import sys
@@ -30,6 +31,8 @@ sys.path.insert(0, str(ROOT))
 from server.emulator import approach, cell_for, home_joints  # noqa: E402
 from solvers.robots import ROBOTS  # noqa: E402
 
+TOKEN = "pdt_benchmark-administrator-token-0123456789"  # the service's first Administrator
+HEADERS = {"Authorization": f"Bearer {TOKEN}"}
 ORIENTATIONS = ((0.0, 0.0, 0.0), (30.0, 0.0, 0.0), (30.0, 120.0, 90.0), (30.0, 240.0, -90.0))
 
 
@@ -55,7 +58,7 @@ def wait_ready(base: str, proc: subprocess.Popen, timeout_s: float = 60.0) -> No
         if proc.poll() is not None:
             raise RuntimeError(f"the service exited with {proc.returncode}")
         try:
-            if httpx.get(f"{base}/controllers", timeout=1.0).status_code == 200:
+            if httpx.get(f"{base}/controllers", timeout=1.0, headers=HEADERS).status_code == 200:
                 return
         except httpx.HTTPError:
             time.sleep(0.2)
@@ -78,7 +81,7 @@ def run_phase(base: str, urls: list[str], make_request: Request, n_requests: int
     def client(url: str) -> None:
         mine: list[float] = []
         bad = 0
-        with httpx.Client(base_url=base, timeout=30.0) as http:
+        with httpx.Client(base_url=base, timeout=30.0, headers=HEADERS) as http:
             for k in range(n_requests):
                 if time.perf_counter() > deadline:
                     break
@@ -112,11 +115,13 @@ def main() -> int:
     with tempfile.TemporaryDirectory() as tmp:
         db = f"sqlite:///{Path(tmp) / 'bench.db'}"
         cmd = [sys.executable, "-m", "server.cli", "serve", "--port", str(port), "--db", db]
-        proc = subprocess.Popen(cmd, cwd=ROOT, stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL)
+        env = {**os.environ, "PENDANT_ADMIN_TOKEN": TOKEN}
+        proc = subprocess.Popen(cmd, cwd=ROOT, env=env, stdout=subprocess.DEVNULL,
+                                stderr=subprocess.DEVNULL)
         try:
             wait_ready(base, proc)
             urls = []
-            with httpx.Client(base_url=base, timeout=30.0) as http:
+            with httpx.Client(base_url=base, timeout=30.0, headers=HEADERS) as http:
                 for _ in range(args.clients):
                     s = http.post("/controllers/1/sessions",
                                   json={"method": "tool.xyz_4point", "target_no": 1})

@@ -144,7 +144,15 @@ def test_audit_filters_and_csv(client):
     assert client.get("/audit", params={"format": "xml"}).status_code == 422
 
 
-def test_audit_records_physics_controllers_and_users(client):
+def test_audit_records_import_physics_controllers_and_users(client):
+    from pathlib import Path
+
+    eva = add_user(client, "eva", "Expert")
+    text = (Path(__file__).parent / "data" / "kuka_config.dat").read_text()
+    n = ok(client.post(f"{C}/import", json={"format": "kuka", "text": text}, headers=eva))["entries"]
+    imports = audit(client, user="eva")
+    assert len(imports) == n and {r["action"] for r in imports} == {"frame.import"}
+    assert all(r["after"]["method"] == "import.kuka" for r in imports)
     ok(client.put(f"{C}/cell/physics", json={"noise_mm": 0.01}))
     c = ok(client.post("/controllers", json={"name": "cell-2", "robot": "kuka_kr6_r900_sixx"}))
     add_user(client, "olga", "Operator")
