@@ -44,13 +44,15 @@ sys.path.insert(0, str(ROOT))
 from emulator import approach, cell_for, home_joints  # noqa: E402
 from solvers.robots import ROBOTS  # noqa: E402
 
+TOKEN = "pdt_benchmark-administrator-token-0123456789"  # the service's first Administrator
+HEADERS = {"Authorization": f"Bearer {TOKEN}"}
 ORIENTATIONS = ((0.0, 0.0, 0.0), (30.0, 0.0, 0.0), (30.0, 120.0, 90.0), (30.0, 240.0, -90.0))
 UNITS = {"us": 1e-3, "ms": 1.0, "s": 1e3}
 
 TOUCH_LUA = """
 local paths = {%(paths)s}
 local bodies = {%(bodies)s}
-local headers = {["Content-Type"] = "application/json"}
+local headers = {["Content-Type"] = "application/json", ["Authorization"] = "%(auth)s"}
 local n = 0
 request = function()
   local s = n %% #paths
@@ -83,7 +85,7 @@ def wait_ready(base: str, proc: subprocess.Popen, timeout_s: float = 90.0) -> No
         if proc.poll() is not None:
             raise RuntimeError(f"the service exited with {proc.returncode}")
         try:
-            if httpx.get(f"{base}/controllers", timeout=1.0).status_code == 200:
+            if httpx.get(f"{base}/controllers", timeout=1.0, headers=HEADERS).status_code == 200:
                 return
         except httpx.HTTPError:
             time.sleep(0.2)
@@ -95,11 +97,11 @@ def prepare(db_url: str) -> None:
     from server.app import create_app
     from server.settings import Settings
 
-    create_app(Settings(db_url=db_url)).state.engine.dispose()
+    create_app(Settings(db_url=db_url, bootstrap_token=TOKEN)).state.engine.dispose()
 
 
 def start(db_url: str, port: int, workers: int) -> subprocess.Popen:
-    env = {**os.environ, "PENDANT_DB_URL": db_url,
+    env = {**os.environ, "PENDANT_DB_URL": db_url, "PENDANT_ADMIN_TOKEN": TOKEN,
            "PYTHONPATH": f"{ROOT}{os.pathsep}{os.environ.get('PYTHONPATH', '')}"}
     cmd = [sys.executable, "-m", "uvicorn", "server.app:app", "--port", str(port),
            "--workers", str(workers), "--log-level", "warning", "--no-access-log"]
@@ -131,7 +133,8 @@ def parse_wrk(out: str) -> dict[str, float]:
 
 
 def wrk(url: str, connections: int, seconds: float, script: Path | None = None) -> dict:
-    cmd = ["wrk", "-t2", f"-c{connections}", f"-d{seconds:g}s", "--latency", "--timeout", "10s"]
+    cmd = ["wrk", "-t2", f"-c{connections}", f"-d{seconds:g}s", "--latency", "--timeout", "10s",
+           "-H", f"Authorization: {HEADERS['Authorization']}"]
     if script is not None:
         cmd += ["-s", str(script)]
     out = subprocess.run(cmd + [url], check=True, capture_output=True, text=True).stdout
@@ -140,7 +143,7 @@ def wrk(url: str, connections: int, seconds: float, script: Path | None = None) 
 
 def touch_script(base: str, n_sessions: int, joints: list[list[float]], tmp: Path) -> Path:
     paths = []
-    with httpx.Client(base_url=base, timeout=30.0) as http:
+    with httpx.Client(base_url=base, timeout=30.0, headers=HEADERS) as http:
         for _ in range(n_sessions):
             s = http.post("/controllers/1/sessions",
                           json={"method": "tool.xyz_4point", "target_no": 1})
@@ -151,7 +154,7 @@ def touch_script(base: str, n_sessions: int, joints: list[list[float]], tmp: Pat
             paths.append(f"{url}/touch-up")
     bodies = [json.dumps({"step": k, "joints_deg": q}) for k, q in enumerate(joints)]
     path = tmp / "touch.lua"
-    path.write_text(TOUCH_LUA % {"paths": ", ".join(json.dumps(p) for p in paths),
+    path.write_text(TOUCH_LUA % {"auth": HEADERS["Authorization"], "paths": ", ".join(json.dumps(p) for p in paths),
                                  "bodies": ", ".join(json.dumps(b) for b in bodies)})
     return path
 

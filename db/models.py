@@ -136,6 +136,7 @@ class FrameEntry(PoseColumns, Base):
     error_rms_mm: Mapped[float | None]
     updated_at: Mapped[datetime | None]
     version: Mapped[int] = mapped_column(default=1, server_default="1")  # 0003: the slot's ETag
+    updated_by: Mapped[str | None] = mapped_column(String(64))  # revision 0003_auth: the user
 
     controller: Mapped[Controller] = relationship(back_populates="entries")
     __mapper_args__ = {"version_id_col": version}
@@ -155,6 +156,7 @@ class EntryHistory(Base):
     changed_at: Mapped[datetime] = mapped_column(default=utcnow)
     before: Mapped[dict[str, Any]]
     after: Mapped[dict[str, Any]]
+    changed_by: Mapped[str | None] = mapped_column(String(64))  # revision 0003_auth: the user
 
 
 class CalibSession(Base):

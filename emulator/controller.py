@@ -208,13 +208,16 @@ def _home(robot: RobotModel) -> tuple[float, ...]:
     rng = np.random.default_rng(0)
     lim = robot.limits_deg()
     lo, hi = np.maximum(lim[:, 0], -180.0), np.minimum(lim[:, 1], 180.0)
-    starts = [np.zeros(robot.dof)] + [rng.uniform(lo, hi) for _ in range(30)]
+    beyond = lo > hi  # a joint whose whole range lies beyond +-180 deg: start inside its range
+    lo[beyond], hi[beyond] = lim[beyond, 0], lim[beyond, 1]
+    zero = np.clip(np.zeros(robot.dof), lim[:, 0], lim[:, 1])  # 0, or the limit nearest to it
+    starts = [zero] + [rng.uniform(lo, hi) for _ in range(30)]
     for q0 in starts:
         try:
             return tuple(float(x) for x in inverse_kinematics(robot, goal, q0))
         except KinematicsError:
             continue
-    return tuple(0.0 for _ in range(robot.dof))
+    return tuple(float(x) for x in zero)
 
 
 def home_joints(robot: RobotModel) -> list[float]:

@@ -12,7 +12,7 @@ from __future__ import annotations
 
 from pathlib import Path
 
-from fastapi import FastAPI
+from fastapi import Depends, FastAPI
 from fastapi.responses import FileResponse, HTMLResponse
 from fastapi.staticfiles import StaticFiles
 
@@ -21,6 +21,9 @@ from db.session import (make_engine, make_sessionmaker, migration_lock, schema_s
                         write_session)
 from emulator import DEMO_ROBOT, home_joints
 from server import deps, errors, idempotency
+from server.auth import audit, guard, tokens
+from server.auth import routes as auth_routes
+from server.auth.web import SiteGuard
 from server.limits import BodyLimits
 from server.routers import (analysis, base, controllers, export, fixed_tool, jobs, robot, sessions,
                             tool, workpiece)
@@ -42,6 +45,8 @@ TAGS = [
                                       "backup/restore."},
     {"name": "Jobs", "description": "Analyses and restores run by the worker processes: state, "
                                     "progress, cancel, result."},
+    {"name": "Auth", "description": "Log in, users, API tokens, roles and the audit trail "
+                                    "(docs/security.md)."},
 ]
 
 PLACEHOLDER = """<!doctype html><html><head><meta charset="utf-8"><title>pendant</title></head>
@@ -74,11 +79,22 @@ def check_schema(engine, migrate: bool) -> None:  # noqa: ANN001
                               f"needs {head}: run `pendant db upgrade` first")
 
 
+def bootstrap(app: FastAPI) -> None:
+    """First start: an Administrator and its token (``app.state.first_token`` if one was made);
+    under the schema lock, so N workers starting on a fresh DB make one Administrator."""
+    with migration_lock(app.state.engine), write_session(app.state.sessionmaker) as db:
+        made = tokens.bootstrap_admin(db, app.state.settings.bootstrap_token)
+        db.commit()
+    app.state.first_token = made if made and not app.state.settings.bootstrap_token else None
+
+
 def create_app(settings: Settings | None = None) -> FastAPI:
     settings = settings or Settings()
     app = FastAPI(title="pendant", version="0.1.0", openapi_tags=TAGS,
+                  dependencies=[Depends(guard.authorize)],
                   description="A controller-side teach-pendant emulator: tool, base, "
                               "fixed-tool and workpiece calibration menus as a REST service.")
+    audit.install()
     engine = make_engine(settings.db_url)
     check_schema(engine, settings.migrate)
     app.state.engine = engine
@@ -90,8 +106,18 @@ def create_app(settings: Settings | None = None) -> FastAPI:
     _install_health(app)
     app.add_middleware(BodyLimits)
     for module in (controllers, robot, tool, base, fixed_tool, workpiece, sessions, export,
-                   analysis, jobs):
+                   analysis, jobs, auth_routes):
         app.include_router(module.router)
+    bootstrap(app)
+    if settings.cors_origins:
+        from starlette.middleware.cors import CORSMiddleware
+
+        app.add_middleware(CORSMiddleware, allow_origins=list(settings.cors_origins),
+                           allow_methods=["*"], allow_headers=["authorization", "content-type",
+                                                               "x-csrf-token", "if-match",
+                                                               "idempotency-key"])
+    app.add_middleware(SiteGuard, allowed_hosts=settings.allowed_hosts,
+                       cors_origins=settings.cors_origins)
     if settings.demo_controller:
         ensure_demo(app)
     _mount_web(app, Path(settings.web_dir))

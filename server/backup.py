@@ -220,6 +220,9 @@ def parse_backup(text: str) -> dict[str, Any]:
         doc = json.loads(text, parse_constant=_no_constant)
     except json.JSONDecodeError as err:
         raise CalibrationError(("text",), f"not JSON: {err.msg} at line {err.lineno}") from None
+    except RecursionError:  # a backup is at most a few levels deep
+        raise CalibrationError(("text",), "nested too deep for a backup (arrays or objects "
+                               "inside each other hundreds of levels deep)") from None
     if not isinstance(doc, dict) or doc.get("format") != FORMAT:
         raise CalibrationError(("text", "format"), f"must be a {FORMAT} document "
                                "(GET .../export?format=json)")

@@ -1,10 +1,11 @@
 """The ``pendant`` command: serve the pendant, calibrate from a file, export a controller's tables.
 
     pendant serve [--host 127.0.0.1] [--port 8000] [--db URL] [--workers N] [--no-migrate]
-                  [--job-workers 2]
+                  [--job-workers 2] [--allow-host NAME] [--cors-origin URL] [--no-auth]
     pendant db upgrade [--db URL]
     pendant worker [--processes 2] [--db URL] [--job-time-s 600] [--job-memory-mb 2048]
     pendant slot tool|base N [--name ..] [--pose x,y,z,a,b,c] [--url URL]   (sends If-Match)
+    pendant users add|list|revoke ...; pendant tokens create USER; pendant roles add|list
     pendant calibrate METHOD FILE [--robot KEY] [--tcp X,Y,Z] [--json]
     pendant export CONTROLLER --format kuka|abb|fanuc|ur|json [--db URL]
     pendant import FILE --controller NAME [--format kuka|abb|fanuc|ur] [--dry-run] [--db URL]
@@ -28,6 +29,7 @@ from typing import Any, Sequence
 import numpy as np
 
 from server.analysis_cli import add_analysis_commands
+from server.auth.cli import add_auth_commands
 from server.slot_cli import add_slot_command
 from server.methods import METHODS, MethodInputs, TaughtData
 from server.schemas import ReportOut
@@ -190,6 +192,14 @@ def build_parser() -> argparse.ArgumentParser:
     w.add_argument("--exit-with-parent", action="store_true", help=argparse.SUPPRESS)
     _job_limits(w)
 
+    s.add_argument("--allow-host", action="append", default=[], metavar="NAME",
+                   help="a Host name clients use besides the loopback names (repeatable; "
+                        "PENDANT_ALLOWED_HOSTS, comma-separated, adds more)")
+    s.add_argument("--cors-origin", action="append", default=[], metavar="URL",
+                   help="an origin whose pages may call the API (CORS; closed by default)")
+    s.add_argument("--no-auth", action="store_true",
+                   help="demo only: no login, everyone an Administrator; loopback hosts only")
+
     c = sub.add_parser("calibrate",
                        help="solve a calibration menu from taught poses in a JSON/CSV file")
     c.add_argument("method", choices=sorted(METHODS))
@@ -218,6 +228,7 @@ def build_parser() -> argparse.ArgumentParser:
 
     add_analysis_commands(sub)
     add_slot_command(sub)
+    add_auth_commands(sub)
     return p
 
 
@@ -316,39 +327,61 @@ class SchemaOutOfDate(RuntimeError):
 def serve(args: argparse.Namespace) -> int:
     """Run the service: one process, or ``--workers N`` uvicorn processes on one database.
 
-    The schema is checked once here, before any worker starts (migrated under the database
-    lock, or refused with ``--no-migrate``); each worker checks it again."""
+    The app is built once here first: the schema is migrated under the database lock (or
+    refused with ``--no-migrate``), the demo controller and, on first start, the
+    Administrator are made, and the Administrator's login link is printed. Each worker then
+    builds its own app from the same settings (passed on in the environment)."""
+    import dataclasses
     import os
 
     import uvicorn
 
     from server import app as app_module
-    from server.settings import ENV_DB_URL, ENV_MIGRATE
+    from server.settings import (ENV_ALLOWED_HOSTS, ENV_CORS_ORIGINS, ENV_DB_URL, ENV_MIGRATE,
+                                 ENV_NO_AUTH, LOOPBACK_HOSTS)
 
-    settings = _settings(args.db)
     if args.workers < 1:
         raise CalibrationError(("--workers",), f"must be >= 1, got {args.workers}")
     _positive(args.job_time_s, "--job-time-s")
     _positive(args.job_memory_mb, "--job-memory-mb")
-    application = None
+    loopback = args.host in LOOPBACK_HOSTS
+    if args.no_auth and not loopback:
+        print(f"pendant: --host: --no-auth serves loopback only (127.0.0.1, localhost, ::1), "
+              f"not {args.host}", file=sys.stderr)
+        return 2
+    extra_hosts = list(args.allow_host)
+    if not loopback and args.host not in ("0.0.0.0", "::"):
+        extra_hosts.append(args.host)
+    # the settings every worker reads from the environment (server.settings)
+    os.environ[ENV_DB_URL] = _settings(args.db).db_url
+    os.environ[ENV_MIGRATE] = "0" if args.no_migrate else "1"
+    os.environ[ENV_NO_AUTH] = "1" if args.no_auth else "0"
+    os.environ[ENV_ALLOWED_HOSTS] = ",".join(
+        [h for h in os.environ.get(ENV_ALLOWED_HOSTS, "").split(",") if h.strip()] + extra_hosts)
+    os.environ[ENV_CORS_ORIGINS] = ",".join(args.cors_origin)
+    settings = _settings(None)
     try:
-        if args.workers == 1:
-            from dataclasses import replace
-
-            application = app_module.create_app(replace(settings, migrate=not args.no_migrate))
-        else:
-            from db.session import make_engine
-
-            app_module.check_schema(make_engine(settings.db_url), not args.no_migrate)
+        application = app_module.create_app(dataclasses.replace(settings,
+                                                                migrate=not args.no_migrate))
     except app_module.SchemaOutOfDate as err:
         raise SchemaOutOfDate(str(err)) from None
+    shown = "localhost" if args.host in ("0.0.0.0", "::") else args.host
+    base = f"http://{'[::1]' if shown == '::1' else shown}:{args.port}"
+    if args.no_auth:
+        print("pendant: WARNING: --no-auth: NO LOGIN. Anyone who can reach this port may move "
+              "the robot and change every frame. A demo on loopback only.", file=sys.stderr)
+    elif application.state.first_token:
+        t = application.state.first_token
+        print(f"pendant: first start: created the Administrator \"admin\". Log in once with\n"
+              f"    {base}/login.html#token={t}\n"
+              f"(valid 24 h, shown only now; API: Authorization: Bearer {t}).\n"
+              f"More users: pendant users add NAME --role Expert; pendant tokens create NAME",
+              file=sys.stderr)
     workers = start_job_workers(settings.db_url, args)  # the schema is current by now
     try:
-        if application is not None:
+        if args.workers == 1:
             uvicorn.run(application, host=args.host, port=args.port)
         else:
-            os.environ[ENV_DB_URL] = settings.db_url  # the workers build server.app:app from these
-            os.environ[ENV_MIGRATE] = "0" if args.no_migrate else "1"
             uvicorn.run("server.app:app", host=args.host, port=args.port, workers=args.workers)
     finally:
         if workers is not None:

@@ -56,13 +56,21 @@ def run_restore(sm: sessionmaker[Session], params: dict[str, Any], progress: Pro
     progress(0.1, "restoring the backup")
 
     def apply(db: Session) -> dict[str, Any]:
-        crud.lock_controller(db, cid)  # the row lock a REST write takes (PostgreSQL)
-        c = crud.get_controller(db, cid)
-        try:
-            n, h = crud.restore_backup(db, c, doc)
-        except (KeyError, TypeError, ValueError) as err:
-            raise CalibrationError(("text",),
-                                   f"malformed backup: {type(err).__name__} {err}") from None
+        from server.auth import audit
+
+        audit.install()
+        with audit.acting_as(params.get("actor"), "backup.restore"):  # who asked for it
+            crud.lock_controller(db, cid)  # the row lock a REST write takes (PostgreSQL)
+            c = crud.get_controller(db, cid)
+            n_before = len(crud.history(db, c.id))
+            try:
+                n, h = crud.restore_backup(db, c, doc)
+            except (KeyError, TypeError, ValueError) as err:
+                raise CalibrationError(("text",),
+                                       f"malformed backup: {type(err).__name__} {err}") from None
+            audit.record(db, "backup.restore", controller_id=c.id,
+                         before={"history_rows": n_before}, after={"history_rows": h, "entries": n})
+            db.flush()  # the audit hooks run now, under the actor
         return {"format": "json", "entries": n, "history": h}
 
     return apply

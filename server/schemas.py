@@ -148,8 +148,8 @@ class JogIn(In):
 
 
 class ActiveIn(In):
-    tool_no: int | None = Field(None, ge=0, le=16, description="0 = flange")
-    base_no: int | None = Field(None, ge=0, le=32, description="0 = world")
+    tool_no: int | None = Field(None, ge=0, le=16, strict=True, description="0 = flange")
+    base_no: int | None = Field(None, ge=0, le=32, strict=True, description="0 = world")
 
 
 class ApproachIn(In):
@@ -244,6 +244,7 @@ class ProvenanceOut(Out):
     error_max_mm: float | None
     error_rms_mm: float | None
     updated_at: datetime | None
+    updated_by: str | None = Field(None, description="the user who last changed the slot")
 
 
 class EntryIn(In):
@@ -277,6 +278,7 @@ class HistoryOut(Out):
     changed_at: datetime
     before: dict[str, Any]
     after: dict[str, Any]
+    changed_by: str | None = None  # the user (revision 0003_auth); None before it or restored
 
 
 # ---------------------------------------------------------------------------------- sessions
@@ -288,9 +290,9 @@ class BeamIn(In):
 
 
 class SessionParamsIn(In):
-    tool_no: int | None = Field(None, ge=1, le=16)
-    reference_tool_no: int | None = Field(None, ge=1, le=16)
-    fixed_tool_no: int | None = Field(None, ge=1, le=32)
+    tool_no: int | None = Field(None, ge=1, le=16, strict=True)  # strict: true is no slot
+    reference_tool_no: int | None = Field(None, ge=1, le=16, strict=True)
+    fixed_tool_no: int | None = Field(None, ge=1, le=32, strict=True)
     known_points_mm: list[Vec3] | None = Field(None, min_length=4, max_length=64)
     pose: PoseIn | None = None
     beams: list[BeamIn] | None = Field(None, min_length=1)
@@ -302,7 +304,8 @@ class SessionParamsIn(In):
 
 class SessionIn(In):
     method: MethodName
-    target_no: int = Field(ge=1, le=32, description="tool (1-16) or base (1-32) slot to calibrate")
+    target_no: int = Field(ge=1, le=32, strict=True,
+                           description="tool (1-16) or base (1-32) slot to calibrate")
     params: SessionParamsIn = SessionParamsIn()
 
 
@@ -310,7 +313,7 @@ class TouchUpIn(In):
     """Fill a step: no body = the emulated robot's current joints; or joints / a flange pose
     recorded on a real controller. ``step`` defaults to the first empty step."""
 
-    step: int | None = Field(None, ge=0)
+    step: int | None = Field(None, ge=0, strict=True)
     joints_deg: list[Deg] | None = Field(None, min_length=1, max_length=7)
     flange_pose: PoseIn | None = None
 

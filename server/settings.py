@@ -11,6 +11,15 @@ import platformdirs
 ROOT = Path(__file__).resolve().parent.parent
 ENV_DB_URL = "PENDANT_DB_URL"
 ENV_MIGRATE = "PENDANT_MIGRATE"  # "0": serve refuses an old schema instead of migrating it
+ENV_ADMIN_TOKEN = "PENDANT_ADMIN_TOKEN"  # the first administrator's token (else one is made)
+ENV_NO_AUTH = "PENDANT_NO_AUTH"  # "1": the --no-auth demo (loopback only)
+ENV_ALLOWED_HOSTS = "PENDANT_ALLOWED_HOSTS"  # Host names besides loopback, comma-separated
+ENV_CORS_ORIGINS = "PENDANT_CORS_ORIGINS"  # origins whose pages may call the API
+LOOPBACK_HOSTS = ("127.0.0.1", "localhost", "::1")
+
+
+def _env_list(name: str) -> tuple[str, ...]:
+    return tuple(v.strip() for v in os.environ.get(name, "").split(",") if v.strip())
 
 
 def default_db_url() -> str:
@@ -30,3 +39,14 @@ class Settings:
     demo_controller: bool = True  # create "cell-1" (KUKA KR 6 R900 sixx) in an empty DB
     migrate: bool = field(default_factory=lambda: os.environ.get(ENV_MIGRATE, "1") != "0")
     # migrate an old schema at start (under the DB lock); False: refuse, name `pendant db upgrade`
+    # who may change a frame (docs/security.md)
+    auth: bool = field(default_factory=lambda: os.environ.get(ENV_NO_AUTH, "0") != "1")
+    # False: --no-auth demo on loopback, everyone an Administrator
+    bootstrap_token: str | None = field(default_factory=lambda: os.environ.get(ENV_ADMIN_TOKEN))
+    allowed_hosts: tuple[str, ...] = field(
+        default_factory=lambda: LOOPBACK_HOSTS + _env_list(ENV_ALLOWED_HOSTS))
+    # Host header allow-list ("*": any)
+    cors_origins: tuple[str, ...] = field(default_factory=lambda: _env_list(ENV_CORS_ORIGINS))
+    # closed unless origins are named
+    idle_timeout_s: float = 600.0  # a browser login idle this long acts as an Operator
+    session_lifetime_s: float = 12 * 3600.0  # a browser login ends after this

@@ -24,9 +24,23 @@ CELL: Cell = cell_for(ROBOTS["kuka_kr6_r900_sixx"], 1)  # its hidden truth, for 
 TRUE_TCP_MM = CELL.T_flange_tool[:3, 3]
 
 
-def make_client(db_url: str) -> TestClient:
-    """A fresh app (migrations, demo controller) on ``db_url``: also how a restart is made."""
-    return TestClient(create_app(Settings(db_url=db_url)), raise_server_exceptions=False)
+ADMIN_TOKEN = "pdt_test-administrator-token-0123456789abcdef"  # the first start's token
+TEST_HOSTS = ("testserver", "127.0.0.1", "localhost")  # TestClient's Host is "testserver"
+
+
+def app_settings(db_url: str, **kw) -> Settings:
+    """Settings of a test app: its first Administrator gets ADMIN_TOKEN."""
+    return Settings(db_url=db_url, bootstrap_token=ADMIN_TOKEN, allowed_hosts=TEST_HOSTS, **kw)
+
+
+def make_client(db_url: str, token: str | None = ADMIN_TOKEN, **kw) -> TestClient:
+    """A fresh app (migrations, demo controller) on ``db_url``: also how a restart is made.
+
+    The client sends ``token`` as a bearer token (the first start's Administrator by
+    default), so every test goes through the real authentication; ``None`` sends none."""
+    headers = {"Authorization": f"Bearer {token}"} if token else {}
+    return TestClient(create_app(app_settings(db_url, **kw)), raise_server_exceptions=False,
+                      headers=headers)
 
 
 @pytest.fixture
@@ -138,7 +152,7 @@ def calibrated_pointer(client: TestClient, number: int = 1) -> dict:
     return calibrate(client, "tool.abc_2point", number)[1]
 
 
-__all__ = ["C", "CELL", "TRUE_TCP_MM", "make_client", "db_url", "client", "ok", "open_session",
-           "edit_slot", "restore_slot",
+__all__ = ["C", "CELL", "TRUE_TCP_MM", "ADMIN_TOKEN", "TEST_HOSTS", "app_settings", "make_client",
+           "db_url", "client", "ok", "open_session", "edit_slot", "restore_slot",
            "approach", "walk", "calibrate", "pose_array", "pose_matrix", "angle_deg",
            "calibrated_pointer", "finish_job", "analyze"]

@@ -22,6 +22,25 @@ CHROMIUM_ARGS = ["--no-sandbox", "--disable-gpu", "--disable-quic", "--no-first-
 VIEWPORT = {"width": 1280, "height": 900}
 
 
+def auth_headers() -> dict[str, str]:
+    """The first Administrator's bearer token, for a browser context (extra_http_headers)."""
+    from api_helpers import ADMIN_TOKEN
+
+    return {"Authorization": f"Bearer {ADMIN_TOKEN}"}
+
+
+def log_in(context, site: str, token: str | None = None) -> dict:  # noqa: ANN001
+    """Log the browser context in as the login page does (the session and CSRF cookies).
+
+    Chromium sends no extra_http_headers with a download, so a page that downloads needs
+    the cookie login too."""
+    from api_helpers import ADMIN_TOKEN
+
+    r = context.request.post(site + "/auth/login", data={"token": token or ADMIN_TOKEN})
+    assert r.ok, r.text()
+    return r.json()
+
+
 def chromium_path() -> str:
     """The Chromium executable; fails the test with the fix when it is missing."""
     import pytest
@@ -43,19 +62,21 @@ def free_port() -> int:
 
 
 @contextmanager
-def serve(db_url: str) -> Iterator[str]:
-    """The real service (create_app on ``db_url``) under uvicorn in a thread, with a
-    ``pendant worker`` process for its jobs (analyses, restores); yields its URL."""
+def serve(db_url: str | None = None, app: object | None = None) -> Iterator[str]:
+    """The real service (create_app on ``db_url``, its first Administrator's token is
+    api_helpers.ADMIN_TOKEN) or ``app`` under uvicorn in a thread, with a ``pendant worker``
+    process for its jobs (analyses, restores); yields its URL."""
     import subprocess
     import sys
 
     import uvicorn
+    from api_helpers import app_settings
 
     from server.app import create_app
-    from server.settings import Settings
 
     port = free_port()
-    config = uvicorn.Config(create_app(Settings(db_url=db_url)), host="127.0.0.1", port=port,
+    app = app if app is not None else create_app(app_settings(db_url))
+    config = uvicorn.Config(app, host="127.0.0.1", port=port,
                             log_level="warning", lifespan="off")
     server = uvicorn.Server(config)
     thread = threading.Thread(target=server.run, name="pendant-uvicorn", daemon=True)
@@ -69,8 +90,8 @@ def serve(db_url: str) -> Iterator[str]:
         raise RuntimeError(f"uvicorn did not start on 127.0.0.1:{port}")
     root = Path(__file__).resolve().parent.parent
     env = {**os.environ, "PYTHONPATH": f"{root}{os.pathsep}{os.environ.get('PYTHONPATH', '')}"}
-    worker = subprocess.Popen([sys.executable, "-m", "server.cli", "worker", "--db", db_url,
-                               "--processes", "1"], env=env)
+    worker = subprocess.Popen([sys.executable, "-m", "server.cli", "worker", "--db",
+                               app.state.settings.db_url, "--processes", "1"], env=env)
     try:
         yield f"http://127.0.0.1:{port}"
     finally:

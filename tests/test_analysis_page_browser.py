@@ -18,7 +18,7 @@ from pathlib import Path
 
 import pytest
 
-from browser_helpers import VIEWPORT
+from browser_helpers import VIEWPORT, auth_headers
 from solvers.physics import Imperfections
 from solvers.simulate import simulate_recording
 
@@ -33,7 +33,7 @@ def compliant_ur10() -> dict:
 
 @pytest.fixture
 def page(chromium, site: str):  # noqa: ANN001, ANN201
-    context = chromium.new_context(viewport=VIEWPORT)
+    context = chromium.new_context(viewport=VIEWPORT, extra_http_headers=auth_headers())
     context.set_default_timeout(15_000)
     p = context.new_page()
     errors: list[str] = []

@@ -84,9 +84,10 @@ def test_other_library_arm_and_custom_dh(client):
 def test_placeholder_page_without_web_dir(tmp_path):
     from fastapi.testclient import TestClient
 
+    from api_helpers import app_settings
+
     from server.app import create_app
-    from server.settings import Settings
-    app = create_app(Settings(db_url=f"sqlite:///{tmp_path / 'p.db'}", web_dir=tmp_path / "no-web"))
+    app = create_app(app_settings(f"sqlite:///{tmp_path / 'p.db'}", web_dir=tmp_path / "no-web"))
     with TestClient(app) as c:
         r = c.get("/")
         assert r.status_code == 200 and "/docs" in r.text

@@ -15,7 +15,7 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from browser_helpers import (VIEWPORT, compute, idle, kuka_frame, open_menu, open_pendant, save, walk_steps,
+from browser_helpers import (VIEWPORT, auth_headers, compute, log_in, idle, kuka_frame, open_menu, open_pendant, save, walk_steps,
                              wizard)
 from emulator import cell_for
 from solvers.robots import ROBOTS
@@ -26,7 +26,9 @@ JITTER_MM = 0.2  # the person's hand: each Move to misses the mark by this much 
 
 @pytest.fixture
 def page(chromium, site: str):  # noqa: ANN001, ANN201
-    context = chromium.new_context(viewport=VIEWPORT, accept_downloads=True)
+    context = chromium.new_context(viewport=VIEWPORT, accept_downloads=True,
+                                   extra_http_headers=auth_headers())
+    log_in(context, site)  # the KUKA download carries the login cookie, not the bearer header
     context.set_default_timeout(15_000)
     p = context.new_page()
     errors: list[str] = []

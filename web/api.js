@@ -50,6 +50,8 @@ export async function request(method, path, { body, bodyText, onStart, onEnd } =
     const init = { method, headers: {} };
     const resource = resourceOf(path);
     if (method !== "GET" && resource && etags.has(resource)) init.headers["If-Match"] = etags.get(resource);
+    const csrf = document.cookie.match(/(?:^|;\s*)pendant_csrf=([^;]*)/);  // web/auth.js's login
+    if (csrf && method !== "GET") init.headers["X-CSRF-Token"] = decodeURIComponent(csrf[1]);
     const text = body !== undefined ? JSON.stringify(body) : bodyText;
     if (text !== undefined) {
       init.headers["Content-Type"] = "application/json";

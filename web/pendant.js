@@ -323,7 +323,8 @@ function renderTable(tbody, rows, table) {
       if (pv.error_max_mm !== null && pv.error_max_mm !== undefined) q.push(`max ${fmt(pv.error_max_mm)} mm`);
       if (pv.session_id) q.push(`session ${pv.session_id}`);
       if (q.length) prov.push(el("div", { text: q.join(" · ") }));
-      if (pv.updated_at) prov.push(el("div", { text: pv.updated_at.slice(0, 16).replace("T", " ") }));
+      const by = pv.updated_by ? ` by ${pv.updated_by}` : "";
+      if (pv.updated_at) prov.push(el("div", { class: "changed", text: `changed${by} at ${pv.updated_at.slice(0, 16).replace("T", " ")}` }));
     }
     const cols = (keys) => keys.map((k) => num(p[k]).padStart(9)).join("");
     const frame = used ? [el("div", { text: cols(["x", "y", "z"]) }), el("div", { class: "abc", text: cols(["a", "b", "c"]) })] : [];

@@ -79,7 +79,7 @@ def entry_out(e: FrameEntry) -> EntryOut:
                        inertia_axes_deg=[v or 0.0 for v in axes])
     provenance = ProvenanceOut(method=e.method, session_id=e.session_id,
                                error_max_mm=e.error_max_mm, error_rms_mm=e.error_rms_mm,
-                               updated_at=e.updated_at)
+                               updated_at=e.updated_at, updated_by=e.updated_by)
     return EntryOut(table=e.entry_table, number=e.number, name=e.name,  # type: ignore[arg-type]
                     kind=e.kind, pose=PoseOut.of(e.pose_values()),  # type: ignore[arg-type]
                     load=load, mech_unit=e.mech_unit, provenance=provenance)

@@ -8,9 +8,11 @@ from __future__ import annotations
 
 import json
 
-from fastapi import APIRouter, Response
+from fastapi import APIRouter, Request, Response
 
 from db import crud, jobs
+from server.auth.audit import actor, mark_operation
+from server.auth.guard import require
 from server.controller_files import ImportResult, apply_import, export_file, parse_file
 from server.deps import SessionDep
 from server.preconditions import IfMatch
@@ -44,9 +46,13 @@ def import_out(result: ImportResult) -> ImportOut:
 
 @router.get("/export", response_class=Response,
             responses={200: {"content": {"text/plain": {}, "application/json": {}}}})
-def export(controller_id: int, db: SessionDep, format: ExportFormat = "kuka") -> Response:
+def export(controller_id: int, db: SessionDep, request: Request,
+           format: ExportFormat = "kuka") -> Response:
     """Download the tables as a controller file (``format=kuka|abb|fanuc|ur``) or the whole
-    controller as a JSON backup (``format=json``, incl. history and sessions)."""
+    controller as a JSON backup (``format=json``, incl. history and sessions; needs
+    ``backup:write``)."""
+    if format == "json":
+        require(request, "backup:write")
     text = export_text(db, controller_id, format)
     media, filename = MEDIA[format]
     name = crud.get_controller(db, controller_id).name
@@ -56,8 +62,8 @@ def export(controller_id: int, db: SessionDep, format: ExportFormat = "kuka") ->
 
 @router.post("/import", responses={202: {"model": JobOut,
                                          "description": "JSON backup: the restore job"}})
-def import_tables(controller_id: int, body: ImportIn, db: SessionDep, response: Response,
-                  if_match: IfMatch = None) -> ImportOut | JobOut:
+def import_tables(controller_id: int, body: ImportIn, db: SessionDep, request: Request,
+                  response: Response, if_match: IfMatch = None) -> ImportOut | JobOut:
     """Read a controller file (KUKA ``$config.dat``, ABB RAPID module, pendant's FANUC or UR
     export) or a JSON backup into the tables.
 
@@ -65,13 +71,16 @@ def import_tables(controller_id: int, body: ImportIn, db: SessionDep, response: 
     and is kept, so that a later export in that format patches only changed values into it;
     the answer is 200. ``dry_run`` returns, per slot, before -> after, kind changes and
     skipped declarations, and writes nothing. A JSON backup replaces the tables, history and
-    sessions: it is checked at once (422 naming the field), then restored by a job (202,
+    sessions (needs ``backup:restore``; the audit keeps every earlier change): it is checked
+    at once (422 naming the field), then restored by a job (202,
     ``Location: /jobs/{id}``; the job's result is ``{"format", "entries", "history"}``).
     ``If-Match`` (the controller's ETag) is honoured: 412 when the controller changed since."""
     from server.routers.controllers import changing
 
     c = changing(db, controller_id, if_match)
     if body.format == "json":
+        require(request, "backup:restore")
+        mark_operation("backup.restore")
         from server.backup import parse_backup
         from server.routers.common import robot_of
         from solvers.dh import check_joint_limits
@@ -92,7 +101,7 @@ def import_tables(controller_id: int, body: ImportIn, db: SessionDep, response: 
             return ImportOut(format="json", entries=len(doc["entries"]), dry_run=True)
         response.status_code = 202  # the restore itself is a job (server.job_kinds)
         return accepted(response, jobs.enqueue(db, "restore", {"controller_id": c.id,
-                                                               "doc": doc}))
+                                                               "doc": doc, "actor": actor()}))
     result = apply_import(db, c, body.format, body.text, parse_file(body.format, body.text),
                           body.dry_run)
     return import_out(result)

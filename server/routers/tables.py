@@ -16,7 +16,7 @@ from solvers.errors import CalibrationError
 def history_out(h: EntryHistory) -> HistoryOut:
     return HistoryOut(id=h.id, table=h.entry_table, number=h.number, reason=h.reason,
                       session_id=h.session_id, changed_at=h.changed_at, before=h.before,
-                      after=h.after)
+                      after=h.after, changed_by=h.changed_by)
 
 
 def _precondition(e: FrameEntry, if_match: str | None) -> None:

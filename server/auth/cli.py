@@ -1,0 +1,138 @@
+"""``pendant users``, ``pendant tokens`` and ``pendant roles``: administer who may change a frame.
+
+    pendant users add NAME --role ROLE [--db URL]     (Operator, Programmer, Expert,
+    pendant users list [--db URL]                      Administrator or a site role)
+    pendant users revoke NAME [--db URL]
+    pendant tokens create NAME [--days 90 | --no-expiry] [--label TEXT] [--db URL]
+    pendant roles add NAME PERMISSION... [--description TEXT] [--db URL]
+    pendant roles list [--db URL]
+
+They work on the database directly (whoever can run them can read the DB file anyway); each
+change is audited with source ``cli`` and the operating-system user.
+"""
+
+from __future__ import annotations
+
+import getpass
+import sys
+from contextlib import contextmanager
+from typing import Any, Iterator
+
+from sqlalchemy.orm import Session
+
+from db.crud import StateConflict
+
+from server.auth import audit, tokens
+from server.auth.permissions import PERMISSIONS
+
+
+@contextmanager
+def cli_session(db_url: str | None) -> Iterator[Session]:
+    """A migrated DB session committed at the end, audited as ``cli:<os user>``."""
+    from db.session import make_engine, make_sessionmaker, run_migrations
+    from server.settings import Settings
+
+    settings = Settings(db_url=db_url) if db_url else Settings()
+    engine = make_engine(settings.db_url)
+    run_migrations(engine)
+    audit.install()
+    token = audit.CONTEXT.set(audit.AuditContext(f"cli:{getpass.getuser()}", None, "cli"))
+    try:
+        with make_sessionmaker(engine)() as db:
+            tokens.ensure_default_roles(db)
+            yield db
+            db.commit()
+    finally:
+        audit.CONTEXT.reset(token)
+        engine.dispose()
+
+
+def _fail(err: Exception) -> int:
+    print(f"pendant: {err}", file=sys.stderr)
+    return 2
+
+
+def run_users(args: Any) -> int:
+    with cli_session(args.db) as db:
+        try:
+            if args.action == "add":
+                u = tokens.add_user(db, args.name, args.role)
+                print(f"user {u.name} ({u.role}) added; give them a token: "
+                      f"pendant tokens create {u.name}")
+            elif args.action == "revoke":
+                u = tokens.revoke_user(db, args.name)
+                print(f"user {u.name} revoked with every token and login")
+            else:
+                print(f"{'id':>4}  {'name':24s} {'role':16s} {'created (UTC)':20s} revoked")
+                for u in tokens.list_users(db):
+                    revoked = u.revoked_at.strftime("%Y-%m-%d %H:%M") if u.revoked_at else ""
+                    print(f"{u.id:4d}  {u.name:24s} {u.role:16s} "
+                          f"{u.created_at.strftime('%Y-%m-%d %H:%M'):20s} {revoked}")
+        except (ValueError, StateConflict) as err:
+            return _fail(err)
+    return 0
+
+
+def run_tokens(args: Any) -> int:
+    with cli_session(args.db) as db:
+        try:
+            days = None if args.no_expiry else args.days
+            secret = tokens.create_token(db, tokens.get_user(db, args.name), days, args.label)
+        except (ValueError, StateConflict) as err:
+            return _fail(err)
+    until = "no expiry" if days is None else f"valid {days:g} days"
+    print(f"token for {args.name} ({until}; shown once, only its hash is stored):", file=sys.stderr)
+    print(secret)
+    return 0
+
+
+def run_roles(args: Any) -> int:
+    with cli_session(args.db) as db:
+        try:
+            if args.action == "add":
+                r = tokens.add_role(db, args.name, args.permissions, args.description)
+                print(f"role {r.name}: {', '.join(r.permissions)}")
+            else:
+                for r in tokens.list_roles(db):
+                    print(f"{r.name:16s} {', '.join(r.permissions)}")
+        except (ValueError, StateConflict) as err:
+            return _fail(err)
+    return 0
+
+
+def add_auth_commands(subparsers: Any) -> None:
+    """Register ``users``, ``tokens`` and ``roles`` on the ``pendant`` command's subparsers."""
+    u = subparsers.add_parser("users", help="add, list or revoke users (docs/security.md)")
+    us = u.add_subparsers(dest="action", required=True)
+    a = us.add_parser("add", help="add a user with a role")
+    a.add_argument("name")
+    a.add_argument("--role", required=True,
+                   help="Operator, Programmer, Expert, Administrator or a site role")
+    us.add_parser("list", help="every user with role and revocation")
+    r = us.add_parser("revoke", help="revoke a user with every token and login")
+    r.add_argument("name")
+    for p in (a, us.choices["list"], r):
+        p.add_argument("--db", help="database URL")
+        p.set_defaults(func=run_users)
+
+    t = subparsers.add_parser("tokens", help="create an API token for a user")
+    ts = t.add_subparsers(dest="action", required=True)
+    c = ts.add_parser("create", help="a new bearer token (printed once)")
+    c.add_argument("name", help="the user")
+    c.add_argument("--days", type=float, default=90.0, help="lifetime in days (90)")
+    c.add_argument("--no-expiry", action="store_true", help="a token that does not expire")
+    c.add_argument("--label", default="", help="what the token is for (cell PC, CI, ...)")
+    c.add_argument("--db", help="database URL")
+    c.set_defaults(func=run_tokens)
+
+    ro = subparsers.add_parser("roles", help="list the roles or add a site role")
+    rs = ro.add_subparsers(dest="action", required=True)
+    ra = rs.add_parser("add", help="a site role: a name and its permissions")
+    ra.add_argument("name")
+    ra.add_argument("permissions", nargs="+", choices=PERMISSIONS, metavar="PERMISSION",
+                    help=", ".join(PERMISSIONS))
+    ra.add_argument("--description", default="")
+    rl = rs.add_parser("list", help="every role with its permissions")
+    for p in (ra, rl):
+        p.add_argument("--db", help="database URL")
+        p.set_defaults(func=run_roles)

@@ -1,0 +1,113 @@
+"""The app-level dependency every route passes: who is asking, may they, and is it cross-site?
+
+1. The route's permission comes from ``permissions.ROUTES`` by the matched path template
+   (``request.scope["route"].path``); an undeclared route is refused to everyone.
+2. The credential is a bearer token (``Authorization: Bearer pdt_...``, source ``api``) or the
+   browser login's HttpOnly cookie (source ``pendant``). A cookie-authenticated command
+   (any method but GET/HEAD/OPTIONS) also needs the login's CSRF token in ``X-CSRF-Token``
+   (double submit: the page reads it from the ``pendant_csrf`` cookie, which another site's
+   page cannot read). After the idle timeout a browser login acts as an Operator.
+3. No credential: 401; a credential without the permission: 403 naming the permission.
+
+The actor, the request id and the client address go into ``audit.CONTEXT`` for the audit hook.
+"""
+
+from __future__ import annotations
+
+import hmac
+import uuid
+from datetime import timedelta
+
+from fastapi import HTTPException, Request
+from starlette.concurrency import run_in_threadpool
+
+from db.models import utcnow
+from server.auth import audit, tokens
+from server.auth.permissions import PERMISSIONS, PUBLIC, SIGNED_IN, required
+
+SESSION_COOKIE = "pendant_session"
+CSRF_COOKIE = "pendant_csrf"
+CSRF_HEADER = "x-csrf-token"
+SAFE_METHODS = ("GET", "HEAD", "OPTIONS")
+TOUCH_EVERY_S = 5.0  # a login's last command time is written at most this often
+
+
+def _refuse(status: int, loc: tuple[str, ...], msg: str, kind: str) -> HTTPException:
+    headers = {"WWW-Authenticate": 'Bearer realm="pendant"'} if status == 401 else None
+    return HTTPException(status, detail={"loc": list(loc), "msg": msg, "type": kind},
+                         headers=headers)
+
+
+def _actor(request: Request) -> tokens.Actor | None:
+    """The actor of the request's credential (None: no credential); raises 401 on a bad one."""
+    settings = request.app.state.settings
+    header = request.headers.get("authorization")
+    cookie = request.cookies.get(SESSION_COOKIE)
+    with request.app.state.sessionmaker() as db:
+        if header is not None:
+            scheme, _, secret = header.partition(" ")
+            if scheme.lower() != "bearer" or not secret.strip():
+                raise _refuse(401, ("header", "authorization"),
+                              "must be 'Bearer <token>' (pendant tokens create)", "unauthorized")
+            found = tokens.actor_of_token(db, secret.strip())
+            if found is None:
+                raise _refuse(401, ("header", "authorization"),
+                              "unknown, expired or revoked token", "unauthorized")
+            user, role = found
+            return tokens.Actor(user.name, role.name, frozenset(role.permissions), "api")
+        if cookie is None:
+            return None
+        found_web = tokens.web_session(db, cookie)
+        if found_web is None:
+            raise _refuse(401, ("cookie", SESSION_COOKIE),
+                          "the login has ended or expired; log in again", "unauthorized")
+        ws, user = found_web
+        actor = tokens.web_actor(db, ws, user, settings.idle_timeout_s)
+        if request.method not in SAFE_METHODS:
+            sent = request.headers.get(CSRF_HEADER, "")
+            if not hmac.compare_digest(sent.encode(), ws.csrf_token.encode()):
+                raise _refuse(403, ("header", CSRF_HEADER), "a command from the browser needs "
+                              "the login's CSRF token (cross-site request refused)", "csrf")
+            now = utcnow()
+            if not actor.idle and now - ws.last_seen_at > timedelta(seconds=TOUCH_EVERY_S):
+                ws.last_seen_at = now  # a command keeps the login awake; reads do not
+                db.commit()
+        return actor
+
+
+async def authorize(request: Request) -> None:
+    """Refuse the request unless its credential carries the route's permission."""
+    route = request.scope.get("route")
+    path = getattr(route, "path", None)
+    need = required(request.method, path) if path else None
+    if need is None:
+        raise _refuse(403, ("path",), f"no permission is declared for {request.method} {path} "
+                      "(server/auth/permissions.py)", "forbidden")
+    client = request.client.host if request.client else None
+    rid = request.headers.get("x-request-id") or uuid.uuid4().hex
+    request.state.request_id = rid
+    if need == PUBLIC:
+        audit.CONTEXT.set(audit.AuditContext(None, None, "api", rid, client))
+        return
+    settings = request.app.state.settings
+    if not settings.auth:
+        actor = tokens.Actor("no-auth", "Administrator", frozenset(PERMISSIONS), "api")
+    else:
+        actor = await run_in_threadpool(_actor, request)
+        if actor is None:
+            raise _refuse(401, ("header", "authorization"), "log in: a bearer token "
+                          "(pendant tokens create) or the pendant's login page", "unauthorized")
+    request.state.actor = actor
+    audit.CONTEXT.set(audit.AuditContext(actor.name, actor.role, actor.source, rid[:64], client))
+    if need != SIGNED_IN and not actor.can(need):
+        raise _refuse(403, ("path",), f"needs permission {need}; {actor.name} acts as "
+                      f"{actor.role}" + (" (idle: log in again)" if actor.idle else ""),
+                      "forbidden")
+
+
+def require(request: Request, permission: str) -> None:
+    """A second permission a route needs for part of its input (a JSON backup, a restore)."""
+    actor = getattr(request.state, "actor", None)
+    if actor is not None and not actor.can(permission):
+        raise _refuse(403, ("path",), f"needs permission {permission}; {actor.name} acts as "
+                      f"{actor.role}", "forbidden")

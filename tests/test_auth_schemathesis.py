@@ -1,0 +1,43 @@
+"""schemathesis over the live OpenAPI, as an authenticated Expert: no input makes a 500.
+
+A bounded run for CI (a few examples per operation). The longer run by hand (docs/security.md)::
+
+    PENDANT_ADMIN_TOKEN=pdt_... pendant serve --port 8000 &
+    pendant users add fuzz --role Expert && pendant tokens create fuzz      # -> TOKEN
+    schemathesis run http://127.0.0.1:8000/openapi.json --checks not_a_server_error \\
+        -H "Authorization: Bearer TOKEN" --max-time 180
+"""
+
+from __future__ import annotations
+
+import pytest
+import schemathesis
+from hypothesis import HealthCheck, settings
+from schemathesis.checks import not_a_server_error
+
+from api_helpers import ADMIN_TOKEN, app_settings
+from server.app import create_app
+
+EXPERT: dict[str, str] = {}
+
+
+@pytest.fixture(scope="module")
+def api_schema(tmp_path_factory):  # noqa: ANN001, ANN201
+    from fastapi.testclient import TestClient
+
+    app = create_app(app_settings(f"sqlite:///{tmp_path_factory.mktemp('fuzz') / 'p.db'}"))
+    with TestClient(app, headers={"Authorization": f"Bearer {ADMIN_TOKEN}"}) as admin:
+        admin.post("/users", json={"name": "fuzz", "role": "Expert"}).raise_for_status()
+        token = admin.post("/users/fuzz/tokens", json={}).json()["token"]
+    EXPERT["Authorization"] = f"Bearer {token}"
+    return schemathesis.openapi.from_asgi("/openapi.json", app)
+
+
+schema = schemathesis.pytest.from_fixture("api_schema")
+
+
+@schema.parametrize()
+@settings(max_examples=2, deadline=None, suppress_health_check=list(HealthCheck))
+def test_no_server_error_as_an_expert(case):  # noqa: ANN001
+    response = case.call(headers=EXPERT)
+    case.validate_response(response, checks=[not_a_server_error])
