@@ -20,6 +20,7 @@ from server import errors
 from server.emulator import DEMO_ROBOT, home_joints
 from server.routers import (analysis, base, controllers, export, fixed_tool, robot, sessions, tool,
                             workpiece)
+from server.routers import plan as plan_router
 from server.settings import Settings
 from solvers.robots import ROBOTS
 
@@ -67,6 +68,7 @@ def create_app(settings: Settings | None = None) -> FastAPI:
     for module in (controllers, robot, tool, base, fixed_tool, workpiece, sessions, export,
                    analysis):
         app.include_router(module.router)
+    app.include_router(plan_router.router)
     if settings.demo_controller:
         ensure_demo(app)
     _mount_web(app, Path(settings.web_dir))
