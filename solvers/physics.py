@@ -117,36 +117,48 @@ class Imperfections:
                                        + ", ".join(sorted(known)))
         kw: dict = {}
         for key, value in d.items():
-            if key == "dh_delta":
-                delta = {}
-                for k, v in value.items():
-                    param, _, joint = str(k).partition(":")
-                    if not joint.isdigit():
-                        raise CalibrationError(("dh_delta", str(k)),
-                                               "keys are 'a_mm:2' (parameter:joint)")
-                    delta[(param, int(joint))] = float(v)
-                kw[key] = delta
-            elif key == "cyclic_error":
-                cyc = {}
-                for k, v in value.items():
-                    if not str(k).isdigit() or len(v) != 2:
-                        raise CalibrationError(("cyclic_error", str(k)),
-                                               "is {joint: [amplitude_deg, periods_per_rev]}")
-                    cyc[int(k)] = (float(v[0]), float(v[1]))
-                kw[key] = cyc
-            elif key == "gear_transmission_error":
-                gears = []
-                for i, v in enumerate(value):
-                    if len(v) != 4 or not str(v[0]).isdigit():
-                        raise CalibrationError((key, i), "is a list of [joint, amplitude_deg, "
-                                               "periods_per_turn, phase_deg]")
-                    gears.append((int(v[0]), float(v[1]), float(v[2]), float(v[3])))
-                kw[key] = tuple(gears)
-            elif isinstance(value, (list, tuple)):
-                kw[key] = tuple(float(v) for v in value)
-            else:
-                kw[key] = float(value)
+            if value is None:      # an omitted per-joint list (GET .../cell/physics shows null)
+                continue
+            try:
+                kw[key] = cls._field_from(key, value)
+            except CalibrationError:
+                raise
+            except (TypeError, ValueError, AttributeError):
+                raise CalibrationError((str(key),), f"cannot read {value!r} as this effect's "
+                                       "value(s)") from None
         return cls(**kw)
+
+    @staticmethod
+    def _field_from(key: str, value) -> object:  # noqa: ANN001
+        """One field of :meth:`from_dict` (TypeError/ValueError on a wrong shape)."""
+        if key == "dh_delta":
+            delta = {}
+            for k, v in value.items():
+                param, _, joint = str(k).partition(":")
+                if not joint.isdigit():
+                    raise CalibrationError(("dh_delta", str(k)),
+                                           "keys are 'a_mm:2' (parameter:joint)")
+                delta[(param, int(joint))] = float(v)
+            return delta
+        if key == "cyclic_error":
+            cyc = {}
+            for k, v in value.items():
+                if not str(k).isdigit() or len(v) != 2:
+                    raise CalibrationError(("cyclic_error", str(k)),
+                                           "is {joint: [amplitude_deg, periods_per_rev]}")
+                cyc[int(k)] = (float(v[0]), float(v[1]))
+            return cyc
+        if key == "gear_transmission_error":
+            gears = []
+            for i, v in enumerate(value):
+                if len(v) != 4 or not str(v[0]).isdigit():
+                    raise CalibrationError((key, i), "is a list of [joint, amplitude_deg, "
+                                           "periods_per_turn, phase_deg]")
+                gears.append((int(v[0]), float(v[1]), float(v[2]), float(v[3])))
+            return tuple(gears)
+        if isinstance(value, (list, tuple)):
+            return tuple(float(v) for v in value)
+        return float(value)
 
     def per_joint(self, name: str, n: int) -> FloatArray:
         """The per-joint field ``name`` as an (n,) array (zeros when None)."""

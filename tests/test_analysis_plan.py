@@ -87,6 +87,9 @@ def test_api_plan_then_record_then_analyse(client) -> None:  # noqa: F811
                                                    "physics": physics, "payload_kg": 5.0}))
     rep = ok(client.post(f"/recordings/{rec['id']}/analyze"))
     assert rep["findings"][0]["effect"] == "joint_compliance" and rep["findings"][0]["joint"] == 2
+    bad = {"robot": "ur10", "joints_deg": plan["joints_deg"], "physics": {"noise_mm": "lots"}}
+    r = client.post("/plan/recording", json=bad)
+    assert r.status_code == 422 and r.json()["detail"][0]["loc"] == ["body", "physics", "noise_mm"]
     r = client.post("/plan", json={"robot": "ur10", "effects": ["thermal_drift"]})
     assert r.status_code == 422 and r.json()["detail"][0]["loc"] == ["body", "effects", "thermal_drift"]
     r = client.post("/plan", json={"robot": "r2d2", "effects": ["joint_offset"]})

@@ -10,6 +10,7 @@ name what the model leaves out and predict held-out poses to 0.34 mm (all 632 po
 from __future__ import annotations
 
 import json
+import warnings
 from pathlib import Path
 
 import pytest
@@ -28,7 +29,11 @@ def rec():
 
 @pytest.fixture(scope="module")
 def report(rec):
-    return analyze(rec)
+    # no numpy RuntimeWarning may leak to the terminal (issue 11: an overflow in the second
+    # orthogonalisation pass of a rank-deficient model, seen on this very recording)
+    with warnings.catch_warnings():
+        warnings.simplefilter("error", RuntimeWarning)
+        return analyze(rec)
 
 
 def test_licence_travels_with_the_data() -> None:

@@ -90,7 +90,10 @@ async def record_from_plan(request: Request, body: PlanRecordingIn) -> dict[str,
     """Measure the plan's poses on a simulated arm with ``physics``; stores the recording."""
     robot = _robot(body.robot)
     physics = {k: v for k, v in body.physics.items() if k != "rigid"}
-    imp = Imperfections.from_dict(physics)
+    try:
+        imp = Imperfections.from_dict(physics).check(robot.dof)
+    except CalibrationError as err:
+        raise CalibrationError(("physics", *err.loc), err.reason) from None
     doc = await run_in_threadpool(lambda: record_plan(
         robot, body.joints_deg, imp, seed=body.seed,
         payload=(body.payload_kg, (0.0, 0.0, 50.0))))
