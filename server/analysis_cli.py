@@ -3,15 +3,24 @@
     pendant analyze RECORDING.json [--json] [--folds K] [--seed S] [--service URL]
     pendant simulate KIND --robot KEY [--effect NAME[:JOINT]=VALUE ...] [--noise MM]
                      [--payload KG] [--n N] [--seed S] -o FILE
+    pendant plan ROBOT --effects EFFECT[:JOINT],... [--n 30] [--workspace X0,Y0,Z0,X1,Y1,Z1]
+                 [--instrument tracker|touch] [--payload KG] [--seed S] [-o PLAN.json]
+                 [--record REC.json [--effect NAME[:JOINT]=VALUE ...] [--noise MM]]
 
 ``--effect`` (repeatable) switches on one hidden effect of the simulated robot, in the units
 of the analysis report: ``offset:J=DEG``, ``a:J=MM``, ``d:J=MM``, ``alpha:J=DEG``,
 ``compliance:J=DEG_PER_NM``, ``backlash:J=DEG``, ``drift=MM`` (along base z),
-``latency=MS``, ``deflection=MM_PER_N``, ``cyclic:J=DEG@PERIODS`` (a gear's periodic error, not
-in the analysis's library). Example::
+``latency=MS``, ``deflection=MM_PER_N``, ``tau=S`` (the drift's warm-up time constant; none:
+linear), ``cyclic:J=DEG@PERIODS`` (a gear's periodic error in the controller's sense),
+``gear:J=DEG@PERIODS[@PHASE_DEG]`` (a ``gear_transmission_error`` harmonic, repeatable).
+
+``plan`` proposes poses that pin down the named effects (D-optimal, docs/analysis.md); with
+``--record`` it also writes a simulated tracker recording measured at those poses. Example::
 
     pendant simulate tracker --robot ur10 --effect compliance:2=0.0005 --payload 5 -o rec.json
     pendant analyze rec.json
+    pendant plan ur10 --effects joint_compliance:2,link_length --payload 5 -o plan.json \
+        --record rec.json --effect compliance:2=0.0005
 """
 
 from __future__ import annotations
@@ -29,7 +38,7 @@ PER_JOINT = {"offset": "joint_offset_deg", "compliance": "compliance_deg_per_Nm"
              "backlash": "backlash_deg"}
 DH = {"a": "a_mm", "d": "d_mm", "alpha": "alpha_deg"}
 SCALAR = {"drift": "thermal_drift_mm", "latency": "trigger_latency_ms",
-          "deflection": "tool_deflection_mm_per_N"}
+          "deflection": "tool_deflection_mm_per_N", "tau": "thermal_tau_s"}
 
 
 def parse_effects(specs: list[str], n_joints: int, noise_mm: float):  # noqa: ANN201
@@ -40,6 +49,7 @@ def parse_effects(specs: list[str], n_joints: int, noise_mm: float):  # noqa: AN
     dh: dict[tuple[str, int], float] = {}
     scalar: dict[str, float] = {}
     cyclic: dict[int, tuple[float, float]] = {}
+    gears: list[tuple[int, float, float, float]] = []
     for spec in specs:
         try:
             name, value = spec.split("=", 1)
@@ -50,6 +60,12 @@ def parse_effects(specs: list[str], n_joints: int, noise_mm: float):  # noqa: AN
                 if joint is None or not 1 <= joint <= n_joints:
                     raise ValueError
                 cyclic[joint] = (float(amp), float(periods or 1))
+                continue
+            if name == "gear":
+                amp, periods, phase = (value.split("@") + ["1", "0"])[:3]
+                if joint is None or not 1 <= joint <= n_joints:
+                    raise ValueError
+                gears.append((joint, float(amp), float(periods), float(phase)))
                 continue
             v = float(value)
         except ValueError:
@@ -65,10 +81,10 @@ def parse_effects(specs: list[str], n_joints: int, noise_mm: float):  # noqa: AN
         elif name in SCALAR:
             scalar[SCALAR[name]] = v
         else:
-            known = ", ".join(sorted([*PER_JOINT, *DH, *SCALAR, "cyclic"]))
+            known = ", ".join(sorted([*PER_JOINT, *DH, *SCALAR, "cyclic", "gear"]))
             raise CalibrationError(("--effect",), f"unknown effect {name!r}; known: {known}")
     return Imperfections(**{k: tuple(v) for k, v in per.items()}, dh_delta=dh, cyclic_error=cyclic,
-                         noise_mm=noise_mm, **scalar)
+                         gear_transmission_error=tuple(gears), noise_mm=noise_mm, **scalar)
 
 
 def _call(base: str, method: str, path: str, body: bytes | None = None) -> Any:
@@ -151,8 +167,38 @@ def run_simulate(args: argparse.Namespace) -> int:
     return 0
 
 
+def run_plan(args: argparse.Namespace) -> int:
+    from solvers.analysis.plan import Workspace, parse_effects as plan_effects
+    from solvers.analysis.plan import plan_poses, record_plan
+
+    if args.robot not in ROBOTS:
+        raise CalibrationError(("robot",), "unknown robot; known: " + ", ".join(sorted(ROBOTS)))
+    robot = ROBOTS[args.robot]
+    ws = None if args.workspace is None else Workspace.parse(args.workspace, robot)
+    payload = (args.payload, (0.0, 0.0, 50.0))
+    plan = plan_poses(robot, plan_effects(args.effects, robot.dof), args.n, workspace=ws,
+                      instrument=args.instrument, payload=payload, seed=args.seed)
+    text = json.dumps(plan, indent=1)
+    if args.output:
+        Path(args.output).write_text(text, encoding="utf-8")
+        print(f"wrote {args.output}: {plan['n_poses']} poses for "
+              f"{', '.join(plan['parameters'])}", file=sys.stderr)
+    else:
+        print(text)
+    if args.record:
+        if args.instrument != "tracker":
+            raise CalibrationError(("--record",), "records a tracker recording: plan with "
+                                   "--instrument tracker (touch poses are taught on the pendant)")
+        imp = parse_effects(args.effect or [], robot.dof, args.noise)
+        doc = record_plan(robot, plan["joints_deg"], imp, seed=args.seed, payload=payload)
+        Path(args.record).write_text(json.dumps(doc, indent=1), encoding="utf-8")
+        print(f"wrote {args.record}: {len(doc['samples'])} tracker samples at the plan's poses",
+              file=sys.stderr)
+    return 0
+
+
 def add_analysis_commands(subparsers: Any) -> None:
-    """Register ``analyze`` and ``simulate`` on the ``pendant`` command's subparsers."""
+    """Register ``analyze``, ``simulate`` and ``plan`` on the ``pendant`` command's subparsers."""
     a = subparsers.add_parser("analyze", help="name the physics a robot's rigid model leaves out "
                                               "(from a robot-recording/1 file)")
     a.add_argument("file", type=Path, help="robot-recording/1 JSON document")
@@ -176,3 +222,23 @@ def add_analysis_commands(subparsers: Any) -> None:
     s.add_argument("--seed", type=int, default=0)
     s.add_argument("-o", "--output", required=True, type=Path, help="file to write")
     s.set_defaults(func=run_simulate)
+
+    p = subparsers.add_parser("plan", help="propose poses that pin down chosen effects "
+                                           "(D-optimal; optionally record them)")
+    p.add_argument("robot", help="robot key (" + ", ".join(sorted(ROBOTS)) + ")")
+    p.add_argument("--effects", action="append", required=True, metavar="EFFECT[:JOINT],...",
+                   help="joint_offset, link_length, link_twist, joint_compliance, "
+                        "tool_deflection; no joint: every joint")
+    p.add_argument("--n", type=int, default=30, help="number of poses (30)")
+    p.add_argument("--workspace", default=None, metavar="X0,Y0,Z0,X1,Y1,Z1",
+                   help="box for the TCP, mm in base (default in front of the robot)")
+    p.add_argument("--instrument", choices=["tracker", "touch"], default="tracker")
+    p.add_argument("--payload", type=float, default=0.0, help="payload mass, kg (at 50 mm on flange z)")
+    p.add_argument("--seed", type=int, default=0)
+    p.add_argument("-o", "--output", type=Path, default=None, help="write the plan here (else stdout)")
+    p.add_argument("--record", type=Path, default=None,
+                   help="also write a simulated tracker recording at the plan's poses")
+    p.add_argument("--effect", action="append", metavar="NAME[:JOINT]=VALUE",
+                   help="--record: hidden effect, as for simulate")
+    p.add_argument("--noise", type=float, default=0.02, help="--record: noise per axis, mm")
+    p.set_defaults(func=run_plan)

@@ -27,6 +27,7 @@ from server.auth.web import SiteGuard
 from server.limits import BodyLimits
 from server.routers import (analysis, base, controllers, export, fixed_tool, jobs, robot, sessions,
                             tool, workpiece)
+from server.routers import plan as plan_router
 from server.settings import Settings
 from solvers.robots import ROBOTS
 
@@ -108,6 +109,7 @@ def create_app(settings: Settings | None = None) -> FastAPI:
     for module in (controllers, robot, tool, base, fixed_tool, workpiece, sessions, export,
                    analysis, jobs, auth_routes):
         app.include_router(module.router)
+    app.include_router(plan_router.router)
     bootstrap(app)
     if settings.cors_origins:
         from starlette.middleware.cors import CORSMiddleware

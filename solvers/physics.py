@@ -10,8 +10,11 @@ the discrepancy analysis report (``analysis-report/1``):
    ``s = motion_signs(q, start_joints_deg)`` (+1 after moving up, -1 after moving down, 0
    before any known motion). Approaching from + and from - therefore differs by b.
 2. ``cyclic_error`` {joint: (amplitude_deg, periods_per_rev)}: a gear's periodic
-   transmission error, ``q <- q + A sin(2 pi k q / 360)`` (k periods per joint turn). Not
-   an effect the analysis knows: it is there to produce "unexplained structure".
+   transmission error, ``q <- q + A sin(2 pi k q / 360)`` (k periods per joint turn), in the
+   controller's sense of the joint. ``gear_transmission_error`` ((joint, amplitude_deg,
+   periods_per_turn, phase_deg), ...) is the same in the report's terms, one entry per
+   harmonic: the DH angle turns by ``A sin(k theta + phi)``, theta the joint's nominal DH
+   angle at the recorded value (the analysis's ``gear_transmission_error``).
 3. ``compliance_deg_per_Nm`` c: the joint yields under gravity and payload torque,
    ``q <- q + c * tau(q)``, tau from :func:`solvers.gravity.gravity_torques` at the recorded
    joints on the nominal model (signed in the joint's positive sense; evaluating it at the
@@ -21,10 +24,12 @@ the discrepancy analysis report (``analysis-report/1``):
    (for ``direction = +1`` arms this is FK at ``q + o``).
 5. ``dh_delta`` {("a_mm" | "d_mm" | "alpha_deg", joint 1-based): true minus nominal}: the
    true DH table.
-6. ``thermal_drift_mm`` D: the robot's base shifts linearly in time along
-   ``thermal_direction`` (unit, default +z: the pedestal and lower arm grow upwards as they
-   warm), ``T_base <- Trans(D * (t - t_0) / (t_N - t_0) * u) @ T_base``; D is the total
-   shift between the first and the last sample.
+6. ``thermal_drift_mm`` D: the robot's base shifts in time along ``thermal_direction``
+   (unit, default +z: the pedestal and lower arm grow upwards as they warm),
+   ``T_base <- Trans(D * w(t) * u) @ T_base``; D is the total shift between the first and
+   the last sample. ``thermal_tau_s`` tau > 0 makes it a first-order warm-up (the ISO 230-3
+   style of thermal response), ``w(t) = (1 - exp(-(t - t_0)/tau)) / (1 - exp(-(t_N - t_0)/tau))``;
+   tau = 0 (the default) is the linear limit ``w(t) = (t - t_0) / (t_N - t_0)`` (tau >> span).
 7. ``trigger_latency_ms`` L (beam recordings, when the TCP velocity v is given): the
    recorded joints are the pose L later along the motion, so the pose at the trigger is the
    recorded one moved back by ``v * L`` (a pure translation: the passes keep the tool's
@@ -46,7 +51,7 @@ from dataclasses import dataclass, field, fields, replace
 
 import numpy as np
 
-from solvers.dh import RobotModel, joint_values, link_matrices
+from solvers.dh import RobotModel, dh_angles_rad, joint_values, link_matrices
 from solvers.errors import CalibrationError
 from solvers.gravity import G_M_S2, gravity_torques
 from solvers.recording import motion_signs
@@ -89,6 +94,8 @@ class Imperfections:
     trigger_latency_ms: float = 0.0
     tool_deflection_mm_per_N: float = 0.0
     cyclic_error: Mapping[int, tuple[float, float]] = field(default_factory=dict)
+    thermal_tau_s: float = 0.0
+    gear_transmission_error: tuple[tuple[int, float, float, float], ...] = ()
     noise_mm: float = 0.0
 
     @classmethod
@@ -110,28 +117,48 @@ class Imperfections:
                                        + ", ".join(sorted(known)))
         kw: dict = {}
         for key, value in d.items():
-            if key == "dh_delta":
-                delta = {}
-                for k, v in value.items():
-                    param, _, joint = str(k).partition(":")
-                    if not joint.isdigit():
-                        raise CalibrationError(("dh_delta", str(k)),
-                                               "keys are 'a_mm:2' (parameter:joint)")
-                    delta[(param, int(joint))] = float(v)
-                kw[key] = delta
-            elif key == "cyclic_error":
-                cyc = {}
-                for k, v in value.items():
-                    if not str(k).isdigit() or len(v) != 2:
-                        raise CalibrationError(("cyclic_error", str(k)),
-                                               "is {joint: [amplitude_deg, periods_per_rev]}")
-                    cyc[int(k)] = (float(v[0]), float(v[1]))
-                kw[key] = cyc
-            elif isinstance(value, (list, tuple)):
-                kw[key] = tuple(float(v) for v in value)
-            else:
-                kw[key] = float(value)
+            if value is None:      # an omitted per-joint list (GET .../cell/physics shows null)
+                continue
+            try:
+                kw[key] = cls._field_from(key, value)
+            except CalibrationError:
+                raise
+            except (TypeError, ValueError, AttributeError):
+                raise CalibrationError((str(key),), f"cannot read {value!r} as this effect's "
+                                       "value(s)") from None
         return cls(**kw)
+
+    @staticmethod
+    def _field_from(key: str, value) -> object:  # noqa: ANN001
+        """One field of :meth:`from_dict` (TypeError/ValueError on a wrong shape)."""
+        if key == "dh_delta":
+            delta = {}
+            for k, v in value.items():
+                param, _, joint = str(k).partition(":")
+                if not joint.isdigit():
+                    raise CalibrationError(("dh_delta", str(k)),
+                                           "keys are 'a_mm:2' (parameter:joint)")
+                delta[(param, int(joint))] = float(v)
+            return delta
+        if key == "cyclic_error":
+            cyc = {}
+            for k, v in value.items():
+                if not str(k).isdigit() or len(v) != 2:
+                    raise CalibrationError(("cyclic_error", str(k)),
+                                           "is {joint: [amplitude_deg, periods_per_rev]}")
+                cyc[int(k)] = (float(v[0]), float(v[1]))
+            return cyc
+        if key == "gear_transmission_error":
+            gears = []
+            for i, v in enumerate(value):
+                if len(v) != 4 or not str(v[0]).isdigit():
+                    raise CalibrationError((key, i), "is a list of [joint, amplitude_deg, "
+                                           "periods_per_turn, phase_deg]")
+                gears.append((int(v[0]), float(v[1]), float(v[2]), float(v[3])))
+            return tuple(gears)
+        if isinstance(value, (list, tuple)):
+            return tuple(float(v) for v in value)
+        return float(value)
 
     def per_joint(self, name: str, n: int) -> FloatArray:
         """The per-joint field ``name`` as an (n,) array (zeros when None)."""
@@ -145,6 +172,7 @@ class Imperfections:
         per_joint = ("joint_offset_deg", "compliance_deg_per_Nm", "backlash_deg")
         return (all(getattr(self, f) is None or not np.any(getattr(self, f)) for f in per_joint)
                 and not any(self.dh_delta.values()) and not self.cyclic_error
+                and not self.gear_transmission_error
                 and self.thermal_drift_mm == 0 and self.trigger_latency_ms == 0
                 and self.tool_deflection_mm_per_N == 0)
 
@@ -161,9 +189,16 @@ class Imperfections:
         for joint in self.cyclic_error:
             if not 1 <= int(joint) <= n:
                 raise CalibrationError(("cyclic_error", joint), f"joint must be 1..{n}")
-        for name in ("thermal_drift_mm", "trigger_latency_ms", "tool_deflection_mm_per_N",
-                     "noise_mm"):
+        for i, (joint, *values) in enumerate(self.gear_transmission_error):
+            if not 1 <= int(joint) <= n:
+                raise CalibrationError(("gear_transmission_error", i), f"joint must be 1..{n}")
+            _finite(values, ("gear_transmission_error", i))
+        for name in ("thermal_drift_mm", "thermal_tau_s", "trigger_latency_ms",
+                     "tool_deflection_mm_per_N", "noise_mm"):
             _finite(getattr(self, name), (name,))
+        if self.thermal_tau_s < 0:
+            raise CalibrationError(("thermal_tau_s",), "is a time constant, must be >= 0 "
+                                   "(0: a linear drift)")
         for (param, joint), value in self.dh_delta.items():
             _finite(value, ("dh_delta", f"{param}:{joint}"))
         for joint, value in self.cyclic_error.items():
@@ -211,9 +246,54 @@ def true_joint_values(robot: RobotModel, joints_deg: object, imperfections: Impe
     return out
 
 
+def warmup_profile(t_s: FloatArray, t0: float, t1: float, tau_s: float | None) -> FloatArray:
+    """Share ``w(t)`` of the total drift reached at each time (0 at t0, 1 at t1).
+
+    First-order warm-up (ISO 230-3, thermal response of a machine to heat from its drives):
+    ``w = (1 - exp(-(t - t0)/tau)) / (1 - exp(-(t1 - t0)/tau))``; ``tau`` None or 0 (or
+    very large) is the linear limit ``(t - t0) / (t1 - t0)``. Computed with ``expm1`` so
+    that neither a tiny nor a huge tau overflows.
+
+    Examples
+    --------
+    >>> warmup_profile(np.array([0.0, 50.0, 100.0]), 0.0, 100.0, None).tolist()
+    [0.0, 0.5, 1.0]
+    >>> w = warmup_profile(np.array([0.0, 50.0, 100.0]), 0.0, 100.0, 20.0)
+    >>> [round(float(v), 3) for v in w]
+    [0.0, 0.924, 1.0]
+    """
+    t = np.asarray(t_s, dtype=float)
+    span = float(t1 - t0)
+    if span <= 0:
+        return np.zeros_like(t)
+    x = (t - t0) / span
+    if not tau_s or tau_s > 1e4 * span:
+        return x
+    r = span / float(tau_s)
+    if r > 700.0:   # a step at t0 (tau far below the sample spacing)
+        return (x > 0).astype(float)
+    return np.expm1(-r * x) / np.expm1(-r)
+
+
+def gear_error_deg(robot: RobotModel, joints_deg: FloatArray,
+                   imperfections: Imperfections) -> FloatArray:
+    """DH angle change (N, n) of the ``gear_transmission_error`` harmonics, in degrees:
+    ``sum A sin(k theta + phi)`` per joint, theta the nominal DH angle of the recorded joints
+    (deg). One harmonic of a gear stage per entry."""
+    q = np.atleast_2d(joints_deg)
+    out = np.zeros(q.shape)
+    if not imperfections.gear_transmission_error:
+        return out
+    theta = np.degrees(dh_angles_rad(robot, q))
+    for joint, amp, k, phase in imperfections.gear_transmission_error:
+        i = int(joint) - 1
+        out[:, i] += amp * np.sin(np.radians(k * theta[:, i] + phase))
+    return out
+
+
 def thermal_shift_mm(t_s: object, imperfections: Imperfections,
                      time_span_s: tuple[float, float] | None = None) -> FloatArray:
-    """Base translation (N, 3) at each time: ``D (t - t_0) / (t_N - t_0) * u``.
+    """Base translation (N, 3) at each time: ``D w(t) u`` (see :func:`warmup_profile`).
 
     ``time_span_s`` = (t_0, t_N) of the whole recording; default the span of ``t_s``.
     """
@@ -223,7 +303,8 @@ def thermal_shift_mm(t_s: object, imperfections: Imperfections,
         return np.zeros((t.size, 3))
     u = np.asarray(imperfections.thermal_direction, dtype=float)
     u = u / np.linalg.norm(u)
-    return imperfections.thermal_drift_mm * ((t - t0) / (t1 - t0))[:, None] * u
+    w = warmup_profile(t, t0, t1, imperfections.thermal_tau_s)
+    return imperfections.thermal_drift_mm * w[:, None] * u
 
 
 def true_flange_poses(robot: RobotModel, joints_deg: object, t_s: object,
@@ -269,7 +350,8 @@ def true_flange_poses(robot: RobotModel, joints_deg: object, t_s: object,
     true = true_robot(robot, imp)
     qt = true_joint_values(robot, q, imp, start_joints_deg, payload_mass_kg, payload_com_mm)
     p = true.params()
-    theta = np.radians(p["direction"] * (qt @ true.coupling_matrix().T) + p["offset_deg"])
+    theta = np.radians(p["direction"] * (qt @ true.coupling_matrix().T) + p["offset_deg"]
+                       + gear_error_deg(robot, q, imp))
     links = link_matrices(true.dh_convention, theta, p["d_mm"], p["a_mm"],
                           np.radians(p["alpha_deg"]))
     T = np.broadcast_to(true.base_pose.as_matrix(), (len(q), 4, 4)).copy()
@@ -320,4 +402,5 @@ def true_tcp_positions(robot: RobotModel, joints_deg: object, t_s: object,
 
 
 __all__ = ["Imperfections", "DH_LENGTHS", "true_robot", "true_joint_values", "thermal_shift_mm",
+           "warmup_profile", "gear_error_deg",
            "true_flange_poses", "true_tcp_poses", "true_tcp_positions", "tool_deflection_mm"]

@@ -242,7 +242,7 @@ def _cond(arm: _Arm, Qd: FloatArray) -> FloatArray:
 
 
 def _tracker(arm: _Arm, imp: Imperfections, n: int, rng: np.random.Generator,
-             payload: tuple[float, FloatArray], instrument: FloatArray):
+             payload: tuple[float, FloatArray], instrument: FloatArray, dt_s: float = TRACKER_DT_S):
     R = arm.reach_mm
     lo = np.maximum(arm.limits[:, 0], -180.0) * 0.95
     hi = np.minimum(arm.limits[:, 1], 180.0) * 0.95
@@ -262,7 +262,7 @@ def _tracker(arm: _Arm, imp: Imperfections, n: int, rng: np.random.Generator,
         raise KinematicsError(("robot",), f"found only {len(chosen)} well-conditioned poses of "
                               f"{arm.model.name}")
     start, q = chosen[0], np.array(chosen[1:n + 1])
-    t = TRACKER_DT_S * np.arange(n)
+    t = dt_s * np.arange(n)
     tcp = true_tcp_poses(arm.model, q, t, imp, arm.tool, start, payload[0], payload[1])[:, :3, 3]
     measured = apply(instrument, tcp) + rng.normal(0.0, imp.noise_mm, (n, 3)) * (imp.noise_mm > 0)
     return dict(t_s=t, joints_deg=q, start_joints_deg=start, measured_mm=measured)
@@ -515,7 +515,8 @@ def simulate_recording(kind: str, robot: RobotModel | str,
                        instrument_pose: Pose | FloatArray = DEFAULT_INSTRUMENT,
                        touch_point_mm: object = None, sensor: Mapping | None = None,
                        heights: int | Sequence[float] = 2, both_directions: bool = True,
-                       speed_mm_s: float = 10.0, recorded_at: str | None = None) -> dict:
+                       speed_mm_s: float = 10.0, recorded_at: str | None = None,
+                       sample_interval_s: float | None = None) -> dict:
     """A ``robot-recording/1`` document of a simulated real robot (see the module docstring).
 
     Parameters
@@ -546,6 +547,8 @@ def simulate_recording(kind: str, robot: RobotModel | str,
         beam: pass through the beams both ways.
     speed_mm_s : float
         beam: commanded TCP speed of the passes.
+    sample_interval_s : float, optional
+        tracker: seconds between samples (default 10 s; long warm-up recordings).
 
     Returns
     -------
@@ -577,7 +580,7 @@ def simulate_recording(kind: str, robot: RobotModel | str,
     if kind == "tracker":
         T_inst = instrument_pose.as_matrix() if isinstance(instrument_pose, Pose) \
             else as_array(instrument_pose, "instrument_pose", (4, 4))
-        data = _tracker(arm, imp, n, rng, pay, T_inst)
+        data = _tracker(arm, imp, n, rng, pay, T_inst, float(sample_interval_s or TRACKER_DT_S))
     elif kind == "touch":
         point = None if touch_point_mm is None else as_array(touch_point_mm, "touch_point_mm", (3,))
         data = _touch(arm, imp, n, rng, pay, point)

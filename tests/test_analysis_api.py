@@ -74,12 +74,13 @@ def test_unknown_ids_are_404(client) -> None:  # noqa: F811
     assert r.status_code == 404 and r.json()["detail"][0]["loc"] == ["path", "analysis_id"]
 
 
-def test_too_few_samples_is_422(client) -> None:  # noqa: F811
-    doc = simulate_recording("tracker", "ur10", Imperfections(noise_mm=0.02), 5, seed=1)
+def test_too_few_samples_is_422_and_four_are_analysed(client) -> None:  # noqa: F811
+    doc = simulate_recording("touch", "ur10", Imperfections(noise_mm=0.02), 4, seed=1)
     rid = ok(client.post("/recordings", json=doc))["id"]
-    job = finish_job(client, client.post(f"/recordings/{rid}/analyze"))
-    assert job["state"] == "failed" and job["links"]["result"] is None
-    assert job["error"]["status"] == 422 and job["error"]["detail"][0]["loc"] == ["body", "samples"]
+    assert analyze(client, rid)["n_samples"] == 4
+    doc["samples"] = doc["samples"][:3]
+    r = client.post("/recordings", json=doc)
+    assert r.status_code == 422 and r.json()["detail"][0]["loc"] == ["body", "samples"]
 
 
 def test_cli_simulate_then_analyze(tmp_path, capsys) -> None:

@@ -101,10 +101,23 @@ def test_static_time_effect_with_one_time_is_not_offered() -> None:
 
 
 def test_too_few_samples_raise_naming_the_field() -> None:
+    from dataclasses import replace
     doc = simulate_recording("tracker", "ur10", Imperfections(noise_mm=0.01), 5, seed=1)
+    rec = parse_recording(doc)
+    short = replace(rec, t_s=rec.t_s[:3], joints_deg=rec.joints_deg[:3],
+                    measured_mm=rec.measured_mm[:3])
     with pytest.raises(CalibrationError) as err:
-        analyze(parse_recording(doc))
-    assert err.value.loc == ("samples",)
+        analyze(short)
+    assert err.value.loc == ("samples",) and "at least 4" in err.value.reason
+
+
+def test_a_four_point_touch_recording_is_analysed() -> None:
+    """A 4-point tool session's recording (docs/api.md's example) is analysed, not refused:
+    leave-one-out still leaves 9 rows for the 6 baseline parameters."""
+    doc = simulate_recording("touch", "kuka_kr6_r900_sixx", Imperfections(noise_mm=0.05), 4, seed=1)
+    rep = analyze(parse_recording(doc))
+    assert rep["n_samples"] == 4 and rep["verdict"] == "no_missing_physics"
+    assert rep["baseline"]["heldout_rms_mm"] >= rep["baseline"]["rms_mm"] > 0
 
 
 @pytest.mark.parametrize("kind, n", [("tracker", 20), ("touch", 12), ("beam", 36)])

@@ -1,14 +1,16 @@
 """Real data: a UR10 measured by a laser tracker (tests/data/ur10-laser-tracker, MIT licence).
 
 The nominal model with a fitted tracker frame and probe leaves ~0.78 mm RMS; a blind
-recalibration of every identifiable DH parameter (~22) predicts held-out poses to ~0.40 mm.
-The analysis must name what the model leaves out and predict held-out poses at least as
-well with fewer parameters.
+recalibration of every identifiable DH parameter (~22) predicts held-out poses to ~0.40 mm,
+and with a two-joint gravity compliance 0.344 mm (issue 11's reference). The analysis must
+name what the model leaves out and predict held-out poses to 0.34 mm (all 632 poses) and
+0.30 mm (the first 200).
 """
 
 from __future__ import annotations
 
 import json
+import warnings
 from pathlib import Path
 
 import pytest
@@ -27,7 +29,11 @@ def rec():
 
 @pytest.fixture(scope="module")
 def report(rec):
-    return analyze(rec)
+    # no numpy RuntimeWarning may leak to the terminal (issue 11: an overflow in the second
+    # orthogonalisation pass of a rank-deficient model, seen on this very recording)
+    with warnings.catch_warnings():
+        warnings.simplefilter("error", RuntimeWarning)
+        return analyze(rec)
 
 
 def test_licence_travels_with_the_data() -> None:
@@ -54,12 +60,31 @@ def test_analysis_names_the_physics_and_beats_the_blind_fit(rec, report) -> None
     # non-parallel shoulder/elbow axes, and joints 2 and 3 yielding under gravity
     assert ("link_length", 2) in findings and ("link_length", 3) in findings
     assert ("joint_compliance", 2) in findings
-    assert report["final"]["heldout_rms_mm"] <= 0.40
-    assert report["final"]["heldout_rms_mm"] <= blind["heldout_rms_mm"]
-    assert report["final"]["n_parameters"] < blind["n_parameters"]
+    assert report["final"]["heldout_rms_mm"] <= 0.34
+    assert report["final"]["heldout_rms_mm"] < blind["heldout_rms_mm"]
+    # the periodic structure on joint 2 is a gear's transmission error, named per harmonic
+    gears = [f for f in report["findings"] if f["effect"] == "gear_transmission_error"]
+    assert any(f["joint"] == 2 for f in gears)
+    assert all(f["parameters"]["amplitude_deg"] <= 0.05 for f in gears)
     comp = next(f for f in report["findings"] if f["effect"] == "joint_compliance" and f["joint"] == 2)
     assert 1e-4 < comp["parameters"]["compliance_deg_per_Nm"] < 2e-3
     assert "gravity torque on joint 2" in comp["explanation"]
+
+
+def test_first_200_poses_reach_030_mm_held_out() -> None:
+    doc = json.loads(DATA.read_text(encoding="utf-8"))
+    doc["samples"] = doc["samples"][:200]
+    rep = analyze(parse_recording(doc))
+    assert rep["final"]["heldout_rms_mm"] <= 0.30
+    assert {f["effect"] for f in rep["findings"]} >= {"link_length", "gear_transmission_error"}
+
+
+def test_stand_ins_are_kept_and_named(report) -> None:
+    """No finding is withdrawn for standing in (issue 11): each stand-in is in the findings."""
+    keys = {(f["effect"], f["joint"]) for f in report["findings"]}
+    for s in report["stand_ins"]:
+        assert (s["effect"], s["joint"]) in keys and s["stands_in_for"]
+    assert "withheld" not in report
 
 
 def test_human_report_reads(report) -> None:

@@ -14,7 +14,8 @@ Jacobian column of the residual with respect to the effect's parameter; the sele
 | link_twist j | DH alpha_j turns by 1 deg (an axis misalignment) |
 | joint_compliance j | DH angle of joint j turns by ``tau_j`` deg (gravity torque, Nm) |
 | backlash j | DH angle turns by ``-s_j / 2`` deg (s_j = sign of the joint's last motion) |
-| thermal_drift | the TCP moves by ``(t - t_0) / (t_end - t_0)`` mm along base x, y, z |
+| thermal_drift (tau) | the TCP moves by ``w(t)`` mm along base x, y, z; ``w`` the first-order warm-up profile of time constant tau (:func:`solvers.physics.warmup_profile`, ISO 230-3), linear for tau = None; one candidate per tau of a grid (``TAU_GRID``), refined by :func:`thermal_candidate` |
+| gear_transmission_error j, k | DH angle of joint j turns by ``sin(k theta_j)`` and ``cos(k theta_j)`` deg (theta_j the recorded DH angle): one candidate per harmonic k = 1..``GEAR_HARMONICS``, so the selection scans each joint's periodogram |
 | trigger_latency | the TCP stood ``v · 1 ms`` behind where it was recorded (beam) |
 | tool_deflection | the TCP moves by ``F_perp`` mm (payload weight across the tool axis, N) |
 """
@@ -26,11 +27,15 @@ from dataclasses import dataclass, field
 import numpy as np
 
 from solvers.analysis.baseline import Baseline
+from solvers.dh import dh_angles_rad
 from solvers.gravity import G_M_S2
+from solvers.physics import warmup_profile
 from solvers.recording import last_motion_sign
 from solvers.validate import FloatArray
 
 DEG = np.pi / 180.0
+GEAR_HARMONICS = 12          # periods per joint turn offered for a gear's transmission error
+TAU_GRID = (1 / 16, 1 / 8, 1 / 4, 1 / 2, 1.0, 2.0, None)   # warm-up tau / recording span
 
 
 @dataclass(eq=False)
@@ -48,11 +53,17 @@ class Candidate:
     theta_per_unit: FloatArray | None = None    # (N, n) DH angle change (rad) per unit beta
     dh_per_unit: tuple[str, int, float] | None = None  # ('a'|'d'|'alpha', row 0-based, scale)
     shift_per_unit: FloatArray | None = None    # (N, 3, k) TCP translation (mm) per unit beta
+    periods: int | None = None        # gear_transmission_error: harmonic k (periods per turn)
+    tau_s: float | None = None        # thermal_drift: warm-up time constant (None: linear)
+    frame: FloatArray | None = None   # thermal_drift: R_instrument_base (direction's frame)
 
     def apply(self, state, beta: FloatArray) -> None:
         """Add this effect with parameter(s) ``beta`` to a :class:`State` (in place)."""
         if self.theta_per_unit is not None:
-            state.dtheta_rad += self.theta_per_unit * float(beta[0])
+            if self.theta_per_unit.ndim == 3:
+                state.dtheta_rad += self.theta_per_unit @ np.asarray(beta, float)
+            else:
+                state.dtheta_rad += self.theta_per_unit * float(beta[0])
         if self.dh_per_unit is not None:
             name, row, scale = self.dh_per_unit
             state.ddh[name][row] += scale * float(beta[0])
@@ -63,7 +74,14 @@ class Candidate:
     def key(self) -> str:
         j = "" if self.joint is None else f"_j{self.joint}"
         dp = "" if self.dh_parameter is None else f"_{self.dh_parameter}"
-        return f"{self.effect}{j}{dp}"
+        k = "" if self.periods is None else f"_k{self.periods}"
+        tau = "" if self.effect != "thermal_drift" or self.tau_s is None else f"_tau{self.tau_s:.0f}s"
+        return f"{self.effect}{j}{dp}{k}{tau}"
+
+    @property
+    def family(self) -> str:
+        """Candidates of one family are alternatives: at most one of them is chosen."""
+        return "thermal_drift" if self.effect == "thermal_drift" else self.key
 
     @property
     def label(self) -> str:
@@ -71,6 +89,8 @@ class Candidate:
             return f"link length {self.dh_parameter}{self.joint}"
         if self.effect == "link_twist":
             return f"link twist alpha{self.joint}"
+        if self.effect == "gear_transmission_error":
+            return f"gear transmission error J{self.joint} ({self.periods} per turn)"
         j = "" if self.joint is None else f" J{self.joint}"
         return self.effect.replace("_", " ") + j
 
@@ -79,8 +99,19 @@ class Candidate:
         if self.effect == "thermal_drift":
             v = float(np.linalg.norm(beta))
             s = float(np.sqrt(np.sum((beta / max(v, 1e-12)) ** 2 * std ** 2)))
-            return {"drift_mm": v, "drift_std_mm": s,
-                    "drift_direction": [float(b / max(v, 1e-12)) for b in beta]}
+            u = beta / max(v, 1e-12)
+            R = np.eye(3) if self.frame is None else self.frame
+            return {"drift_mm": v, "drift_std_mm": s, "tau_s": self.tau_s,
+                    "direction": [float(x) for x in R @ u],
+                    "direction_base": [float(x) for x in u]}
+        if self.effect == "gear_transmission_error":
+            # A sin(k q + phi) = A cos(phi) sin(k q) + A sin(phi) cos(k q)
+            amp = float(np.hypot(beta[0], beta[1]))
+            g = np.array([beta[0], beta[1]]) / max(amp, 1e-300)
+            s = float(np.sqrt(np.sum(g ** 2 * std[:2] ** 2)))
+            return {"amplitude_deg": amp, "amplitude_std_deg": s,
+                    "periods_per_turn": int(self.periods or 0),
+                    "phase_deg": float(np.degrees(np.arctan2(beta[1], beta[0])))}
         b, s = float(beta[0]), float(std[0])
         if self.effect == "backlash":
             return {"backlash_deg": abs(b), "backlash_std_deg": s}
@@ -150,14 +181,17 @@ def build_library(rec, base: Baseline, torques_nm: FloatArray | None = None,
                                "backlash_deg",
                                regressor=f"the direction joint {j + 1} last moved in",
                                feature=sg[:, j], theta_per_unit=ctrl_unit * (-0.5 * sg[:, j:j + 1])))
+    theta_deg = np.degrees(dh_angles_rad(rec.robot, rec.joints_deg))
+    for j in range(n):
+        if np.ptp(theta_deg[:, j]) < 1e-6:
+            continue
+        for k in range(1, GEAR_HARMONICS + 1):
+            cands.append(gear_candidate(base, theta_deg[:, j], j, k))
     t = np.asarray(rec.t_s, float)
     span = float(t.max() - t.min())
     if span > 0:
-        f = (t - t.min()) / span
-        tw = np.zeros((len(t), 6, 3))
-        tw[:, 0, 0] = tw[:, 1, 1] = tw[:, 2, 2] = f
-        cands.append(Candidate("thermal_drift", None, _apply(base, tw), "drift_mm",
-                               regressor="time", feature=f, shift_per_unit=tw[:, :3, :]))
+        for r in TAU_GRID:
+            cands.append(thermal_candidate(rec, base, None if r is None else r * span))
     if rec.kind == "beam" and rec.tcp_velocity_mm_s is not None:
         w = np.asarray(rec.tcp_velocity_mm_s, float)
         tw = np.zeros((len(w), 6))
@@ -175,3 +209,30 @@ def build_library(rec, base: Baseline, torques_nm: FloatArray | None = None,
                                regressor="the payload weight across the tool axis",
                                feature=np.linalg.norm(fperp, axis=1), shift_per_unit=tw[:, :3, None]))
     return Library(cands, tau, sg)
+
+
+def gear_candidate(base: Baseline, theta_deg: FloatArray, j: int, k: int) -> Candidate:
+    """Joint j's (0-based) k-th harmonic of a gear's transmission error: its DH angle turns
+    by ``b_s sin(k theta) + b_c cos(k theta)`` deg (theta: the recorded DH angle, deg)."""
+    N = len(theta_deg)
+    n = base.sens.theta.shape[2]
+    arg = np.radians(k * theta_deg)
+    waves = np.stack([np.sin(arg), np.cos(arg)], axis=1)            # (N, 2)
+    th = base.sens.theta[:, :, j] * DEG
+    unit = np.zeros((N, n, 2))
+    unit[:, j, :] = waves * DEG
+    return Candidate("gear_transmission_error", j + 1, _apply(base, th[:, :, None] * waves[:, None, :]),
+                     "amplitude_deg", regressor=f"sin/cos({k} q{j + 1})",
+                     feature=waves[:, 0], theta_per_unit=unit, periods=k)
+
+
+def thermal_candidate(rec, base: Baseline, tau_s: float | None) -> Candidate:
+    """A base (or instrument) shift ``w(t) beta`` mm along x, y, z: ``w`` the warm-up profile
+    of time constant ``tau_s`` (None: linear), 0 at the first sample and 1 at the last."""
+    t = np.asarray(rec.t_s, float)
+    f = warmup_profile(t, float(t.min()), float(t.max()), tau_s)
+    tw = np.zeros((len(t), 6, 3))
+    tw[:, 0, 0] = tw[:, 1, 1] = tw[:, 2, 2] = f
+    return Candidate("thermal_drift", None, _apply(base, tw), "drift_mm", regressor="time",
+                     feature=f, shift_per_unit=tw[:, :3, :], tau_s=tau_s,
+                     frame=base.R_instrument_base)

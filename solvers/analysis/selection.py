@@ -47,7 +47,10 @@ def orth(X: FloatArray, rtol: float = 1e-9) -> FloatArray:
     keep = w > (rtol ** 2) * w[-1]
     Q = Xn @ (V[:, keep] / np.sqrt(w[keep]))
     w2, V2 = np.linalg.eigh(Q.T @ Q)
-    return Q @ (V2 / np.sqrt(np.maximum(w2, 1e-300)))
+    # directions the first pass lost to rounding (w2 ~ 0) are dropped, not blown up: dividing
+    # by their tiny norms overflowed (the RuntimeWarning of issue 11)
+    keep2 = w2 > max(rtol ** 2, 1e-14) * max(w2[-1], 1e-300)
+    return Q @ (V2[:, keep2] / np.sqrt(w2[keep2]))
 
 
 def project_out(Q: FloatArray, X: FloatArray) -> FloatArray:
@@ -184,6 +187,60 @@ def f_test(y_perp: FloatArray, Qm_cols: int, Xp: FloatArray, n_rows: int) -> tup
     rss1 = max(rss0 - gain, dof * NOISE_FLOOR_MM ** 2)
     F = (gain / k) / (rss1 / dof)
     return gain, float(stats.f.sf(F, k, dof)), k
+
+
+def batch_f_tests(Q: FloatArray, X_all: FloatArray, blocks: list[slice], y_perp: FloatArray,
+                  n_rows: int, ident_tol: float | None = None, projected: bool = False
+                  ) -> tuple[FloatArray, FloatArray, FloatArray, FloatArray]:
+    """:func:`residual_ratio` and :func:`f_test` of many candidate groups at once.
+
+    ``X_all`` holds every group's columns, each normalised (``normalise``); ``blocks`` the
+    column slice of each group. One product projects them all out of span(Q); each group's
+    test then needs only its small Gram matrix. Returns (ratio, gain, p, k) arrays, equal to
+    the one-at-a-time functions (the rank tolerance of ``f_test``'s ``orth(., 1e-6)``).
+    With ``ident_tol`` each group is first cut to its :func:`identifiable_part` (directions
+    standing out of span(Q) by at least ``ident_tol``), as the structure groups are tested.
+    ``projected``: ``X_all`` is already projected out of span(Q) (kept up to date by the
+    caller as the model grows; only ``Q.shape[1]`` is used).
+    """
+    P = X_all if projected or not Q.shape[1] else X_all - Q @ (Q.T @ X_all)
+    c_all = P.T @ y_perp
+    rss0 = float(y_perp @ y_perp)
+    nb = len(blocks)
+    ratio, gain, kk = np.zeros(nb), np.zeros(nb), np.zeros(nb, dtype=int)
+    widths = np.array([b.stop - b.start for b in blocks])
+    for wdt in np.unique(widths):
+        which = np.flatnonzero(widths == wdt)
+        idx = np.array([np.arange(blocks[i].start, blocks[i].stop) for i in which])  # (b, w)
+        Pw = P[:, idx]                                          # (rows, b, w)
+        G = np.einsum("rbi,rbj->bij", Pw, Pw)
+        c = c_all[idx]                                          # (b, w)
+        d = np.einsum("bii->bi", G)
+        if ident_tol is not None:
+            w, V = np.linalg.eigh(G)
+            keep = w >= ident_tol ** 2
+            proj = np.einsum("bij,bi->bj", V, c)
+            kk[which] = keep.sum(1)
+            gain[which] = np.sum(np.where(keep, proj ** 2 / np.where(keep, w, 1.0), 0.0), 1)
+            continue
+        ratio[which] = np.sqrt(np.maximum(np.linalg.eigvalsh(G)[:, 0], 0.0))
+        nz = d > 0
+        dn = np.sqrt(np.where(nz, d, 1.0))
+        Gn = G / (dn[:, :, None] * dn[:, None, :])
+        b = c / dn
+        w, V = np.linalg.eigh(Gn)
+        keep = (w > 1e-12 * w[:, -1:]) & (w[:, -1:] > 0) & np.any(nz, 1)[:, None]
+        proj = np.einsum("bij,bi->bj", V, b)
+        kk[which] = keep.sum(1)
+        gain[which] = np.sum(np.where(keep, proj ** 2 / np.where(keep, w, 1.0), 0.0), 1)
+    dof = n_rows - Q.shape[1] - kk
+    ok = (kk > 0) & (dof > 0)
+    p = np.ones(nb)
+    if np.any(ok):
+        rss1 = np.maximum(rss0 - gain[ok], dof[ok] * NOISE_FLOOR_MM ** 2)
+        F = (gain[ok] / kk[ok]) / (rss1 / dof[ok])
+        p[ok] = stats.f.sf(F, kk[ok], dof[ok])
+    return ratio, gain, p, kk
 
 
 def holm_pass(pvals: list[float], alpha: float) -> list[bool]:

@@ -8,7 +8,8 @@ WHAT = {
     "link_twist": "axis {j} is tilted against the nominal table (DH alpha{j})",
     "joint_compliance": "joint {j} yields under gravity",
     "backlash": "joint {j} has lost motion (backlash)",
-    "thermal_drift": "the arm or the cell drifts over time",
+    "thermal_drift": "the arm or the cell drifts over time (a warm-up)",
+    "gear_transmission_error": "joint {j}'s gear carries a periodic transmission error",
     "trigger_latency": "the trigger is recorded late, along the motion",
     "tool_deflection": "the tool bends under the payload's weight",
 }
@@ -22,6 +23,7 @@ _VALUE_FORMATS = (
     ("compliance_deg_per_Nm", "compliance_deg_per_Nm_std", "{v:.3g} deg/Nm (± {s:.2g})"),
     ("backlash_deg", "backlash_std_deg", "{v:.4f} deg (± {s:.4f})"),
     ("drift_mm", "drift_std_mm", "{v:.3f} mm over the recording (± {s:.3f})"),
+    ("amplitude_deg", "amplitude_std_deg", "{v:.4f} deg (± {s:.4f})"),
     ("latency_ms", "latency_ms_std", "{v:+.2f} ms (± {s:.2f})"),
     ("deflection_mm_per_N", "deflection_mm_per_N_std", "{v:.4g} mm/N (± {s:.2g})"),
 )
@@ -35,17 +37,49 @@ def _value(f: dict) -> str:
     return ""
 
 
+def _minutes(s: float) -> str:
+    return f"{s / 60:.0f} min" if s >= 600 else f"{s:.0f} s"
+
+
+def _warmup(p: dict, ev: dict) -> str:
+    """How the drift goes over time, and whether the recording separates its tau."""
+    lo, hi = ev.get("tau_range_s", [None, None])
+    span = _minutes(ev.get("span_s", 0.0))
+    direction = ", ".join(f"{v:+.2f}" for v in p["direction"])
+    text = f" Direction ({direction}) in the instrument's frame;"
+    if p.get("tau_s") is None:
+        text += " the drift is linear in time"
+    else:
+        text += f" a first-order warm-up with tau = {_minutes(p['tau_s'])}"
+    if ev.get("tau_separable"):
+        return text + f" (95% interval {_minutes(lo)}..{_minutes(hi)})."
+    if hi is None and lo is not None:
+        return text + (f"; the recording's span ({span}) cannot separate tau from a slower "
+                       f"warm-up or a linear drift: any tau above {_minutes(lo)} fits as well.")
+    if lo is None and hi is not None:
+        return text + (f"; the recording's span ({span}) cannot resolve tau below "
+                       f"{_minutes(hi)}: the warm-up is as good as a step between samples.")
+    return text + f"; the recording's span ({span}) cannot separate tau at all."
+
+
 def explanation(c, f: dict, same: list[str] | None = None,
                 alternatives: list[str] | None = None) -> str:
     ev = f["evidence"]
     j = c.joint if c.joint is not None else ""
     what = WHAT.get(c.effect, c.effect).format(j=j, p=c.dh_parameter or "")
+    if c.periods:
+        what += f", {c.periods} period{'s' if c.periods > 1 else ''} per turn"
     grows = (f"the residual grows with {c.regressor} (r = {ev['correlation_r']:.2f})"
              if c.regressor != "a constant" else
              f"the residual follows this parameter's pose signature (r = {ev['correlation_r']:.2f})")
     text = (f"{what}: {grows}; modelled as {_value(f)}; held-out RMS "
             f"{ev['heldout_rms_before_mm']:.3f} → {f['heldout_rms_mm']:.3f} mm "
             f"(p = {ev['p_value']:.1e} among {ev['candidates_tested']} candidates).")
+    p = f["parameters"]
+    if c.effect == "gear_transmission_error":
+        text += f" Phase {p['phase_deg']:+.0f} deg (amplitude · sin({c.periods} q{j} + phase))."
+    if c.effect == "thermal_drift":
+        text += _warmup(p, ev)
     share = ev.get("angle_term_share", 0.0)
     if share > 0.9:
         text += (f" Caution: {100 * share:.0f}% of this signature is also that of a smooth error of "
@@ -57,6 +91,9 @@ def explanation(c, f: dict, same: list[str] | None = None,
     if alternatives:
         text += (" Almost as good an explanation here: " + ", ".join(alternatives)
                  + " (more varied poses would separate them).")
+    if "stands_in_for" in ev:
+        text += (f" It may partly stand in for structure no candidate explains "
+                 f"({ev['stands_in_for']}); kept, since it lowers the held-out error.")
     return text
 
 
@@ -81,6 +118,9 @@ def not_identifiable_reason(rec, c, base=None) -> str:
         return (f"absorbed by {absorber}: the passes ran in one direction at one speed, so a late "
                 "trigger looks like a shifted TCP: add reverse passes (and a second speed) to "
                 "separate latency from the TCP and beam positions")
+    if e == "gear_transmission_error":
+        return (f"absorbed by {absorber}: joint {j}'s angle hardly varies over these poses at "
+                f"{c.periods} periods per turn: spread joint {j} over at least one period")
     if e == "thermal_drift":
         return (f"absorbed by {absorber}: a static thermal growth is indistinguishable from "
                 "link lengths and frames; only its change over time shows it — record longer, "
@@ -131,10 +171,10 @@ def render_text(report: dict) -> str:
         lines.append("Findings: none — the residual is consistent with measurement noise.")
     lines.append(f"With the findings: RMS {fin['rms_mm']:.3f} mm, held-out "
                  f"{fin['heldout_rms_mm']:.3f} mm")
-    for w in report.get("withheld") or []:
-        name = w["effect"] + (f" J{w['joint']}" if w.get("joint") else "") + (
-            f" ({w['dh_parameter']})" if w.get("dh_parameter") else "")
-        lines.append(f"Withheld: {name}: {w['reason']}.")
+    for w in report.get("stand_ins") or []:
+        name = w["effect"] + (f" J{w['joint']}" if w.get("joint") else "")
+        lines.append(f"Stand-in: {name} may partly stand in for {w['stands_in_for']} "
+                     "(kept: it lowers the held-out error).")
     ni = report.get("not_identifiable") or []
     if ni:
         lines.append("Not identifiable from this recording:")

@@ -1,0 +1,213 @@
+"""Step 2, selection: forward selection of candidate effects, then a backward check.
+
+At each step every identifiable candidate not yet in the model is tested against the current
+model M (baseline + findings so far) with the extra-sum-of-squares F-test
+
+    F = ((RSS_M - RSS_{M+X}) / k) / (RSS_{M+X} / (n - p - k))  ~  F(k, n - p - k)
+
+(Seber & Wild, *Nonlinear Regression*, Wiley 1989, sec. 5.3, applied to the model linearised
+at the current fit). The family of the step's p-values is controlled with Holm's step-down
+procedure at level ``alpha`` (Holm, "A simple sequentially rejective multiple test
+procedure", Scand. J. Statist. 6:65-70, 1979): every harmonic of every joint's gear error and
+every warm-up time constant counts in the family, so scanning a periodogram or a grid of tau
+costs what it should. Of the candidates that pass, the one with the largest penalised gain
+``RSS reduction - k sigma^2`` (Mallows' C_p) is added if it also lowers the K-fold
+cross-validated (held-out) RMS by at least ``MIN_CV_GAIN`` (Stone, "Cross-validatory choice
+and assessment of statistical predictions", JRSS B 36:111-147, 1974) and explains at least
+``GUARD_FRACTION`` of what the generic structure groups could (so an effect is not named for
+a small share of a large unexplained structure).
+
+The backward check drops a finding that is no longer significant in the full model
+(Bonferroni over the findings).
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass, field
+
+import numpy as np
+
+from solvers.analysis.baseline import Baseline
+from solvers.analysis.effects import Candidate
+from solvers.analysis.screen import IDENT_TOL, PLAUSIBLE
+from solvers.analysis.selection import (CV, batch_f_tests, f_test, fit_linear, holm_pass,
+                                        identifiable_part, normalise, orth, project_out,
+                                        residual_ratio)
+
+ALPHA = 1e-3            # family-wise level of each selection step (Holm)
+GUARD_FRACTION = 0.05   # a named effect must explain this share of the structure found
+MIN_CV_GAIN = 0.002     # relative held-out RMS improvement an effect must bring
+SAME_COS = 0.999        # |cos| between projected regressors: indistinguishable effects
+ALTERNATIVE_LR = 4.0    # RSS difference / sigma^2 under which another candidate is as good
+PRIORITY = ("joint_offset", "joint_compliance", "backlash", "link_length", "link_twist",
+            "gear_transmission_error", "thermal_drift", "trigger_latency", "tool_deflection")
+
+
+@dataclass
+class StepStats:
+    """The evidence of one selection step (what made the chosen candidate a finding)."""
+
+    p_value: float                 # F-test p-value against the model before this step
+    family: int                    # candidates tested in the step (Holm's family)
+    r: float                       # sqrt(share of the remaining residual it explains)
+    identifiability: float         # relative residual of its regressor outside the model
+    structure_share: float         # its penalised gain / that of the best structure group
+    alternatives: list[Candidate] = field(default_factory=list)   # almost as good
+    same: list[Candidate] = field(default_factory=list)           # indistinguishable here
+    periodogram: dict[int, float] = field(default_factory=dict)   # gear: k -> RSS share
+
+
+@dataclass
+class Selection:
+    """The chosen candidates, in order, with the evidence of each step."""
+
+    chosen: list[Candidate] = field(default_factory=list)
+    steps: list[StepStats] = field(default_factory=list)
+
+    def keys(self) -> list[str]:
+        return [c.key for c in self.chosen]
+
+
+def model(base: Baseline, chosen: list[Candidate], extra: list | None = None) -> np.ndarray:
+    """The model's Jacobian: baseline columns, then each chosen effect's, then ``extra``."""
+    return np.hstack([base.B] + [c.columns for c in chosen] + (extra or []))
+
+
+def group_gains(y_perp, Q, groups, n_rows):
+    """(name, gain, p, k) of each structure group; only its identifiable directions count."""
+    if not groups:
+        return []
+    X = np.hstack([normalise(cols) for _, cols in groups])
+    ends = np.cumsum([cols.shape[1] for _, cols in groups])
+    blocks = [slice(int(e - cols.shape[1]), int(e)) for (_, cols), e in zip(groups, ends)]
+    _, gain, p, k = batch_f_tests(Q, X, blocks, y_perp, n_rows, IDENT_TOL)
+    return [(name, float(g), float(pp), int(kk))
+            for (name, _), g, pp, kk in zip(groups, gain, p, k)]
+
+
+def _indistinguishable(c, Q, tests) -> list[Candidate]:
+    """One-parameter candidates whose regressor, outside span(Q), is c's (|cos| > SAME_COS)."""
+    if c.columns.shape[1] != 1:
+        return []
+    ones = [t[0] for t in tests if t[0] is not c and t[0].columns.shape[1] == 1]
+    if not ones:
+        return []
+    Xp = project_out(Q, normalise(np.hstack([c.columns] + [d.columns for d in ones])))
+    Xp = Xp / np.maximum(np.linalg.norm(Xp, axis=0), 1e-300)
+    cos = np.abs(Xp[:, 1:].T @ Xp[:, 0])
+    return [d for d, v in zip(ones, cos) if v > SAME_COS]
+
+
+def plausible(y, M, c: Candidate) -> bool:
+    """Whether the candidate's fitted value (with the model M) is physically possible.
+
+    A value beyond ``screen.PLAUSIBLE`` (e.g. a gear's transmission error of degrees, where
+    strain-wave and cycloidal gears stay within arcminutes) means the candidate's regressor
+    only fits some other structure; it is then not named, whatever the held-out gain.
+    """
+    beta = fit_linear(y, np.hstack([M, c.columns]))[0][M.shape[1]:]
+    return float(np.linalg.norm(beta)) <= PLAUSIBLE[c.effect]
+
+
+def forward(y, base: Baseline, cands: list[Candidate], cv: CV, groups, alpha: float = ALPHA,
+            max_findings: int = 16) -> Selection:
+    """Forward selection (see the module docstring)."""
+    n_rows = y.size
+    sel = Selection()
+    cur_cv = cv.heldout_rms(y, base.B)
+    X_all = np.hstack([normalise(c.columns) for c in cands]) if cands else np.zeros((n_rows, 0))
+    P = project_out(orth(base.B), X_all)   # kept projected out of the growing model
+    ends = np.cumsum([c.columns.shape[1] for c in cands])
+    blocks = [slice(int(e - c.columns.shape[1]), int(e)) for c, e in zip(cands, ends)]
+    while len(sel.chosen) < max_findings:
+        M = model(base, sel.chosen)
+        Q = orth(M)
+        y_perp = project_out(Q, y)
+        rss0 = float(y_perp @ y_perp)
+        sigma2 = rss0 / max(n_rows - Q.shape[1], 1)
+        families = {c.family for c in sel.chosen}
+        ratio, gains, ps, ks = batch_f_tests(Q, P, blocks, y_perp, n_rows, projected=True)
+        tests = []
+        for i, c in enumerate(cands):
+            if c.family in families or ratio[i] < IDENT_TOL:
+                continue
+            tests.append((c, float(gains[i]), float(ps[i]), int(ks[i]), None))
+        if not tests:
+            break
+        passed = holm_pass([t[2] for t in tests], alpha)
+        order = sorted([t for t, ok in zip(tests, passed) if ok], key=lambda t: -(t[1] - t[3] * sigma2))
+        if not order:
+            break
+        gg = group_gains(y_perp, Q, groups, n_rows)
+        sgain = max([g - k * sigma2 for _, g, _, k in gg], default=0.0)
+        accepted = None
+        for c, gain, p, k, Xp in order[:8]:
+            cgain = gain - k * sigma2
+            if sgain > 0 and cgain < GUARD_FRACTION * sgain:
+                continue
+            if not plausible(y, M, c):
+                continue
+            new_cv = cv.heldout_rms(y, np.hstack([M, c.columns]))
+            if new_cv < cur_cv * (1.0 - MIN_CV_GAIN):
+                accepted = (c, gain, p, k, Xp, new_cv, cgain)
+                break
+        if accepted is None:
+            break
+        c, gain, p, k, Xp, new_cv, cgain = accepted
+        same = _indistinguishable(c, Q, tests)
+        if same:
+            # indistinguishable on these poses: name the one physics expects first
+            group = sorted([c] + same, key=lambda d: (PRIORITY.index(d.effect), d.joint or 0))
+            if group[0] is not c:
+                c, same = group[0], [d for d in group if d is not group[0]]
+        # other candidates that explain almost as much (likelihood-ratio difference < 4, i.e.
+        # about two standard errors): this recording cannot tell them apart with confidence
+        s2 = max(rss0 - gain, 1e-300) / max(n_rows - Q.shape[1] - k, 1)
+        alternatives = [t[0] for t in order if t[0] is not c and t[0] not in same
+                        and t[0].family != c.family and (gain - t[1]) / s2 < ALTERNATIVE_LR]
+        periodogram = {}
+        if c.effect == "gear_transmission_error":
+            periodogram = {t[0].periods: round(t[1] / rss0, 4) for t in tests
+                           if t[0].effect == c.effect and t[0].joint == c.joint and rss0 > 0}
+        Qc = orth(project_out(Q, c.columns))
+        P -= Qc @ (Qc.T @ P)
+        sel.chosen.append(c)
+        sel.steps.append(StepStats(
+            p_value=float(p), family=len(tests), r=float(np.sqrt(gain / rss0)) if rss0 > 0 else 0.0,
+            identifiability=residual_ratio(Q, c.columns),
+            structure_share=(cgain / sgain) if sgain > 0 else 1.0,
+            alternatives=alternatives, same=same, periodogram=periodogram))
+        cur_cv = new_cv
+    return sel
+
+
+def significance_in(y, base: Baseline, chosen: list[Candidate], c: Candidate, extra: list,
+                    n_rows: int) -> float:
+    """p-value of ``c`` in the model of the other findings (and ``extra`` columns)."""
+    others = model(base, [d for d in chosen if d is not c], extra)
+    Qo = orth(others)
+    _, p, _ = f_test(project_out(Qo, y), Qo.shape[1], project_out(Qo, normalise(c.columns)), n_rows)
+    return p
+
+
+def backward(y, base: Baseline, sel: Selection, alpha: float = ALPHA) -> Selection:
+    """Drop findings no longer significant (alpha / #findings) in the full model, and any
+    whose value in the full model is no longer physically possible (``plausible``)."""
+    chosen, steps = list(sel.chosen), list(sel.steps)
+    while chosen:
+        beta = fit_linear(y, model(base, chosen))[0]
+        col, bad = base.B.shape[1], None
+        for i, c in enumerate(chosen):
+            k = c.columns.shape[1]
+            if float(np.linalg.norm(beta[col:col + k])) > PLAUSIBLE[c.effect]:
+                bad = i
+            col += k
+        if bad is not None:
+            del chosen[bad], steps[bad]
+            continue
+        ps = [significance_in(y, base, chosen, c, [], y.size) for c in chosen]
+        worst = int(np.argmax(ps))
+        if ps[worst] * len(chosen) < alpha:
+            break
+        del chosen[worst], steps[worst]
+    return Selection(chosen, steps)
