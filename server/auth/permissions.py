@@ -88,6 +88,11 @@ ROUTES: Final[dict[tuple[str, str], str]] = {
     ("GET", "/recordings/{recording_id}"): "frames:read",
     ("POST", "/recordings/{recording_id}/analyze"): "sessions:run",
     ("GET", "/analysis/{analysis_id}"): "frames:read",
+    ("POST", "/plan"): "sessions:run",  # which poses to measure (a computation)
+    ("POST", "/plan/recording"): "sessions:run",  # a simulated recording at a plan's poses
+    ("GET", "/jobs/{job_id}"): "frames:read",
+    ("POST", "/jobs/{job_id}/cancel"): "sessions:run",
+    ("GET", "/healthz"): PUBLIC,  # load balancers and compose health checks
 }
 
 
