@@ -13,10 +13,11 @@ from pathlib import Path
 from fastapi import FastAPI
 from fastapi.responses import FileResponse, HTMLResponse
 from fastapi.staticfiles import StaticFiles
+from fastapi_offline import FastAPIOffline
 
 from db import crud
 from db.session import make_engine, make_sessionmaker, run_migrations
-from server import errors
+from server import __version__, errors
 from server.emulator import DEMO_ROBOT, home_joints
 from server.routers import (analysis, base, controllers, export, fixed_tool, robot, sessions, tool,
                             workpiece)
@@ -54,9 +55,12 @@ def ensure_demo(app: FastAPI) -> None:
 
 def create_app(settings: Settings | None = None) -> FastAPI:
     settings = settings or Settings()
-    app = FastAPI(title="pendant", version="0.1.0", openapi_tags=TAGS,
-                  description="A controller-side teach-pendant emulator: tool, base, "
-                              "fixed-tool and workpiece calibration menus as a REST service.")
+    # FastAPIOffline: FastAPI whose /docs and /redoc load Swagger UI and ReDoc from the
+    # fastapi-offline package, not a CDN (robot cells are often offline)
+    app = FastAPIOffline(title="pendant", version=__version__, openapi_tags=TAGS,
+                         description="A controller-side teach-pendant emulator: tool, base, "
+                                     "fixed-tool and workpiece calibration menus as a REST "
+                                     "service.")
     engine = make_engine(settings.db_url)
     run_migrations(engine)
     app.state.engine = engine
