@@ -188,7 +188,7 @@ def build_parser() -> argparse.ArgumentParser:
                                    "service and no DB.",
                        epilog=_methods_epilog(), formatter_class=argparse.RawDescriptionHelpFormatter)
     c.add_argument("method", metavar="METHOD", help="the menu, one of the methods listed below")
-    c.add_argument("file", type=Path, help="taught poses: JSON or CSV")
+    c.add_argument("file", type=Path, metavar="FILE", help="taught poses: JSON or CSV")
     c.add_argument("--robot", choices=sorted(ROBOTS), metavar="KEY",
                    help=f"arm of joint values in the file: {', '.join(sorted(ROBOTS))}")
     c.add_argument("--tcp", help="X,Y,Z of the calibrated touching tool (ABC menus: the tool's "
