@@ -153,6 +153,9 @@ class ActiveIn(In):
     base_no: int | None = Field(None, ge=0, le=32, description="0 = world")
 
 
+AIM_NOISE_MM = 0.1  # a person's eye on a reference tip, per axis (|miss| about 0.16 mm)
+
+
 class ApproachIn(In):
     """Jog the true tip (or workpiece mark) onto a cell target from an orientation."""
 
@@ -164,6 +167,11 @@ class ApproachIn(In):
     tool_point_mm: Vec3 | None = Field(None,
                                        description="another point of the held body (its frame)")
     miss_mm: Vec3 | None = Field(None, description="miss the target by this vector (world, mm)")
+    noise_mm: float = Field(AIM_NOISE_MM, ge=0.0, le=5.0,
+                            description="the operator's aim: each axis stops off the mark by a "
+                                        "normal error of this sigma (mm), seeded by the cell and "
+                                        "its motion count, so a walk-through repeats; 0 = ideal "
+                                        "aim (exactly on the mark)")
 
 
 class CellOut(Out):

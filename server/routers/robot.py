@@ -19,6 +19,7 @@ from solvers.errors import CalibrationError
 from solvers.physics import Imperfections
 
 router = APIRouter(prefix="/controllers/{controller_id}/robot", tags=["Robot"])
+AIM_STREAM = 7  # the aim's random stream, apart from the emulator's own draws of noise_seed
 
 
 def state_out(db: SessionDep, c: Controller) -> RobotStateOut:
@@ -123,10 +124,17 @@ def approach(controller_id: int, body: ApproachIn, db: SessionDep) -> RobotState
     workpiece) onto a cell target from tilt/around; ``fixed_tool_align`` aligns the flange
     with the fixed tool. Refused (422) when the pose is out of reach or limits. On an
     imperfect arm (``.../cell/physics``) the TRUE tip goes onto the target, so the joints
-    shown differ from the nominal solution."""
+    shown differ from the nominal solution. The tip stops off the mark like a person's does
+    (``noise_mm``, default 0.1 mm per axis, seeded: the same walk-through gives the same
+    report); ``noise_mm: 0`` is the ideal aim."""
     c = crud.get_controller(db, controller_id)
+    physics = physics_of(db, c)
+    miss = None if body.miss_mm is None else np.asarray(body.miss_mm, float)
+    if body.noise_mm > 0:  # the operator's aim: seeded by cell and motion count (own stream)
+        aim = physics.rng(AIM_STREAM).normal(0.0, body.noise_mm, 3)
+        miss = aim if miss is None else miss + aim
     q = emulator.approach(robot_of(c), cell_of(c), c.joints_deg, body.target, body.tilt_deg,
-                          body.around_deg, body.spin_deg, body.tool_point_mm, body.miss_mm,
-                          physics=physics_of(db, c))
+                          body.around_deg, body.spin_deg, body.tool_point_mm, miss,
+                          physics=physics)
     move_to(c, q, emulator.APPROACH_S)
     return state_out(db, c)
