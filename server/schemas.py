@@ -167,6 +167,9 @@ class ApproachIn(In):
     tool_point_mm: Vec3 | None = Field(None,
                                        description="another point of the held body (its frame)")
     miss_mm: Vec3 | None = Field(None, description="miss the target by this vector (world, mm)")
+    flange_orientation: Annotated[list[Vec3], Field(min_length=3, max_length=3)] | None = Field(
+        None, description="the flange's orientation in world (3x3 rotation matrix, rows), e.g. "
+                          "a report's next_orientation; replaces tilt/around/spin")
     noise_mm: float = Field(AIM_NOISE_MM, ge=0.0, le=5.0,
                             description="the operator's aim: each axis stops off the mark by a "
                                         "normal error of this sigma (mm), seeded by the cell and "

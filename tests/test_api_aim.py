@@ -59,3 +59,22 @@ def test_an_aim_out_of_range_is_refused_naming_noise_mm(client, noise):  # noqa:
     r = client.post(f"{C}/robot/approach", json={"target": "reference_tip", "noise_mm": noise})
     assert r.status_code == 422
     assert r.json()["detail"][0]["loc"] == ["body", "noise_mm"]
+
+
+def test_approach_to_the_reports_next_orientation(client):  # noqa: F811
+    """After XYZ 4-point, the report's next_orientation is a Move to: the flange arrives at
+    that orientation (ideal aim) with the true tip on the reference tip; a non-rotation is
+    refused naming flange_orientation."""
+    url = open_session(client, "tool.xyz_4point", 1)
+    for st in ok(client.get(url))["steps"]:
+        ok(client.post(f"{C}/robot/approach", json={"target": st["target"], "tilt_deg": st["tilt_deg"],
+                                                    "around_deg": st["around_deg"], "spin_deg": st["spin_deg"]}))
+        ok(client.post(f"{url}/touch-up", json={"step": st["index"]}))
+    R = np.array(ok(client.post(f"{url}/compute"))["next_orientation"])
+    s = ok(client.post(f"{C}/robot/approach", json={"target": "reference_tip", "flange_orientation": R.tolist(),
+                                                    "noise_mm": 0}))
+    T = forward_kinematics(KR6, s["joints_deg"])
+    assert T[:3, :3] == pytest.approx(R, abs=1e-6)
+    assert tip_miss_mm(s) < 1e-6
+    r = client.post(f"{C}/robot/approach", json={"target": "reference_tip", "flange_orientation": (2 * R).tolist()})
+    assert r.status_code == 422 and r.json()["detail"][0]["loc"] == ["body", "flange_orientation"]
