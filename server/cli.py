@@ -145,7 +145,8 @@ def format_report(report: ReportOut) -> str:
             lines.append(f"{name:20s}{v:.4f} {unit}")
     if report.bad_point:
         lines.append(f"bad point   {report.bad_point.message}")
-    lines += [f"{w.severity:8s}    {w.message}" for w in report.warnings]
+    lines += [f"{w.severity:8s}    {w.message}" for w in report.warnings
+              if not (report.bad_point and w.code == "bad_point")]  # said once, above
     if report.guidance:
         lines.append(f"guidance    {report.guidance}")
     return "\n".join(lines)

@@ -362,6 +362,14 @@ class BadPointOut(Out):
     message: str
 
 
+def _bad_point_words(bp: Any, residual_in_fit_mm: float) -> str:
+    """The bad point once, both its numbers explained: the leave-one-out distance (what the
+    test judges) and its residual in the fit with it (its bar in the chart), and the refit."""
+    return (f"{bp.message()}. Its bar, {residual_in_fit_mm:.3f} mm, is its residual in the fit "
+            f"that includes it, which it pulls towards itself; without it the RMS residual is "
+            f"{float(bp.refit_rms_mm):.3f} mm")
+
+
 class ReportOut(Out):
     method: str
     frame: PoseOut
@@ -402,7 +410,7 @@ class ReportOut(Out):
                 index=bp.index, residual_mm=float(bp.residual_mm),
                 threshold_mm=float(bp.threshold_mm),
                 refit_frame=PoseOut.of_matrix(bp.refit_frame), refit_rms_mm=float(bp.refit_rms_mm),
-                message=bp.message()),
+                message=_bad_point_words(bp, float(r.residuals_mm[bp.index]))),
             warnings=[FindingOut(code=f.code, message=f.message, loc=list(f.loc),
                                  severity=f.severity) for f in r.warnings],
             guidance=r.guidance,
