@@ -2,13 +2,12 @@
 downloads the KUKA file, and sees a refused input's reason beside the input.
 
 The service runs for real (uvicorn, a temporary SQLite file, the emulated KR 6 R900 sixx of
-the demo controller "cell-1"). ``PENDANT_SCREENSHOT=docs/pendant.png`` keeps the screenshot
-of the tool report for the README (else it goes to a temporary directory).
+the demo controller "cell-1"). The README's screenshot comes from
+``tests/test_readme_walkthrough_browser.py``.
 """
 
 from __future__ import annotations
 
-import os
 import re
 from pathlib import Path
 
@@ -61,8 +60,7 @@ def test_tool_4point_and_base_3point_by_clicking_then_kuka_export_matches(page, 
     assert report.locator("svg.chart rect.bar").count() == 4
     assert report.get_by_role("img", name=re.compile("Residual per touch-up")).count() == 1
     assert w.locator("#session-state").inner_text().lower() == "computed"
-    shot = Path(os.environ.get("PENDANT_SCREENSHOT", tmp_path / "pendant.png"))
-    shot.parent.mkdir(parents=True, exist_ok=True)
+    shot = tmp_path / "pendant.png"  # the README's screenshot comes from test_readme_walkthrough_browser
     page.evaluate("window.scrollTo(0, 0)")
     page.screenshot(path=str(shot))
     assert shot.read_bytes()[:8] == b"\x89PNG\r\n\x1a\n"

@@ -631,7 +631,7 @@ function residualChart(r) {
       const o = s("rect", { x, y: top + ph - hl, width: bw, height: hl, class: "loo" });
       o.append(s("title", {}, `touch-up ${i + 1}: ${fmt(loo)} mm off the fit of the others`));
       svg.append(o);
-      svg.append(s("text", { x: x + bw + 4, y: top + ph - hl + 10, class: "tick-label loo-label" }, `${fmt(loo)} off the others`));
+      svg.append(s("text", { x: x + bw / 2, y: top + ph - hl - 3, "text-anchor": "middle", class: "tick-label loo-label" }, fmt(loo)));
     }
     svg.append(s("text", { x: x + bw / 2, y: top + ph + 14, "text-anchor": "middle", class: "tick-label" }, String(i + 1)));
   });
@@ -671,7 +671,7 @@ function renderReport() {
     notes.append(el("li", { class: w.severity === "error" ? "error" : "warning", text: `${w.severity}: ${w.message}` }));
   }
   if (!r.bad_point && !r.warnings.length) notes.append(el("li", { class: "ok", text: "No warnings." }));
-  const offer = suggestedStep() ? " Or press Move to in Calibration: it goes to that orientation." : "";
+  const offer = suggestedStep() ? ". Or press Move to in Calibration: it goes to that orientation." : "";
   const guidance = r.guidance ? el("p", { class: "guidance" }, el("strong", { text: "Guidance: " }), r.guidance + offer) : null;
   body.replaceChildren(frameRow, stats, residualChart(r), notes, ...(guidance ? [guidance] : []));
   if (s) $("#save").textContent = `Save into ${s.target_table.toUpperCase()} ${s.target_no}`;
