@@ -78,3 +78,13 @@ def test_approach_to_the_reports_next_orientation(client):  # noqa: F811
     assert tip_miss_mm(s) < 1e-6
     r = client.post(f"{C}/robot/approach", json={"target": "reference_tip", "flange_orientation": (2 * R).tolist()})
     assert r.status_code == 422 and r.json()["detail"][0]["loc"] == ["body", "flange_orientation"]
+
+
+def test_base_3point_with_an_empty_touching_tool_is_refused_at_open(client):  # noqa: F811
+    """Issue 14: refused at Open (naming params.tool_no), not after every touch-up; no session
+    is left behind."""
+    r = client.post(f"{C}/sessions", json={"method": "base.3point", "target_no": 1, "params": {"tool_no": 5}})
+    assert r.status_code == 422, r.text
+    d = r.json()["detail"][0]
+    assert d["loc"] == ["body", "params", "tool_no"] and "tool 5 is empty" in d["msg"]
+    assert ok(client.get(f"{C}/sessions")) == []
