@@ -15,12 +15,13 @@ from pathlib import Path
 from fastapi import Depends, FastAPI
 from fastapi.responses import FileResponse, HTMLResponse
 from fastapi.staticfiles import StaticFiles
+from fastapi_offline import FastAPIOffline
 
 from db import crud
 from db.session import (make_engine, make_sessionmaker, migration_lock, schema_status, upgrade,
                         write_session)
 from emulator import DEMO_ROBOT, home_joints
-from server import deps, errors, idempotency
+from server import __version__, deps, errors, idempotency
 from server.auth import audit, guard, tokens
 from server.auth import routes as auth_routes
 from server.auth.web import SiteGuard
@@ -91,10 +92,13 @@ def bootstrap(app: FastAPI) -> None:
 
 def create_app(settings: Settings | None = None) -> FastAPI:
     settings = settings or Settings()
-    app = FastAPI(title="pendant", version="0.1.0", openapi_tags=TAGS,
-                  dependencies=[Depends(guard.authorize)],
-                  description="A controller-side teach-pendant emulator: tool, base, "
-                              "fixed-tool and workpiece calibration menus as a REST service.")
+    # FastAPIOffline: FastAPI whose /docs and /redoc load Swagger UI and ReDoc from the
+    # fastapi-offline package, not a CDN (robot cells are often offline)
+    app = FastAPIOffline(title="pendant", version=__version__, openapi_tags=TAGS,
+                         dependencies=[Depends(guard.authorize)],
+                         description="A controller-side teach-pendant emulator: tool, base, "
+                                     "fixed-tool and workpiece calibration menus as a REST "
+                                     "service.")
     audit.install()
     engine = make_engine(settings.db_url)
     check_schema(engine, settings.migrate)

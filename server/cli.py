@@ -12,22 +12,30 @@
 
 ``calibrate`` reads taught poses from a JSON or CSV file (format in docs/api.md, "pendant
 calibrate") and prints the report; it needs no service and no DB.
+
+A mistake (a DB URL typo, a port in use, a bad file) is one line on stderr naming what is
+wrong and what to type instead, and exit status 2; Ctrl-C is "interrupted" and status 130.
 """
 
 from __future__ import annotations
 
 import argparse
 import csv
+import difflib
+import errno
 import io
 import json
 import os
 import subprocess
+import signal
+import socket
 import sys
 from pathlib import Path
 from typing import Any, Sequence
 
 import numpy as np
 
+from server import __version__
 from server.analysis_cli import add_analysis_commands
 from server.auth.cli import add_auth_commands
 from server.slot_cli import add_slot_command
@@ -151,7 +159,8 @@ def format_report(report: ReportOut) -> str:
         lines.append(f"{'sigma':20s}{report.sigma_mm:.4f} mm ({source})")
     if report.bad_point:
         lines.append(f"bad point   {report.bad_point.message}")
-    lines += [f"{w.severity:8s}    {w.message}" for w in report.warnings]
+    lines += [f"{w.severity:8s}    {w.message}" for w in report.warnings
+              if not (report.bad_point and w.code == "bad_point")]  # said once, above
     if report.guidance:
         lines.append(f"guidance    {report.guidance}")
     return "\n".join(lines)
@@ -159,15 +168,33 @@ def format_report(report: ReportOut) -> str:
 
 # ------------------------------------------------------------------------------------ main
 
-def build_parser() -> argparse.ArgumentParser:
-    p = argparse.ArgumentParser(prog="pendant", description=__doc__.split("\n\n")[0])
-    sub = p.add_subparsers(dest="command", required=True)
+DESCRIPTION = """A controller-side teach-pendant emulator: the Calibrate menus as a REST
+service and a browser pendant, calibration from recorded poses, controller file export, and
+the sim-vs-reality analysis. Run "pendant COMMAND --help" for a command's options."""
 
-    s = sub.add_parser("serve", help="run the pendant service (REST API and the pendant page)")
-    s.add_argument("--host", default="127.0.0.1")
-    s.add_argument("--port", type=int, default=8000)
-    s.add_argument("--db", help="database URL (default: PENDANT_DB_URL, else a SQLite file in "
-                                "the user data dir)")
+DB_HELP = ("database URL, e.g. sqlite:///path/to/pendant.db or "
+           "postgresql+psycopg://user@host/pendant (default: $PENDANT_DB_URL, else pendant.db "
+           "in the user data directory)")
+
+
+def _methods_epilog() -> str:
+    width = max(len(name) for name in METHODS)
+    return "methods:\n" + "\n".join(f"  {name:{width}s}  {m.title}" for name, m in METHODS.items())
+
+
+def build_parser() -> argparse.ArgumentParser:
+    p = argparse.ArgumentParser(prog="pendant", description=DESCRIPTION)
+    p.add_argument("--version", action="version", version=f"pendant {__version__}")
+    sub = p.add_subparsers(dest="command", required=True, metavar="COMMAND")
+
+    s = sub.add_parser("serve", help="run the pendant service (REST API and the pendant page)",
+                       description="Run the service: the pendant page at /, the API docs at "
+                                   "/docs (served offline).")
+    s.add_argument("--host", default="127.0.0.1",
+                   help="address to listen on; 0.0.0.0 for every interface (default: %(default)s)")
+    s.add_argument("--port", type=int, default=8000,
+                   help="TCP port to listen on (default: %(default)s)")
+    s.add_argument("--db", metavar="URL", help=DB_HELP)
     s.add_argument("--workers", type=int, default=1,
                    help="API processes on this port (uvicorn workers; all share the database)")
     s.add_argument("--no-migrate", action="store_true",
@@ -177,7 +204,7 @@ def build_parser() -> argparse.ArgumentParser:
     dsub = d.add_subparsers(dest="db_command", required=True)
     up = dsub.add_parser("upgrade", help="migrate the schema to this version's (Alembic upgrade "
                                          "head, under a database-wide lock)")
-    up.add_argument("--db", help="database URL")
+    up.add_argument("--db", metavar="URL", help=DB_HELP)
 
     s.add_argument("--job-workers", type=int, default=2, metavar="N",
                    help="job worker processes started with the service (analyses, restores); "
@@ -188,7 +215,7 @@ def build_parser() -> argparse.ArgumentParser:
                                       "processes; any number of hosts may share one database")
     w.add_argument("--processes", type=int, default=2, metavar="N",
                    help="jobs run at once, one process each (default 2)")
-    w.add_argument("--db", help="database URL")
+    w.add_argument("--db", metavar="URL", help=DB_HELP)
     w.add_argument("--exit-with-parent", action="store_true", help=argparse.SUPPRESS)
     _job_limits(w)
 
@@ -201,10 +228,15 @@ def build_parser() -> argparse.ArgumentParser:
                    help="demo only: no login, everyone an Administrator; loopback hosts only")
 
     c = sub.add_parser("calibrate",
-                       help="solve a calibration menu from taught poses in a JSON/CSV file")
-    c.add_argument("method", choices=sorted(METHODS))
-    c.add_argument("file", type=Path)
-    c.add_argument("--robot", choices=sorted(ROBOTS), help="arm of joint values in the file")
+                       help="solve a calibration menu from taught poses in a JSON/CSV file",
+                       description="Solve a calibration menu from taught poses (JSON or CSV, "
+                                   "format in docs/api.md) and print the report. Needs no "
+                                   "service and no DB.",
+                       epilog=_methods_epilog(), formatter_class=argparse.RawDescriptionHelpFormatter)
+    c.add_argument("method", metavar="METHOD", help="the menu, one of the methods listed below")
+    c.add_argument("file", type=Path, metavar="FILE", help="taught poses: JSON or CSV")
+    c.add_argument("--robot", choices=sorted(ROBOTS), metavar="KEY",
+                   help=f"arm of joint values in the file: {', '.join(sorted(ROBOTS))}")
     c.add_argument("--tcp", help="X,Y,Z of the calibrated touching tool (ABC menus: the tool's "
                                  "own XYZ)")
     c.add_argument("--reference-tcp", help="X,Y,Z of the reference tool (XYZ Reference)")
@@ -212,9 +244,11 @@ def build_parser() -> argparse.ArgumentParser:
     c.add_argument("--json", action="store_true", help="print the report as JSON")
 
     e = sub.add_parser("export", help="print a controller's tables as a controller file")
-    e.add_argument("controller", help="controller name (or id)")
-    e.add_argument("--format", choices=["kuka", "abb", "fanuc", "ur", "json"], default="kuka")
-    e.add_argument("--db", help="database URL")
+    e.add_argument("controller", help="controller name (or id), e.g. cell-1")
+    e.add_argument("--format", choices=["kuka", "abb", "fanuc", "ur", "json"], default="kuka",
+                   help="kuka: $config.dat; abb: a RAPID module; fanuc: frames; ur: a URScript; "
+                        "json: the whole controller as a backup (default: %(default)s)")
+    e.add_argument("--db", metavar="URL", help=DB_HELP)
 
     i = sub.add_parser("import", help="read a controller file into a controller's tables "
                                       "(--dry-run: show what would change)")
@@ -314,10 +348,97 @@ def run_worker(args: argparse.Namespace) -> int:
     return 0
 
 
-def _settings(db: str | None):  # noqa: ANN202
-    from server.settings import Settings
+def db_url_problem(url: str) -> str | None:
+    """Why ``url`` cannot be a database URL, with what to type instead; None when it can."""
+    from sqlalchemy.engine import make_url
+    from sqlalchemy.exc import ArgumentError, NoSuchModuleError
 
-    return Settings(db_url=db) if db else Settings()
+    example = "sqlite:///path/to/pendant.db"
+    try:
+        parsed = make_url(url)
+    except ArgumentError:
+        hint = f"sqlite:///{Path(url).resolve()}" if url.strip() else example
+        return f"{url!r} is not a database URL; for a SQLite file write {hint}"
+    try:
+        dialect = parsed.get_dialect()
+    except NoSuchModuleError:
+        name = parsed.drivername.split("+")[0]
+        near = difflib.get_close_matches(name, ["sqlite", "postgresql", "mysql"], n=1)
+        guess = f"did you mean {near[0]}? " if near else ""
+        return (f"unknown database {name!r} in {url!r}; {guess}write sqlite:///... "
+                f"(e.g. {example}) or postgresql+psycopg://user@host/pendant")
+    try:
+        dialect.import_dbapi()
+    except ImportError as err:
+        package = {"psycopg2": "psycopg2-binary", "psycopg": "'psycopg[binary]'",
+                   "MySQLdb": "mysqlclient"}.get(err.name or "", err.name)
+        return (f"{url!r} needs the Python driver {err.name!r}, which is not installed: "
+                f"pip install {package}")
+    if parsed.get_backend_name() == "sqlite" and parsed.database not in (None, "", ":memory:"):
+        folder = Path(parsed.database).expanduser().resolve().parent
+        if not folder.is_dir():
+            return f"the folder {folder} of {url!r} does not exist; create it (mkdir -p {folder})"
+    return None
+
+
+def _settings(db: str | None):  # noqa: ANN202
+    """Settings for ``--db`` (else $PENDANT_DB_URL, else the default file), the URL checked
+    first: a typo is one line saying what to type (CalibrationError on --db)."""
+    from server.settings import ENV_DB_URL, Settings, default_db_url
+
+    url = db or default_db_url()
+    problem = db_url_problem(url)
+    if problem:
+        raise CalibrationError(("--db" if db else ENV_DB_URL,), problem)
+    return Settings(db_url=url)
+
+
+def _open_app(db: str | None, **overrides: object):  # noqa: ANN202
+    """The app on ``--db``; a database that refuses the connection is one line, not a trace."""
+    import dataclasses
+
+    from sqlalchemy.exc import DBAPIError
+
+    from server.app import create_app
+
+    settings = dataclasses.replace(_settings(db), **overrides)
+    try:
+        return create_app(settings)
+    except DBAPIError as err:
+        reason = str(err.orig).strip().splitlines()[0] if err.orig else type(err).__name__
+        raise CalibrationError(("--db",), f"cannot open {settings.db_url!r}: {reason}") from None
+
+
+def _serve(app, host: str, port: int) -> None:  # noqa: ANN001
+    """uvicorn on ``app``, whose second Ctrl-C stops at once with one line instead of
+    cancelling the requests in flight (a 500 and a CancelledError trace per request and for
+    the lifespan). What a request had committed stays; the interrupted one saves nothing more."""
+    import uvicorn
+
+    class Server(uvicorn.Server):
+        def handle_exit(self, sig: int, frame: object) -> None:
+            if self.should_exit and sig == signal.SIGINT:  # the second Ctrl-C
+                busy = len(self.server_state.tasks)
+                print(f"pendant: stopped at once; {busy} request(s) in progress abandoned "
+                      "(they saved nothing)", file=sys.stderr, flush=True)
+                os._exit(130)
+            super().handle_exit(sig, frame)
+
+    Server(uvicorn.Config(app, host=host, port=port)).run()
+
+
+def _check_port_free(host: str, port: int) -> None:
+    """Refuse a port already in use before starting uvicorn, suggesting --port."""
+    with socket.socket(socket.AF_INET6 if ":" in host else socket.AF_INET) as probe:
+        try:
+            probe.bind((host, port))
+        except OSError as err:
+            if err.errno == errno.EADDRINUSE:
+                raise CalibrationError(("--port",), f"port {port} on {host} is in use (another "
+                                       f"pendant serve?); choose another: pendant serve "
+                                       f"--port {port + 1}") from None
+            raise CalibrationError(("--host",), f"cannot listen on {host}:{port}: "
+                                   f"{err.strerror}") from None
 
 
 class SchemaOutOfDate(RuntimeError):
@@ -344,6 +465,7 @@ def serve(args: argparse.Namespace) -> int:
         raise CalibrationError(("--workers",), f"must be >= 1, got {args.workers}")
     _positive(args.job_time_s, "--job-time-s")
     _positive(args.job_memory_mb, "--job-memory-mb")
+    _check_port_free(args.host, args.port)
     loopback = args.host in LOOPBACK_HOSTS
     if args.no_auth and not loopback:
         print(f"pendant: --host: --no-auth serves loopback only (127.0.0.1, localhost, ::1), "
@@ -361,8 +483,7 @@ def serve(args: argparse.Namespace) -> int:
     os.environ[ENV_CORS_ORIGINS] = ",".join(args.cors_origin)
     settings = _settings(None)
     try:
-        application = app_module.create_app(dataclasses.replace(settings,
-                                                                migrate=not args.no_migrate))
+        application = _open_app(None, migrate=not args.no_migrate)
     except app_module.SchemaOutOfDate as err:
         raise SchemaOutOfDate(str(err)) from None
     shown = "localhost" if args.host in ("0.0.0.0", "::") else args.host
@@ -380,7 +501,7 @@ def serve(args: argparse.Namespace) -> int:
     workers = start_job_workers(settings.db_url, args)  # the schema is current by now
     try:
         if args.workers == 1:
-            uvicorn.run(application, host=args.host, port=args.port)
+            _serve(application, args.host, args.port)
         else:
             uvicorn.run("server.app:app", host=args.host, port=args.port, workers=args.workers)
     finally:
@@ -416,10 +537,9 @@ def main(argv: Sequence[str] | None = None) -> int:
             return 0
         if args.command == "export":
             from db import crud
-            from server.app import create_app
             from server.routers.export import export_text
 
-            app = create_app(_settings(args.db))
+            app = _open_app(args.db)
             with app.state.sessionmaker() as db:
                 controller = crud.find_controller(db, args.controller)
                 sys.stdout.write(export_text(db, controller.id, args.format))
@@ -443,6 +563,9 @@ def main(argv: Sequence[str] | None = None) -> int:
         print(f"pendant: {args.file}: not UTF-8 text ({err.reason} at byte {err.start})",
               file=sys.stderr)
         return 2
+    except KeyboardInterrupt:
+        print("pendant: interrupted", file=sys.stderr)
+        return 130
 
 
 if __name__ == "__main__":

@@ -152,6 +152,9 @@ class ActiveIn(In):
     base_no: int | None = Field(None, ge=0, le=32, strict=True, description="0 = world")
 
 
+AIM_NOISE_MM = 0.1  # a person's eye on a reference tip, per axis (|miss| about 0.16 mm)
+
+
 class ApproachIn(In):
     """Jog the true tip (or workpiece mark) onto a cell target from an orientation."""
 
@@ -163,6 +166,14 @@ class ApproachIn(In):
     tool_point_mm: Vec3 | None = Field(None,
                                        description="another point of the held body (its frame)")
     miss_mm: Vec3 | None = Field(None, description="miss the target by this vector (world, mm)")
+    flange_orientation: Annotated[list[Vec3], Field(min_length=3, max_length=3)] | None = Field(
+        None, description="the flange's orientation in world (3x3 rotation matrix, rows), e.g. "
+                          "a report's next_orientation; replaces tilt/around/spin")
+    noise_mm: float = Field(AIM_NOISE_MM, ge=0.0, le=5.0,
+                            description="the operator's aim: each axis stops off the mark by a "
+                                        "normal error of this sigma (mm), seeded by the cell and "
+                                        "its motion count, so a walk-through repeats; 0 = ideal "
+                                        "aim (exactly on the mark)")
 
 
 class CellOut(Out):
@@ -358,6 +369,14 @@ class BadPointOut(Out):
     message: str
 
 
+def _bad_point_words(bp: Any, residual_in_fit_mm: float) -> str:
+    """The bad point once, both its numbers explained: the leave-one-out distance (what the
+    test judges) and its residual in the fit with it (its bar in the chart), and the refit."""
+    return (f"{bp.message()}. Its bar, {residual_in_fit_mm:.3f} mm, is its residual in the fit "
+            f"that includes it, which it pulls towards itself; without it the RMS residual is "
+            f"{float(bp.refit_rms_mm):.3f} mm")
+
+
 class ReportOut(Out):
     method: str
     frame: PoseOut
@@ -403,7 +422,7 @@ class ReportOut(Out):
                 index=bp.index, residual_mm=float(bp.residual_mm),
                 threshold_mm=float(bp.threshold_mm),
                 refit_frame=PoseOut.of_matrix(bp.refit_frame), refit_rms_mm=float(bp.refit_rms_mm),
-                message=bp.message()),
+                message=_bad_point_words(bp, float(r.residuals_mm[bp.index]))),
             warnings=[FindingOut(code=f.code, message=f.message, loc=list(f.loc),
                                  severity=f.severity) for f in r.warnings],
             guidance=r.guidance,

@@ -118,8 +118,23 @@ def _direction_words(v: FloatArray) -> str:
     return "the flange direction ({:.2f}, {:.2f}, {:.2f})".format(*v)
 
 
-_TILT_WORDS = [f"tilt the flange {deg:.0f} deg about {_direction_words(u)} "
-               "(report.next_orientation)" for deg, u in zip(_TILT_DEG, _TILT_AXIS)]
+def _jog_words(Q: FloatArray, deg: float) -> str:
+    """A flange-frame tilt ``Q`` as pendant jogs: Tool coordinates (TOOL 0, the flange),
+    ``Q = Rz(A) Ry(B) Rx(C)``, so jogging A, then B, then C by these angles gets there
+    (KUKA A, B, C about the tool's z, y, x; scipy ``as_euler("ZYX")``, intrinsic)."""
+    abc = Rotation.from_matrix(Q).as_euler("ZYX", degrees=True)
+    jogs = [f"{name} {v:+.0f} deg" for name, v in zip("ABC", abc) if abs(v) >= 0.5]
+    return (f"tilt {deg:.0f} deg: with TOOL 0 in Tool jog, jog {', '.join(jogs)} (in that "
+            "order), then X, Y, Z back onto the point")
+
+
+def _count_words(numbers: list[int]) -> str:
+    """1 -> "1"; [6, 7, 8] -> "6, 7 and 8"."""
+    text = [str(k) for k in numbers]
+    return text[0] if len(text) == 1 else f"{', '.join(text[:-1])} and {text[-1]}"
+
+
+_TILT_WORDS = [_jog_words(Q, deg) for Q, deg in zip(_TILT_R, _TILT_DEG)]
 
 
 def _perpendicular_axes_words(v: FloatArray) -> str:
@@ -487,12 +502,19 @@ def tcp_xyz_4point(flange_poses: FloatArray) -> CalibrationResult:
             ("flange_poses",)))
     if sum(g > _TRACE_HALF_DEG for g in Gl) > n:  # some pair within 0.5 deg (rare path)
         p = X[:, :, 3]
-        for i, j in np.argwhere(np.triu(G > _TRACE_HALF_DEG, 1)):
-            if np.linalg.norm(p[i] - p[j]) < 0.5:
-                findings.append(Finding("duplicate_touch_up", (
-                    f"touch-up {j + 1} repeats touch-up {i + 1} (same orientation and position): "
-                    f"it adds no information; touch up from a new orientation"),
-                    ("flange_poses", int(j))))
+        repeats: dict[int, list[int]] = {}  # first touch-up -> the later ones that repeat it
+        first_of: dict[int, int] = {}
+        for i, j in np.argwhere(np.triu(G > _TRACE_HALF_DEG, 1)).tolist():
+            if j not in first_of and np.linalg.norm(p[i] - p[j]) < 0.5:
+                first_of[j] = first_of.get(i, i)
+                repeats.setdefault(first_of[j], []).append(j)
+        for i, js in repeats.items():  # one finding per repeated touch-up, not per pair
+            which = _count_words([j + 1 for j in js])
+            verb, it = ("repeats", "it adds") if len(js) == 1 else ("repeat", "they add")
+            findings.append(Finding("duplicate_touch_up", (
+                f"touch-up{'s' if len(js) > 1 else ''} {which} {verb} touch-up {i + 1} (same "
+                f"orientation and position): {it} no information; touch up from a new "
+                f"orientation"), ("flange_poses", js[0])))
     if sigma > LARGE_SIGMA_MM:
         findings.append(Finding("large_residual", (
             f"the touch-ups disagree: residual scatter {sigma:.2f} mm per coordinate (RMS "

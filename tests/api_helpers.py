@@ -102,7 +102,8 @@ def open_session(client: TestClient, method: str, target_no: int = 1, controller
 
 
 def approach(client: TestClient, target: str, controller: str = C, **kw) -> dict:
-    return ok(client.post(f"{controller}/robot/approach", json={"target": target, **kw}))
+    """POST /robot/approach with the ideal aim (``noise_mm`` 0) unless ``kw`` gives one."""
+    return ok(client.post(f"{controller}/robot/approach", json={"target": target, "noise_mm": 0.0, **kw}))
 
 
 def walk(client: TestClient, url: str, controller: str = C, extra: int = 0) -> dict:

@@ -50,7 +50,8 @@ def test_tool_jog_moves_along_the_active_tool_axis(client):
 
 def test_approach_puts_the_true_tip_on_the_target(client):
     from solvers.dh import forward_kinematics
-    s = ok(client.post(f"{C}/robot/approach", json={"target": "reference_tip", "tilt_deg": 30, "around_deg": 45}))
+    s = ok(client.post(f"{C}/robot/approach", json={"target": "reference_tip", "tilt_deg": 30, "around_deg": 45,
+                                                    "noise_mm": 0}))  # the ideal aim
     T = forward_kinematics(ROBOTS["kuka_kr6_r900_sixx"], s["joints_deg"], CELL.T_flange_tool)
     assert T[:3, 3] == pytest.approx(CELL.reference_tip_mm, abs=1e-6)
     assert np.degrees(np.arccos(-T[2, 2])) == pytest.approx(30.0, abs=1e-6)

@@ -121,7 +121,7 @@ def test_recording_of_a_light_barrier_cycle(client):
 
 
 def test_recording_refuses_other_menus_and_too_few_points(client):
-    url = open_session(client, "base.3point", 1, tool_no=1)
+    url = open_session(client, "base.numeric", 1, pose={"x": 0, "y": 0, "z": 0, "a": 0, "b": 0, "c": 0})
     r = client.get(f"{url}/recording")
     assert r.status_code == 422 and r.json()["detail"][0]["loc"] == ["body", "method"]
     url = open_session(client, "tool.xyz_4point", 1)

@@ -44,7 +44,7 @@ const UNITS = [["_deg_per_Nm", "deg/Nm"], ["_mm_per_N", "mm/N"], ["_mm", "mm"], 
 const EVIDENCE = {
   p_value: "p-value", candidates_tested: "candidates tested", correlation_r: "correlation r",
   identifiability: "identifiability", t_value: "t value",
-  heldout_rms_before_mm: "held-out RMS before", structure_share: "share of the structure",
+  heldout_rms_before_mm: "held-out RMS before", structure_share: "of the structure it explains",
   indistinguishable_from: "indistinguishable from",
 };
 
@@ -138,10 +138,51 @@ function unitOf(key) {
 
 function effectName(effect) { return EFFECTS[effect] || String(effect).replace(/_/g, " "); }
 
+/** "Link length J2 (a2)": the DH parameter (in the finding or its parameters) tells a2 from d2. */
 function findingTitle(f) {
-  const joint = f.joint !== null && f.joint !== undefined ? ` J${f.joint}` : "";
-  const dh = f.dh_parameter ? ` (${f.dh_parameter})` : "";
+  const hasJoint = f.joint !== null && f.joint !== undefined;
+  const joint = hasJoint ? ` J${f.joint}` : "";
+  const p = f.dh_parameter || (f.parameters || {}).dh_parameter;
+  const dh = p ? ` (${p}${hasJoint ? f.joint : ""})` : f.effect === "link_twist" && hasJoint ? ` (α${f.joint})` : "";
   return `${effectName(f.effect)}${joint}${dh}`;
+}
+
+/** A p-value as a person reads it: 0.012, 3.1e-5, or "< 1e-15" below what a double resolves. */
+function pValue(p) {
+  if (!isNum(p)) return num(p);
+  if (p < 1e-15) return "< 1e-15";
+  if (p < 0.001) return p.toExponential(1);
+  return p.toFixed(3);
+}
+
+/** structure_share: the effect's share of what the best generic smooth-function group would
+ * explain at that step; above 1 the effect explains more than that group did. */
+function structureShare(v) {
+  if (!isNum(v)) return num(v);
+  return v > 1 ? `all of it (${Math.round(v * 100)} % of what the best generic group explains)`
+               : `${Math.round(v * 100)} %`;
+}
+
+/** The sign convention of a finding's value, in words (nominal DH from the recording, when known). */
+function signWords(f, robot) {
+  const P = f.parameters || {};
+  const j = f.joint;
+  const joints = robot && Array.isArray(robot.joints) ? robot.joints : null;
+  if (f.effect === "link_length" && isNum(P.delta_mm)) {
+    const name = `${P.dh_parameter || "length"}${j ?? ""}`;
+    const nominal = joints && joints[j - 1] ? joints[j - 1][`${P.dh_parameter}_mm`] : undefined;
+    if (!isNum(nominal) || nominal === 0) return `true minus nominal ${name}`;
+    const longer = Math.abs(nominal + P.delta_mm) > Math.abs(nominal);
+    const mm3 = (v) => Math.abs(v).toFixed(3);
+    return `true minus nominal: |${name}| is ${mm3(nominal + P.delta_mm)} mm, not ${mm3(nominal)}: ` +
+           `${mm3(P.delta_mm)} mm ${longer ? "longer" : "shorter"}`;
+  }
+  if (f.effect === "link_twist" && isNum(P.delta_alpha_deg)) return `true minus nominal α${j ?? ""}`;
+  if (f.effect === "joint_offset" && isNum(P.offset_deg)) {
+    return `true minus shown: joint ${j} stands ${num(Math.abs(P.offset_deg))} deg further ${P.offset_deg > 0 ? "positive" : "negative"} than it shows`;
+  }
+  if (f.effect === "trigger_latency" && isNum(P.latency_ms)) return P.latency_ms >= 0 ? "recorded late" : "recorded early";
+  return "";
 }
 
 /** ["body", "samples", 3, "joints_deg"] -> "samples[3].joints_deg" (the JSON path). */
@@ -247,8 +288,14 @@ async function analyseText(text) {
     return;
   }
   render(rep);
+  page.analysed = inputKey(text);
   if (rep.id !== undefined) history.replaceState(null, "", `?analysis=${rep.id}`);
   setStatus(`Analysis ${rep.id ?? ""} of recording ${rec.id}: ${rep.verdict}.`, "ok");
+}
+
+/** What an analysis ran on: the text, folds and seed. */
+function inputKey(text = $("#paste").value) {
+  return JSON.stringify([text, $("#folds").value || "5", $("#seed").value || "0"]);
 }
 
 function showRecording(rec) {
@@ -275,15 +322,29 @@ async function loadStored(id) {
 // ------------------------------------------------------------------------------ the report
 
 function render(rep) {
+  if (page.report && page.report.recording_id !== rep.recording_id) page.robot = null;
   page.report = rep;
   renderVerdict(rep);
   renderPlots(rep);
   renderLocate(rep.locate || {});
-  renderFindings(rep.findings || []);
+  renderFindings(rep.findings || [], page.robot || null);
+  if (!page.robot && rep.recording_id !== undefined) nominalRobot(rep);
   renderNotes(rep);
   renderMore(rep);
   $("#empty").hidden = true;
   $("#report").hidden = false;
+}
+
+/** The recording's robot (nominal DH), for the sign words; drawn again once it arrives. */
+async function nominalRobot(rep) {
+  try {
+    const doc = await request("GET", `/recordings/${encodeURIComponent(rep.recording_id)}`);
+    if (page.report !== rep || !doc || !doc.robot) return;
+    page.robot = doc.robot;
+    renderFindings(rep.findings || [], page.robot);
+  } catch {
+    // the words fall back to "true minus nominal"
+  }
 }
 
 function renderVerdict(rep) {
@@ -362,7 +423,7 @@ function hline(root, cls, yv, label, pw) {  // cls: rms | noise
 
 /** Bars of |r_k| per sample (0-based sample numbers, as the locate block's). */
 function residualChart(values, { top, rms, noise, worst, label }) {
-  const root = svg("svg", { viewBox: `0 0 ${W} ${H}`, class: "chart", role: "img",
+  const root = svg("svg", { viewBox: `0 0 ${W} ${H}`, class: "chart", role: "img", style: `max-width: ${W}px`,
     "aria-label": `${label}: |r_k| of ${values.length} samples`, "data-n": values.length });
   const yTicks = ticks(top);
   const topTick = yTicks[yTicks.length - 1];
@@ -399,7 +460,8 @@ function stepsChart(rep) {
   const top = Math.max(...vals, 1e-9) * 1.05; // headroom above the tallest bar
   const yTicks = ticks(top, 4);
   const topTick = yTicks[yTicks.length - 1];
-  const root = svg("svg", { viewBox: `0 0 ${SW} ${SH}`, class: "chart", role: "img", "aria-label": "RMS model by model" });
+  const root = svg("svg", { viewBox: `0 0 ${SW} ${SH}`, class: "chart", role: "img", style: `max-width: ${SW}px`,
+    "aria-label": "RMS model by model" });
   const { pw, ph, y } = axes(root, yTicks, topTick, "mm", SW, SH);
   const slot = Math.min(pw / models.length, 110);
   models.forEach((m, i) => {
@@ -462,7 +524,7 @@ function renderLocate(loc) {
   $("#correlations tbody").replaceChildren(...corr.map((c) => shareRow(c.feature, Math.abs(c.r), `r = ${num(c.r)}`)));
   const un = loc.unexplained || [];
   $("#unexplained").replaceChildren(...un.map((u) => el("li", { text:
-    `Unexplained structure varies with ${u.varies_with} (p = ${num(u.p_value)})` })));
+    `Unexplained structure varies with ${u.varies_with} (p = ${pValue(u.p_value)})` })));
 }
 
 function shareRow(name, share, text) {
@@ -488,20 +550,29 @@ function evidenceRows(ev) {
     let [name, unit] = unitOf(key);
     name = EVIDENCE[key] || name.replace(/_/g, " ");
     if (EVIDENCE[key]) unit = key.endsWith("_mm") ? "mm" : "";
-    const text = Array.isArray(value) ? value.join(", ") : `${num(value)}${unit ? ` ${unit}` : ""}`;
+    const text = Array.isArray(value) ? value.join(", ")
+      : key === "p_value" ? pValue(value)
+      : key === "structure_share" ? structureShare(value)
+      : `${num(value)}${unit ? ` ${unit}` : ""}`;
     return el("tr", { "data-evidence": key }, el("th", { text: name }), el("td", { text }));
   });
 }
 
-function renderFindings(findings) {
+function renderFindings(findings, robot = null) {
   $("#no-findings").hidden = findings.length > 0;
   const ol = $("#findings");
   ol.replaceChildren();
   findings.forEach((f, i) => {
     const li = el("li", { class: "finding", "data-effect": f.effect, "data-joint": f.joint ?? "" });
-    li.append(el("h3", {}, el("span", { class: "rank", text: `${i + 1}` }),
-      el("span", { class: "title", text: findingTitle(f) }), el("code", { class: "code", text: f.effect })));
-    li.append(el("p", { class: "explanation", text: f.explanation || "" }));
+    // collapsible: the strongest finding open, the others one line each until opened
+    const box = el("details", { class: "finding-box" });
+    box.open = i === 0;
+    const head = el("h3", {}, el("span", { class: "rank", text: `${i + 1}` }),
+      el("span", { class: "title", text: findingTitle(f) }), el("span", { class: "headline", text: headline(f) }),
+      el("code", { class: "code", text: f.effect }));
+    box.append(el("summary", {}, head));
+    li.append(box);
+    box.append(el("p", { class: "explanation", text: f.explanation || "" }));
     const grid = el("div", { class: "finding-grid" });
     const p = el("table", { class: "params", "aria-label": "parameters" },
       el("caption", { text: "Parameters" }), el("tbody", {}, ...paramRows(f.parameters)));
@@ -511,10 +582,22 @@ function renderFindings(findings) {
         el("tr", {}, el("th", { text: "held-out RMS" }), el("td", { text: mm(f.heldout_rms_mm) }))));
     const ev = el("table", { class: "params evidence", "aria-label": "evidence" },
       el("caption", { text: "Evidence" }), el("tbody", {}, ...evidenceRows(f.evidence)));
+    const words = signWords(f, robot);
+    if (words) p.querySelector("tbody").append(el("tr", { "data-param": "sign" }, el("th", { text: "sign" }), el("td", { class: "sign-words", text: words })));
     grid.append(p, fit, ev);
-    li.append(grid);
+    box.append(grid);
     ol.append(li);
   });
+}
+
+/** The value of a finding on its one line: "−0.824 ± 0.033 mm". */
+function headline(f) {
+  const P = f.parameters || {};
+  const key = Object.keys(P).find((k) => isNum(P[k]) && !k.endsWith("_std") && !k.includes("_std_"));
+  if (!key) return "";
+  const [, unit] = unitOf(key);
+  const std = P[`${key}_std`];
+  return `${num(P[key])}${isNum(std) ? ` ± ${num(std)}` : ""}${unit ? ` ${unit}` : ""}`;
 }
 
 function noteItem(n, extra) {
@@ -530,7 +613,7 @@ function renderNotes(rep) {
   $("#notes-panel").hidden = ni.length === 0;
   const wh = rep.withheld || [];
   $("#withheld").replaceChildren(...wh.map((n) => noteItem(n,
-    isNum(n.p_value_with_structure) ? `p with the structure = ${num(n.p_value_with_structure)}` : "")));
+    isNum(n.p_value_with_structure) ? `p with the structure = ${pValue(n.p_value_with_structure)}` : "")));
   $("#withheld-panel").hidden = wh.length === 0;
 }
 
@@ -557,7 +640,13 @@ function init() {
       await analyseText(text);
     });
   });
-  $("#analyse").addEventListener("click", () => busy(() => analyseText($("#paste").value)));
+  $("#analyse").addEventListener("click", () => busy(async () => {
+    if (page.report && page.analysed === inputKey()) { // the file choice ran it already
+      setStatus(`Already analysed: analysis ${page.report.id ?? ""}. Change the text, folds or seed to run again.`, "ok");
+      return;
+    }
+    await analyseText($("#paste").value);
+  }));
   $("#simulate").addEventListener("click", () => busy(async () => {
     let text;
     try {

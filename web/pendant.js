@@ -114,10 +114,12 @@ function showErrors(scope, err, fallback = null) {
   }
 }
 
-/** Run an action of a panel: clear its errors, show any failure beside the right field
- * (an error naming no field of the panel goes beside `fallback`, else to the panel's line). */
+/** Run an action of a panel: clear every message on the page (a message belongs to the
+ * action that raised it, so the next action, in any panel, takes it away), then show any
+ * failure beside the right field (an error naming no field of the panel goes beside
+ * `fallback`, else to the panel's line). */
 async function act(scope, fn, fallback = null) {
-  clearErrors(scope);
+  clearErrors(document);
   try {
     await fn();
   } catch (err) {
@@ -125,18 +127,13 @@ async function act(scope, fn, fallback = null) {
   }
 }
 
-/** mulberry32: a small seeded generator, so a page's hand jitter repeats run after run. */
-function seeded(seed) {
-  let a = seed >>> 0;
-  return () => {
-    a = (a + 0x6d2b79f5) >>> 0;
-    let t = a;
-    t = Math.imul(t ^ (t >>> 15), t | 1);
-    t ^= t + Math.imul(t ^ (t >>> 7), t | 61);
-    return ((t ^ (t >>> 14)) >>> 0) / 4294967296;
-  };
+/** The service's default aim (POST /robot/approach `noise_mm`), read from its OpenAPI schema
+ * so the page states the value the service uses. */
+async function loadAimDefault() {
+  const spec = await api("GET", "/openapi.json");
+  const v = spec.components.schemas.ApproachIn.properties.noise_mm.default;
+  if (Number.isFinite(v)) $("#aim").value = String(v);
 }
-const random = seeded(Number(new URLSearchParams(location.search).get("seed") || 1));
 
 // ------------------------------------------------------------------------------ formatting
 
@@ -437,7 +434,21 @@ function currentStep() {
   const s = state.session;
   if (!s) return null;
   if (state.step !== null && s.steps.some((st) => st.index === state.step)) return s.steps.find((st) => st.index === state.step);
-  return s.steps.find((st) => st.required && !st.filled) || null;
+  return s.steps.find((st) => st.required && !st.filled) || suggestedStep();
+}
+
+/** After the required steps, the next optional step at the orientation the report suggests
+ * (`next_orientation`, the one that shrinks the TCP's uncertainty most), as a Move to. */
+function suggestedStep() {
+  const s = state.session;
+  const r = state.report || (s && s.report);
+  if (!s || !r || !r.next_orientation || !s.extra_steps_allowed) return null;
+  const first = s.steps.find((st) => st.required && st.target);
+  if (!first) return null;
+  const index = Math.max(...s.steps.map((st) => st.index)) + 1;
+  return { index, required: false, filled: false, suggested: true, target: first.target,
+           flange_orientation: r.next_orientation, tool_point_mm: null,
+           prompt: `Optional: touch up from the orientation the report suggests (Move to goes there), then Compute again` };
 }
 
 function renderSession() {
@@ -470,8 +481,12 @@ function renderSession() {
   $("#run-cycle").hidden = !lb;
   $("#touch-up").hidden = lb;
   $("#move-to").closest(".field").hidden = !(cur && cur.target);
-  $(".jitter", wizard).hidden = !(cur && cur.target);
-  if (cur) {
+  $(".aim", wizard).hidden = !(cur && cur.target);
+  if (cur && cur.suggested) {
+    $("#step-label").textContent = `Step ${cur.index + 1} (optional, ${s.extra_steps_allowed} left)`;
+    $("#prompt").textContent = cur.prompt;
+    $("#touch-up").hidden = false;
+  } else if (cur) {
     $("#step-label").textContent = `Step ${cur.index + 1} of ${Math.max(n, cur.index + 1)}` + (cur.filled ? " (taught; touch up again to re-teach)" : "");
     $("#prompt").textContent = cur.prompt;
   } else if (lb) {
@@ -480,7 +495,7 @@ function renderSession() {
   } else {
     const taught = s.steps.filter((st) => st.filled).length;
     $("#step-label").textContent = taught > n ? `All ${n} steps taught, ${taught - n} optional` : `All ${n} steps taught`;
-    $("#prompt").textContent = n ? (s.extra_steps_allowed ? `Compute, or touch up again for an optional step (${s.extra_steps_allowed} left).` : "Compute.")
+    $("#prompt").textContent = n ? (s.extra_steps_allowed ? `Compute: the report then suggests an orientation for an optional step (${s.extra_steps_allowed} left), or touch up again here.` : "Compute.")
                                  : "No touch-up needed: Compute.";
     $("#touch-up").hidden = !(n && s.extra_steps_allowed);
   }
@@ -498,17 +513,12 @@ async function refreshSession(s) {
 async function moveTo() {
   const st = currentStep();
   if (!st || !st.target) return;
-  const body = { target: st.target, tilt_deg: st.tilt_deg, around_deg: st.around_deg, spin_deg: st.spin_deg };
+  const body = st.flange_orientation
+    ? { target: st.target, flange_orientation: st.flange_orientation }
+    : { target: st.target, tilt_deg: st.tilt_deg, around_deg: st.around_deg, spin_deg: st.spin_deg };
   if (st.tool_point_mm) body.tool_point_mm = st.tool_point_mm;
-  const jitter = Number($("#jitter").value || 0);
-  if (!Number.isFinite(jitter) || jitter < 0) {
-    throw new ApiError(422, [{ loc: ["body", "miss_mm"], msg: "hand jitter is a distance >= 0 mm" }]);
-  }
-  if (jitter > 0) { // a sloppy touch-up: miss the mark by `jitter` mm in a (seeded) random direction
-    const v = [random() - 0.5, random() - 0.5, random() - 0.5];
-    const n = Math.hypot(...v) || 1;
-    body.miss_mm = v.map((x) => (x / n) * jitter);
-  }
+  if ($("#ideal-aim").checked) body.noise_mm = 0;
+  else if ($("#aim").value.trim() !== "") body.noise_mm = Number($("#aim").value); // the service judges it
   await loadRobot(await api("POST", ctl("/robot/approach"), body));
 }
 
@@ -560,6 +570,11 @@ async function save() {
 }
 
 async function discard() {
+  const s = state.session;
+  const taught = s.steps.filter((st) => st.filled).length;
+  const what = state.report ? "the computed result and " : "";
+  if (!window.confirm(`Discard ${s.title} → ${s.target_table.toUpperCase()} ${s.target_no}? ` +
+                      `This drops ${what}${taught} touch-up${taught === 1 ? "" : "s"}; nothing is written.`)) return;
   await api("POST", ctl(`/sessions/${state.session.id}/discard`));
   state.session = null;
   state.report = null;
@@ -579,7 +594,8 @@ function residualChart(r) {
   const values = r.residuals_mm || [];
   const W = 520, H = 132, left = 64, right = 12, top = 14, bottom = 28;
   const threshold = r.bad_point ? r.bad_point.threshold_mm : null;
-  const vmax = Math.max(...values, threshold || 0, 0.001); // exact touch-ups: a flat 1 µm scale
+  const loo = r.bad_point ? r.bad_point.residual_mm : null; // its distance from the fit of the others
+  const vmax = Math.max(...values, threshold || 0, loo || 0, 0.001); // exact touch-ups: a flat 1 µm scale
   const svg = document.createElementNS(NS, "svg");
   const s = (tag, attrs, text) => {
     const e = document.createElementNS(NS, tag);
@@ -590,7 +606,8 @@ function residualChart(r) {
   svg.setAttribute("viewBox", `0 0 ${W} ${H}`);
   svg.setAttribute("class", "chart");
   svg.setAttribute("role", "img");
-  svg.setAttribute("aria-label", `Residual per touch-up, mm: ${values.map((v) => fmt(v)).join(", ")}`);
+  svg.setAttribute("aria-label", `Residual per touch-up, mm: ${values.map((v) => fmt(v)).join(", ")}` +
+    (r.bad_point ? `; touch-up ${r.bad_point.index + 1} is ${fmt(loo)} mm off the fit of the others` : ""));
   const ph = H - top - bottom, pw = W - left - right;
   svg.append(s("line", { x1: left, y1: top + ph, x2: W - right, y2: top + ph, class: "axis" }));
   svg.append(s("line", { x1: left, y1: top, x2: left, y2: top + ph, class: "axis" }));
@@ -610,12 +627,19 @@ function residualChart(r) {
     const rect = s("rect", { x, y: top + ph - h, width: bw, height: Math.max(h, 0.5), class: bad ? "bar bad" : "bar" });
     rect.append(s("title", {}, `touch-up ${i + 1}: ${fmt(v)} mm`));
     svg.append(rect);
+    if (bad) { // dashed outline: how far it is from the fit of the others (what the threshold judges)
+      const hl = (loo / vmax) * ph;
+      const o = s("rect", { x, y: top + ph - hl, width: bw, height: hl, class: "loo" });
+      o.append(s("title", {}, `touch-up ${i + 1}: ${fmt(loo)} mm off the fit of the others`));
+      svg.append(o);
+      svg.append(s("text", { x: x + bw / 2, y: top + ph - hl - 3, "text-anchor": "middle", class: "tick-label loo-label" }, fmt(loo)));
+    }
     svg.append(s("text", { x: x + bw / 2, y: top + ph + 14, "text-anchor": "middle", class: "tick-label" }, String(i + 1)));
   });
   if (threshold) {
     const y = top + ph - (threshold / vmax) * ph;
     svg.append(s("line", { x1: left, y1: y, x2: W - right, y2: y, class: "threshold" }));
-    svg.append(s("text", { x: W - right, y: y - 3, "text-anchor": "end", class: "tick-label" }, `threshold ${fmt(threshold)} mm`));
+    svg.append(s("text", { x: W - right, y: y - 3, "text-anchor": "end", class: "tick-label" }, `allowed off the others ${fmt(threshold)} mm`));
   }
   svg.append(s("text", { x: left + pw / 2, y: H - 2, "text-anchor": "middle", class: "tick-label" }, "touch-up"));
   return svg;
@@ -643,9 +667,13 @@ function renderReport() {
     ...(r.sigma_mm !== null ? [stat("σ touch-up", r.sigma_mm, "mm")] : []));
   const notes = el("ul", { class: "notes", "aria-label": "Warnings" });
   if (r.bad_point) notes.append(el("li", { class: "warning bad-point", text: `Bad point: ${r.bad_point.message}` }));
-  for (const w of r.warnings) notes.append(el("li", { class: w.severity === "error" ? "error" : "warning", text: `${w.severity}: ${w.message}` }));
+  for (const w of r.warnings) {
+    if (r.bad_point && w.code === "bad_point") continue; // said once, above
+    notes.append(el("li", { class: w.severity === "error" ? "error" : "warning", text: `${w.severity}: ${w.message}` }));
+  }
   if (!r.bad_point && !r.warnings.length) notes.append(el("li", { class: "ok", text: "No warnings." }));
-  const guidance = r.guidance ? el("p", { class: "guidance" }, el("strong", { text: "Guidance: " }), r.guidance) : null;
+  const offer = suggestedStep() ? ". Or press Move to in Calibration: it goes to that orientation." : "";
+  const guidance = r.guidance ? el("p", { class: "guidance" }, el("strong", { text: "Guidance: " }), r.guidance + offer) : null;
   body.replaceChildren(frameRow, stats, residualChart(r), notes, ...(guidance ? [guidance] : []));
   if (s) $("#save").textContent = `Save into ${s.target_table.toUpperCase()} ${s.target_no}`;
 }
@@ -677,6 +705,7 @@ function wire() {
   $("#run-cycle").addEventListener("click", () => act(wizard, runCycle));
   $("#compute").addEventListener("click", () => act(wizard, compute, $("#compute")));
   $("#discard").addEventListener("click", () => act(wizard, discard));
+  $("#ideal-aim").addEventListener("change", (e) => { $("#aim").disabled = e.target.checked; });
   const report = $("#report");
   $("#save").addEventListener("click", () => act(report, save));
   $("#discard-report").addEventListener("click", () => act(report, discard));
@@ -690,6 +719,7 @@ async function main() {
   await act($("#topbar"), async () => {
     await loadMethods();
     await loadControllers();
+    await loadAimDefault();
   });
   document.body.dataset.ready = "true";
 }

@@ -7,6 +7,7 @@ from __future__ import annotations
 
 import numpy as np
 from fastapi import APIRouter, Response
+from scipy.spatial.transform import Rotation
 
 import emulator
 from db import crud
@@ -20,6 +21,7 @@ from solvers.errors import CalibrationError
 from solvers.physics import Imperfections
 
 router = APIRouter(prefix="/controllers/{controller_id}/robot", tags=["Robot"])
+AIM_STREAM = 7  # the aim's random stream, apart from the emulator's own draws of noise_seed
 
 
 def state_out(db: SessionDep, c: Controller) -> RobotStateOut:
@@ -129,6 +131,35 @@ def set_active(controller_id: int, body: ActiveIn, db: SessionDep, response: Res
     return _answer(db, c, response)
 
 
+def approach_angles(cell: emulator.Cell, target: str,
+                    flange_orientation: list[list[float]]) -> tuple[float, float, float]:
+    """(tilt, around, spin) in deg of :func:`server.emulator.approach_rotation` that puts the
+    flange at ``flange_orientation`` (R_world_flange) while the true tool touches ``target``.
+
+    The held tool's frame is ``R_world_tool = R_world_flange @ R_flange_tool`` and
+    ``R_target_tool = Rz(around) Ry(tilt) Rx(180) Rz(spin)``; since ``Rx(180) Rz(s) =
+    Rz(-s) Rx(180)``, ``R_target_tool @ Rx(180) = Rz(around) Ry(tilt) Rz(-spin)``: intrinsic
+    Z-Y-Z Euler angles (scipy ``Rotation.as_euler("ZYZ")``, tilt in [0, 180] deg).
+    Raises CalibrationError(("flange_orientation",)) for a matrix that is not a rotation or a
+    tilt beyond the approach's 80 deg."""
+    R = np.asarray(flange_orientation, float)
+    if not (np.all(np.isfinite(R)) and np.allclose(R @ R.T, np.eye(3), atol=1e-6)
+            and np.linalg.det(R) > 0):
+        raise CalibrationError(("flange_orientation",), "is not a rotation matrix (orthonormal, "
+                               "det +1, rows as in a report's next_orientation)")
+    t = cell.target(target)
+    if t.align or t.held != "tool":
+        raise CalibrationError(("flange_orientation",), f"target {target!r} sets its own "
+                               "orientation; give tilt_deg/around_deg/spin_deg instead")
+    R_target_tool = t.R_world_target.T @ R @ cell.T_flange_tool[:3, :3]
+    around, tilt, minus_spin = Rotation.from_matrix(
+        R_target_tool @ emulator.rot("X", 180.0)).as_euler("ZYZ", degrees=True)
+    if tilt > 80.0:
+        raise CalibrationError(("flange_orientation",), f"tilts the tool {tilt:.0f} deg from "
+                               f"the {target} normal; the approach reaches at most 80 deg")
+    return float(tilt), float(around), float(-minus_spin)
+
+
 @router.post("/approach")
 def approach(controller_id: int, body: ApproachIn, db: SessionDep, response: Response,
         if_match: IfMatch = None) -> RobotStateOut:
@@ -136,10 +167,20 @@ def approach(controller_id: int, body: ApproachIn, db: SessionDep, response: Res
     workpiece) onto a cell target from tilt/around; ``fixed_tool_align`` aligns the flange
     with the fixed tool. Refused (422) when the pose is out of reach or limits. On an
     imperfect arm (``.../cell/physics``) the TRUE tip goes onto the target, so the joints
-    shown differ from the nominal solution."""
+    shown differ from the nominal solution. The tip stops off the mark like a person's does
+    (``noise_mm``, default 0.1 mm per axis, seeded: the same walk-through gives the same
+    report); ``noise_mm: 0`` is the ideal aim."""
     c = _controller(db, controller_id, if_match)
-    q = emulator.approach(robot_of(c), cell_of(c), c.joints_deg, body.target, body.tilt_deg,
-                          body.around_deg, body.spin_deg, body.tool_point_mm, body.miss_mm,
-                          physics=physics_of(db, c))
+    physics = physics_of(db, c)
+    miss = None if body.miss_mm is None else np.asarray(body.miss_mm, float)
+    if body.noise_mm > 0:  # the operator's aim: seeded by cell and motion count (own stream)
+        aim = physics.rng(AIM_STREAM).normal(0.0, body.noise_mm, 3)
+        miss = aim if miss is None else miss + aim
+    cell = cell_of(c)
+    tilt, around, spin = body.tilt_deg, body.around_deg, body.spin_deg
+    if body.flange_orientation is not None:
+        tilt, around, spin = approach_angles(cell, body.target, body.flange_orientation)
+    q = emulator.approach(robot_of(c), cell, c.joints_deg, body.target, tilt, around, spin,
+                          body.tool_point_mm, miss, physics=physics)
     move_to(c, q, emulator.APPROACH_S)
     return _answer(db, c, response)

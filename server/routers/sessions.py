@@ -53,7 +53,8 @@ def list_methods() -> list[dict[str, Any]]:
 @router.post(PREFIX, status_code=201)
 def open_session(controller_id: int, body: SessionIn, db: SessionDep,
                  response: Response) -> SessionOut:
-    """Open a menu run on a target slot; the params the method needs are checked now."""
+    """Open a menu run on a target slot; the params the method needs are checked now, and the
+    slots they name too (an empty touching or reference tool, a base that is no fixed tool)."""
     c = crud.get_controller(db, controller_id)
     spec = METHODS[body.method]
     params = body.params.model_dump(exclude_none=True)
@@ -64,6 +65,8 @@ def open_session(controller_id: int, body: SessionIn, db: SessionDep,
         raise CalibrationError(("target_no",),
                                f"{spec.name} writes a tool slot (1..16), got {body.target_no}")
     s = crud.open_session(db, c, spec.name, spec.table, body.target_no, jsonable(params))
+    if any(k in params for k in ("tool_no", "reference_tool_no", "fixed_tool_no")):
+        resolve_inputs(db, s)  # an empty touching tool is refused now, not at Compute
     set_etag(response, db, s)
     return session_out(s)
 
