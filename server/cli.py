@@ -1,6 +1,7 @@
 """The ``pendant`` command: serve the pendant, calibrate from a file, export a controller's tables.
 
-    pendant serve [--host 127.0.0.1] [--port 8000] [--db URL]
+    pendant serve [--host 127.0.0.1] [--port 8000] [--db URL] [--opcua-port 4840]
+    pendant opcua [--host 127.0.0.1] [--port 4840] [--db URL]
     pendant calibrate METHOD FILE [--robot KEY] [--tcp X,Y,Z] [--json]
     pendant export CONTROLLER --format kuka|abb|fanuc|ur|json [--db URL]
 
@@ -22,6 +23,7 @@ import numpy as np
 
 from server.analysis_cli import add_analysis_commands
 from server.methods import METHODS, MethodInputs, TaughtData
+from server.opcua.cli import add_opcua_commands, start_beside
 from server.schemas import ReportOut
 from solvers.errors import CalibrationError
 from solvers.frames import Pose
@@ -153,6 +155,8 @@ def build_parser() -> argparse.ArgumentParser:
     s.add_argument("--port", type=int, default=8000)
     s.add_argument("--db", help="database URL (default: PENDANT_DB_URL, else a SQLite file in "
                                 "the user data dir)")
+    s.add_argument("--opcua-port", type=int, help="also serve the OPC UA face on this port "
+                                                  "(a process of its own on the same database)")
 
     c = sub.add_parser("calibrate",
                        help="solve a calibration menu from taught poses in a JSON/CSV file")
@@ -171,6 +175,7 @@ def build_parser() -> argparse.ArgumentParser:
     e.add_argument("--db", help="database URL")
 
     add_analysis_commands(sub)
+    add_opcua_commands(sub)
     return p
 
 
@@ -188,7 +193,14 @@ def main(argv: Sequence[str] | None = None) -> int:
 
             from server.app import create_app
 
-            uvicorn.run(create_app(_settings(args.db)), host=args.host, port=args.port)
+            app = create_app(_settings(args.db))
+            face = start_beside(args.host, args.opcua_port, args.db) if args.opcua_port else None
+            try:
+                uvicorn.run(app, host=args.host, port=args.port)
+            finally:
+                if face is not None:
+                    face.terminate()
+                    face.wait(timeout=10)
             return 0
         if args.command == "calibrate":
             given = (("tcp_mm", args.tcp), ("reference_tcp_mm", args.reference_tcp),
