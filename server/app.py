@@ -8,6 +8,8 @@ controller "cell-1" (KUKA KR 6 R900 sixx) in an empty DB and serves ``web/`` at 
 from __future__ import annotations
 
 import asyncio
+from collections.abc import AsyncIterator
+from contextlib import asynccontextmanager
 from pathlib import Path
 
 from fastapi import FastAPI
@@ -18,8 +20,10 @@ from db import crud
 from db.session import make_engine, make_sessionmaker, run_migrations
 from server import errors
 from server.emulator import DEMO_ROBOT, home_joints
+from server.events.dispatcher import Dispatcher, WebhookSink
+from server.events.mqtt import MqttSink
 from server.routers import (analysis, base, controllers, export, fixed_tool, robot, sessions, tool,
-                            workpiece)
+                            webhooks, workpiece)
 from server.settings import Settings
 from solvers.robots import ROBOTS
 
@@ -36,6 +40,8 @@ TAGS = [
                                         "discard."},
     {"name": "Export", "description": "Controller files (KUKA, ABB, FANUC, UR) and JSON "
                                       "backup/restore."},
+    {"name": "Events", "description": "Webhooks for MES: frame committed, calibration computed, "
+                                      "import applied, analysis finished (signed, retried)."},
 ]
 
 PLACEHOLDER = """<!doctype html><html><head><meta charset="utf-8"><title>pendant</title></head>
@@ -52,20 +58,44 @@ def ensure_demo(app: FastAPI) -> None:
             db.commit()
 
 
+def event_dispatcher(app: FastAPI) -> Dispatcher:
+    """The webhook (and, when configured, MQTT) dispatcher of this process (docs/events.md)."""
+    s: Settings = app.state.settings
+    sinks: dict = {"webhook": WebhookSink()}
+    if s.mqtt_url:
+        sinks["mqtt"] = MqttSink(s.mqtt_url, s.uns_site, s.uns_area)
+    return Dispatcher(app.state.sessionmaker, sinks, backoff_s=s.events_backoff_s)
+
+
+@asynccontextmanager
+async def lifespan(app: FastAPI) -> AsyncIterator[None]:
+    """Deliver events while the service runs."""
+    dispatcher = event_dispatcher(app) if app.state.settings.dispatch_events else None
+    if dispatcher is not None:
+        dispatcher.start()
+    app.state.dispatcher = dispatcher
+    try:
+        yield
+    finally:
+        if dispatcher is not None:
+            dispatcher.stop()
+
+
 def create_app(settings: Settings | None = None) -> FastAPI:
     settings = settings or Settings()
-    app = FastAPI(title="pendant", version="0.1.0", openapi_tags=TAGS,
+    app = FastAPI(title="pendant", version="0.1.0", openapi_tags=TAGS, lifespan=lifespan,
                   description="A controller-side teach-pendant emulator: tool, base, "
                               "fixed-tool and workpiece calibration menus as a REST service.")
     engine = make_engine(settings.db_url)
     run_migrations(engine)
     app.state.engine = engine
     app.state.sessionmaker = make_sessionmaker(engine)
+    app.state.sessionmaker.configure(info={"mqtt_sink": bool(settings.mqtt_url)})  # db.outbox
     app.state.write_lock = asyncio.Lock()  # one writer at a time (SQLite); see deps.get_session
     app.state.settings = settings
     errors.install(app)
     for module in (controllers, robot, tool, base, fixed_tool, workpiece, sessions, export,
-                   analysis):
+                   analysis, webhooks):
         app.include_router(module.router)
     if settings.demo_controller:
         ensure_demo(app)

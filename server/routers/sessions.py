@@ -12,6 +12,7 @@ import numpy as np
 from fastapi import APIRouter, Body
 
 from db import crud
+from db.outbox import emit
 from server import emulator
 from server.deps import SessionDep
 from server.methods import METHODS, PARAM_HELP
@@ -113,6 +114,10 @@ def compute(controller_id: int, session_id: int, db: SessionDep) -> ReportOut:
     report = ReportOut.from_result(result)
     frame = Pose.from_matrix(result.frame).as_array()
     crud.store_result(db, s, frame, report.model_dump(mode="json"))
+    emit(db, "calibration-computed", crud.get_controller(db, controller_id), {
+        "session_id": s.id, "method": s.method, "table": s.target_table, "number": s.target_no,
+        "frame": dict(zip("xyzabc", frame.tolist())), "rms_error_mm": report.rms_error_mm,
+        "max_error_mm": report.max_error_mm, "position_bound95_mm": report.position_bound95_mm})
     return report
 
 
