@@ -8,6 +8,7 @@ own with its own event loop, on the same SQLite file as the REST app.
 from __future__ import annotations
 
 import asyncio
+import json
 import logging
 import threading
 import time
@@ -288,3 +289,33 @@ def test_serve_with_an_opcua_port_starts_the_face_beside_the_rest_service(tmp_pa
     finally:
         proc.terminate()
         proc.wait(timeout=20)
+
+
+def test_a_frame_committed_over_rest_arrives_as_an_opcua_event(face: dict) -> None:
+    class Inbox:
+        def __init__(self) -> None:
+            self.events: list[tuple[float, object]] = []
+
+        def event_notification(self, event) -> None:  # noqa: ANN001
+            self.events.append((time.monotonic(), event))
+
+    async def body(client: Client, ns: dict) -> tuple[float, object]:
+        inbox = Inbox()
+        sub = await client.create_subscription(50, inbox)
+        etype = await client.nodes.base_event_type.get_child([f"{ns['pendant']}:PendantEventType"])
+        await sub.subscribe_events(client.nodes.server, etype)
+        await asyncio.sleep(0.3)
+        sent = time.monotonic()
+        await asyncio.to_thread(face["rest"].put, f"{C}/bases/4", json={"name": "fixture"})
+        while time.monotonic() - sent < 3.0:
+            if inbox.events:
+                t, ev = inbox.events[0]
+                return t - sent, ev
+            await asyncio.sleep(0.02)
+        return float("inf"), None
+
+    delay, ev = on_client(face, body)
+    assert delay < 1.0
+    assert (ev.Kind, ev.Controller) == ("frame-committed", "cell-1")
+    payload = json.loads(ev.Payload)
+    assert (payload["table"], payload["number"], payload["name"]) == ("base", 4, "fixture")

@@ -19,7 +19,7 @@ from sqlalchemy.orm import Session, sessionmaker
 
 from db import crud
 from server.opcua import space
-from server.opcua.state import ControllerState, read_cells
+from server.opcua.state import ControllerState, events_after, latest_event_id, read_cells
 
 log = logging.getLogger("pendant.opcua")
 TABLES = {"tool": 16, "base": 32}
@@ -37,6 +37,8 @@ class PendantOpcUa:
     cells: dict[int, space.CellNodes] = field(default_factory=dict, init=False)
     states: dict[int, ControllerState] = field(default_factory=dict, init=False)
     ns_ids: tuple[int, int, int] = field(default=(0, 0, 0), init=False)
+    last_event_id: int = field(default=0, init=False)
+    _events: object = field(default=None, init=False)  # the PendantEventType generator
     _task: asyncio.Task | None = field(default=None, init=False)
 
     async def start(self) -> None:
@@ -46,6 +48,8 @@ class PendantOpcUa:
         self.server.set_server_name("pendant")
         await self.server.set_application_uri(space.PENDANT_URI)
         self.ns_ids = await space.load_nodesets(self.server)
+        self._events = await space.event_generator(self.server, self.ns_ids[2])
+        self.last_event_id = await asyncio.to_thread(latest_event_id, self.make_session)
         await self.sync()
         await self.server.start()
         self._task = asyncio.create_task(self._poll_forever(), name="pendant-opcua-poll")
@@ -80,6 +84,9 @@ class PendantOpcUa:
             else:
                 writes += await space.update_cell(self.cells[cid], self.states[cid], st)
             self.states[cid] = st
+        for ev in await asyncio.to_thread(events_after, self.make_session, self.last_event_id):
+            await space.raise_event(self._events, ev)
+            self.last_event_id = ev.id
         return writes
 
     async def _add_methods(self, cid: int, name: str, nodes: space.CellNodes) -> None:

@@ -14,13 +14,14 @@ rotation, see :func:`opc_orientation`). docs/opcua.md has the tree.
 
 from __future__ import annotations
 
+import json
 from dataclasses import dataclass, field
 from pathlib import Path
 
 from asyncua import Node, Server, ua
 from asyncua.common.instantiate_util import instantiate
 
-from server.opcua.state import ControllerState, SlotState
+from server.opcua.state import ControllerState, EventState, SlotState
 
 NODESETS = Path(__file__).resolve().parent / "nodesets"
 DI_URI = "http://opcfoundation.org/UA/DI/"
@@ -358,3 +359,23 @@ async def update_cell(nodes: CellNodes, old: ControllerState | None, new: Contro
     for node, value, variant in writes:
         await _set(node, value, variant)
     return len(writes)
+
+
+async def event_generator(server: Server, ns: int):  # noqa: ANN201
+    """``PendantEventType`` (a BaseEventType) raised by the Server object for every outbox
+    event: Kind, Controller, Payload (the JSON the webhooks carry), EventRecordId."""
+    etype = await server.create_custom_event_type(
+        ns, "PendantEventType", ua.ObjectIds.BaseEventType,
+        [("Kind", ua.VariantType.String), ("Controller", ua.VariantType.String),
+         ("Payload", ua.VariantType.String), ("EventRecordId", ua.VariantType.Int64)])
+    return await server.get_event_generator(etype, server.nodes.server)
+
+
+async def raise_event(gen, ev: EventState) -> None:  # noqa: ANN001
+    gen.event.Kind = ev.kind
+    gen.event.Controller = ev.controller or ""
+    gen.event.Payload = json.dumps(ev.payload, separators=(",", ":"))
+    gen.event.EventRecordId = ev.id
+    gen.event.Message = ua.LocalizedText(f"{ev.kind} on {ev.controller or 'the service'}")
+    gen.event.Severity = 300
+    await gen.trigger()

@@ -11,11 +11,11 @@ from __future__ import annotations
 from dataclasses import dataclass
 from typing import Any
 
-from sqlalchemy import select
+from sqlalchemy import func, select
 from sqlalchemy.orm import Session, sessionmaker
 
 from db import crud
-from db.models import CalibSession, Controller, FrameEntry
+from db.models import CalibSession, Controller, Event, FrameEntry
 from server.routers.common import robot_of
 
 
@@ -102,3 +102,26 @@ def read_cells(make_session: sessionmaker[Session]) -> dict[int, ControllerState
     """Every controller's state by id, in one read transaction."""
     with make_session() as db:
         return {c.id: controller_state(db, c) for c in crud.list_controllers(db)}
+
+
+@dataclass(frozen=True)
+class EventState:
+    id: int
+    kind: str
+    controller: str | None
+    payload: dict[str, Any]
+    created_at: str
+
+
+def latest_event_id(make_session: sessionmaker[Session]) -> int:
+    """The newest event's id: the face raises what comes after it (no replay at start)."""
+    with make_session() as db:
+        return int(db.scalar(select(func.max(Event.id))) or 0)
+
+
+def events_after(make_session: sessionmaker[Session], after_id: int,
+                 limit: int = 500) -> list[EventState]:
+    with make_session() as db:
+        rows = db.scalars(select(Event).where(Event.id > after_id).order_by(Event.id).limit(limit))
+        return [EventState(e.id, e.kind, e.controller_name, e.payload, e.created_at.isoformat())
+                for e in rows]
