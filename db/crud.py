@@ -16,6 +16,7 @@ from sqlalchemy.orm import Session
 
 from db.models import (BASE_SLOTS, TOOL_SLOTS, CalibSession, Controller, ControllerFile,
                        EntryHistory, FrameEntry, StoredDocument, TaughtPoint, utcnow)
+from db.outbox import emit
 
 SLOTS = {"tool": TOOL_SLOTS, "base": BASE_SLOTS}
 MAX_ID = 2**63 - 1  # SQLite INTEGER: a larger id cannot be a row (and would overflow the driver)
@@ -178,6 +179,9 @@ def change_entry(db: Session, e: FrameEntry, values: dict[str, Any], reason: str
                      reason=reason, session_id=session_id, before=before, after=snapshot(e))
     db.add(h)
     db.flush()
+    emit(db, "frame-committed", e.controller, {
+        "table": e.entry_table, "number": e.number, "reason": reason, "session_id": session_id,
+        **{k: v for k, v in h.after.items() if k != "session_id"}})
     return h
 
 

@@ -313,3 +313,56 @@ class Job(Base):
     lease_until: Mapped[datetime | None]
 
 
+class Event(Base):
+    """The outbox: one row per event (frame committed, calibration computed, import applied,
+    analysis finished), written in the transaction of the change it reports.
+
+    No foreign key: an event outlives a deleted controller. Webhook and MQTT deliveries are
+    rows of their own; the OPC UA face reads new events by id.
+    """
+
+    __tablename__ = "event"
+
+    id: Mapped[int] = mapped_column(primary_key=True)
+    kind: Mapped[str] = mapped_column(String(32), index=True)
+    controller_id: Mapped[int | None]
+    controller_name: Mapped[str | None] = mapped_column(String(64))
+    payload: Mapped[dict[str, Any]]
+    created_at: Mapped[datetime] = mapped_column(default=utcnow)
+
+
+class Webhook(Base):
+    """A subscriber: events (all, or the kinds listed) are POSTed to ``url``, signed with
+    HMAC-SHA256 under ``secret``."""
+
+    __tablename__ = "webhook"
+
+    id: Mapped[int] = mapped_column(primary_key=True)
+    url: Mapped[str] = mapped_column(String(2048))
+    secret: Mapped[str] = mapped_column(String(128))
+    kinds: Mapped[dict[str, Any] | None]  # {"kinds": [...]} or None for every kind
+    active: Mapped[bool] = mapped_column(default=True)
+    created_at: Mapped[datetime] = mapped_column(default=utcnow)
+
+
+class Delivery(Base):
+    """One event to one sink (a webhook, or the MQTT broker): attempts, back-off, outcome.
+
+    ``state``: pending → sending (claimed by one dispatcher) → delivered | pending (retry at
+    ``next_attempt_at``) | failed (attempts exhausted).
+    """
+
+    __tablename__ = "delivery"
+
+    id: Mapped[int] = mapped_column(primary_key=True)
+    event_id: Mapped[int] = mapped_column(ForeignKey("event.id", ondelete="CASCADE"), index=True)
+    sink: Mapped[str] = mapped_column(String(16))  # webhook | mqtt
+    webhook_id: Mapped[int | None] = mapped_column(ForeignKey("webhook.id", ondelete="CASCADE"),
+                                                   index=True)
+    state: Mapped[str] = mapped_column(String(16), default="pending", index=True)
+    attempts: Mapped[int] = mapped_column(default=0)
+    next_attempt_at: Mapped[datetime] = mapped_column(default=utcnow)
+    claimed_at: Mapped[datetime | None]
+    delivered_at: Mapped[datetime | None]
+    last_status: Mapped[int | None]
+    last_error: Mapped[str | None] = mapped_column(String(512))

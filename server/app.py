@@ -10,6 +10,8 @@ data dir); ``pendant serve --workers N`` starts N such processes on one database
 
 from __future__ import annotations
 
+from collections.abc import AsyncIterator
+from contextlib import asynccontextmanager
 from pathlib import Path
 
 from fastapi import Depends, FastAPI
@@ -25,9 +27,11 @@ from server import __version__, deps, errors, idempotency
 from server.auth import audit, guard, tokens
 from server.auth import routes as auth_routes
 from server.auth.web import SiteGuard
+from server.events.dispatcher import Dispatcher, WebhookSink
+from server.events.mqtt import MqttSink
 from server.limits import BodyLimits
 from server.routers import (analysis, base, controllers, export, fixed_tool, jobs, robot, sessions,
-                            tool, workpiece)
+                            tool, webhooks, workpiece)
 from server.routers import plan as plan_router
 from server.settings import Settings
 from solvers.robots import ROBOTS
@@ -49,6 +53,8 @@ TAGS = [
                                     "progress, cancel, result."},
     {"name": "Auth", "description": "Log in, users, API tokens, roles and the audit trail "
                                     "(docs/security.md)."},
+    {"name": "Events", "description": "Webhooks for MES: frame committed, calibration computed, "
+                                      "import applied, analysis finished (signed, retried)."},
 ]
 
 PLACEHOLDER = """<!doctype html><html><head><meta charset="utf-8"><title>pendant</title></head>
@@ -90,11 +96,35 @@ def bootstrap(app: FastAPI) -> None:
     app.state.first_token = made if made and not app.state.settings.bootstrap_token else None
 
 
+def event_dispatcher(app: FastAPI) -> Dispatcher:
+    """The webhook (and, when configured, MQTT) dispatcher of this process (docs/events.md)."""
+    s: Settings = app.state.settings
+    sinks: dict = {"webhook": WebhookSink()}
+    if s.mqtt_url:
+        sinks["mqtt"] = MqttSink(s.mqtt_url, s.uns_site, s.uns_area)
+    return Dispatcher(app.state.sessionmaker, sinks, backoff_s=s.events_backoff_s)
+
+
+@asynccontextmanager
+async def lifespan(app: FastAPI) -> AsyncIterator[None]:
+    """Deliver events while the service runs."""
+    dispatcher = event_dispatcher(app) if app.state.settings.dispatch_events else None
+    if dispatcher is not None:
+        dispatcher.start()
+    app.state.dispatcher = dispatcher
+    try:
+        yield
+    finally:
+        if dispatcher is not None:
+            dispatcher.stop()
+
+
 def create_app(settings: Settings | None = None) -> FastAPI:
     settings = settings or Settings()
     # FastAPIOffline: FastAPI whose /docs and /redoc load Swagger UI and ReDoc from the
     # fastapi-offline package, not a CDN (robot cells are often offline)
     app = FastAPIOffline(title="pendant", version=__version__, openapi_tags=TAGS,
+                         lifespan=lifespan,
                          dependencies=[Depends(guard.authorize)],
                          description="A controller-side teach-pendant emulator: tool, base, "
                                      "fixed-tool and workpiece calibration menus as a REST "
@@ -104,6 +134,7 @@ def create_app(settings: Settings | None = None) -> FastAPI:
     check_schema(engine, settings.migrate)
     app.state.engine = engine
     app.state.sessionmaker = make_sessionmaker(engine)
+    app.state.sessionmaker.configure(info={"mqtt_sink": bool(settings.mqtt_url)})  # db.outbox
     app.state.settings = settings
     deps.install(app)
     errors.install(app)
@@ -111,7 +142,7 @@ def create_app(settings: Settings | None = None) -> FastAPI:
     _install_health(app)
     app.add_middleware(BodyLimits)
     for module in (controllers, robot, tool, base, fixed_tool, workpiece, sessions, export,
-                   analysis, jobs, auth_routes):
+                   analysis, jobs, auth_routes, webhooks):
         app.include_router(module.router)
     app.include_router(plan_router.router)
     bootstrap(app)

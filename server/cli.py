@@ -2,7 +2,9 @@
 
     pendant serve [--host 127.0.0.1] [--port 8000] [--db URL] [--workers N] [--no-migrate]
                   [--job-workers 2] [--allow-host NAME] [--cors-origin URL] [--no-auth]
+                  [--opcua-port 4840]
     pendant db upgrade [--db URL]
+    pendant opcua [--host 127.0.0.1] [--port 4840] [--db URL]
     pendant worker [--processes 2] [--db URL] [--job-time-s 600] [--job-memory-mb 2048]
     pendant slot tool|base N [--name ..] [--pose x,y,z,a,b,c] [--url URL]   (sends If-Match)
     pendant users add|list|revoke ...; pendant tokens create USER; pendant roles add|list
@@ -40,6 +42,7 @@ from server.analysis_cli import add_analysis_commands
 from server.auth.cli import add_auth_commands
 from server.slot_cli import add_slot_command
 from server.methods import METHODS, MethodInputs, TaughtData
+from server.opcua.cli import add_opcua_commands, start_beside
 from server.schemas import ReportOut
 from solvers.errors import CalibrationError
 from solvers.frames import Pose
@@ -226,6 +229,9 @@ def build_parser() -> argparse.ArgumentParser:
                    help="an origin whose pages may call the API (CORS; closed by default)")
     s.add_argument("--no-auth", action="store_true",
                    help="demo only: no login, everyone an Administrator; loopback hosts only")
+    s.add_argument("--opcua-port", type=int, metavar="PORT",
+                   help="also serve the OPC UA face on this port (a process of its own on the "
+                        "same database; docs/opcua.md)")
 
     c = sub.add_parser("calibrate",
                        help="solve a calibration menu from taught poses in a JSON/CSV file",
@@ -263,6 +269,7 @@ def build_parser() -> argparse.ArgumentParser:
     add_analysis_commands(sub)
     add_slot_command(sub)
     add_auth_commands(sub)
+    add_opcua_commands(sub)
     return p
 
 
@@ -499,15 +506,17 @@ def serve(args: argparse.Namespace) -> int:
               f"More users: pendant users add NAME --role Expert; pendant tokens create NAME",
               file=sys.stderr)
     workers = start_job_workers(settings.db_url, args)  # the schema is current by now
+    face = start_beside(args.host, args.opcua_port, settings.db_url) if args.opcua_port else None
     try:
         if args.workers == 1:
             _serve(application, args.host, args.port)
         else:
             uvicorn.run("server.app:app", host=args.host, port=args.port, workers=args.workers)
     finally:
-        if workers is not None:
-            workers.terminate()
-            workers.wait(timeout=30)
+        for child in (workers, face):
+            if child is not None:
+                child.terminate()
+                child.wait(timeout=30)
     return 0
 
 

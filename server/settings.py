@@ -32,6 +32,10 @@ def default_db_url() -> str:
     return f"sqlite:///{data / 'pendant.db'}"
 
 
+def _env(name: str, default: str | None = None) -> str | None:
+    return os.environ.get(name) or default
+
+
 @dataclass(frozen=True)
 class Settings:
     db_url: str = field(default_factory=default_db_url)
@@ -50,3 +54,10 @@ class Settings:
     # closed unless origins are named
     idle_timeout_s: float = 600.0  # a browser login idle this long acts as an Operator
     session_lifetime_s: float = 12 * 3600.0  # a browser login ends after this
+    # events (docs/events.md): the MQTT broker that takes every event, and the unified-namespace
+    # levels of its topics <site>/<area>/<cell>/pendant/<event>; the webhook retry back-off
+    mqtt_url: str | None = field(default_factory=lambda: _env("PENDANT_MQTT_URL"))
+    uns_site: str = field(default_factory=lambda: _env("PENDANT_UNS_SITE", "site") or "site")
+    uns_area: str = field(default_factory=lambda: _env("PENDANT_UNS_AREA", "area") or "area")
+    events_backoff_s: float = 2.0
+    dispatch_events: bool = True  # deliver webhooks / MQTT from this process

@@ -93,6 +93,12 @@ ROUTES: Final[dict[tuple[str, str], str]] = {
     ("GET", "/jobs/{job_id}"): "frames:read",
     ("POST", "/jobs/{job_id}/cancel"): "sessions:run",
     ("GET", "/healthz"): PUBLIC,  # load balancers and compose health checks
+    # MES integration (docs/events.md): a subscription sends every frame to its URL
+    ("GET", "/webhooks"): "controllers:admin",
+    ("POST", "/webhooks"): "controllers:admin",
+    ("DELETE", "/webhooks/{webhook_id}"): "controllers:admin",
+    ("POST", "/webhooks/{webhook_id}/test"): "controllers:admin",
+    ("GET", "/webhooks/{webhook_id}/deliveries"): "controllers:admin",
 }
 
 

@@ -13,6 +13,7 @@ from fastapi import APIRouter, Body, Response
 
 import emulator
 from db import crud
+from db.outbox import emit
 from server.deps import SessionDep
 from server.preconditions import IfMatch, check, set_etag
 from server.methods import METHODS, PARAM_HELP
@@ -139,6 +140,10 @@ def compute(controller_id: int, session_id: int, db: SessionDep, response: Respo
     crud.store_result(db, s, frame, report.model_dump(mode="json"))
     s.target_version = crud.get_entry(db, controller_id, s.target_table, s.target_no).version
     set_etag(response, db, s)
+    emit(db, "calibration-computed", crud.get_controller(db, controller_id), {
+        "session_id": s.id, "method": s.method, "table": s.target_table, "number": s.target_no,
+        "frame": dict(zip("xyzabc", frame.tolist())), "rms_error_mm": report.rms_error_mm,
+        "max_error_mm": report.max_error_mm, "position_bound95_mm": report.position_bound95_mm})
     return report
 
 

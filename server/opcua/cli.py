@@ -1,0 +1,50 @@
+"""``pendant opcua``: the OPC UA server as a process of its own, on the service's database.
+
+    pendant opcua [--host 127.0.0.1] [--port 4840] [--db URL]
+
+``pendant serve --opcua-port 4840`` starts the same process beside the REST service.
+"""
+
+from __future__ import annotations
+
+import argparse
+import asyncio
+import logging
+import subprocess
+import sys
+
+
+def add_opcua_commands(sub: argparse._SubParsersAction) -> None:
+    o = sub.add_parser("opcua", help="serve the OPC UA face (Robotics companion specification) "
+                                     "on the service's database")
+    add_opcua_arguments(o)
+    o.add_argument("--db", help="database URL (default: PENDANT_DB_URL, else the SQLite file in "
+                                "the user data dir)")
+    o.set_defaults(func=run_opcua)
+
+
+def add_opcua_arguments(o: argparse.ArgumentParser) -> None:
+    o.add_argument("--host", default="127.0.0.1", help="address to listen on (default 127.0.0.1)")
+    o.add_argument("--port", type=int, default=4840, help="OPC UA port (default 4840)")
+
+
+def run_opcua(args: argparse.Namespace) -> int:
+    from server.app import create_app
+    from server.opcua.service import run
+    from server.settings import Settings
+
+    logging.basicConfig(level=logging.WARNING, format="%(levelname)s %(name)s: %(message)s")
+    app = create_app(Settings(db_url=args.db) if args.db else Settings())
+    try:
+        asyncio.run(run(app.state.sessionmaker, args.host, args.port))
+    except KeyboardInterrupt:
+        pass
+    return 0
+
+
+def start_beside(host: str, port: int, db_url: str | None) -> subprocess.Popen:
+    """``pendant serve --opcua-port``: the OPC UA face as a child process on the same DB."""
+    cmd = [sys.executable, "-m", "server.cli", "opcua", "--host", host, "--port", str(port)]
+    if db_url:
+        cmd += ["--db", db_url]
+    return subprocess.Popen(cmd)

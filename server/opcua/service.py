@@ -1,0 +1,153 @@
+"""pendant's OPC UA server: the Robotics address space over the service's database.
+
+``pendant opcua --port 4840`` runs it as a process of its own, ``pendant serve --opcua-port
+4840`` beside the REST service. It polls the database (``poll_s``, 0.2 s by default) and
+writes what changed into the address space, so a REST change made by any worker on any host
+reaches a subscribed client within a poll and a publishing interval. Methods on each
+controller's pendant object: ``ReadFrame``, ``ExportFile`` (and the open sessions as a
+variable). docs/opcua.md has the tree and an example client session.
+"""
+
+from __future__ import annotations
+
+import asyncio
+import logging
+from dataclasses import dataclass, field
+
+from asyncua import Server, ua
+from sqlalchemy.orm import Session, sessionmaker
+
+from db import crud
+from server.opcua import space
+from server.opcua.state import ControllerState, events_after, latest_event_id, read_cells
+
+log = logging.getLogger("pendant.opcua")
+TABLES = {"tool": 16, "base": 32}
+FORMATS = ("kuka", "abb", "fanuc", "ur", "json")
+
+
+@dataclass
+class PendantOpcUa:
+    """The server, its cells' node handles and the last state read from the database."""
+
+    make_session: sessionmaker[Session]
+    endpoint: str = "opc.tcp://127.0.0.1:4840/pendant/"
+    poll_s: float = 0.2
+    server: Server = field(init=False)
+    cells: dict[int, space.CellNodes] = field(default_factory=dict, init=False)
+    states: dict[int, ControllerState] = field(default_factory=dict, init=False)
+    ns_ids: tuple[int, int, int] = field(default=(0, 0, 0), init=False)
+    last_event_id: int = field(default=0, init=False)
+    _events: object = field(default=None, init=False)  # the PendantEventType generator
+    _task: asyncio.Task | None = field(default=None, init=False)
+
+    async def start(self) -> None:
+        self.server = Server()
+        await self.server.init()
+        self.server.set_endpoint(self.endpoint)
+        self.server.set_server_name("pendant")
+        await self.server.set_application_uri(space.PENDANT_URI)
+        self.ns_ids = await space.load_nodesets(self.server)
+        self._events = await space.event_generator(self.server, self.ns_ids[2])
+        self.last_event_id = await asyncio.to_thread(latest_event_id, self.make_session)
+        await self.sync()
+        await self.server.start()
+        self._task = asyncio.create_task(self._poll_forever(), name="pendant-opcua-poll")
+
+    async def stop(self) -> None:
+        if self._task is not None:
+            self._task.cancel()
+            await asyncio.gather(self._task, return_exceptions=True)
+        await self.server.stop()
+
+    async def _poll_forever(self) -> None:
+        while True:
+            await asyncio.sleep(self.poll_s)
+            try:
+                await self.sync()
+            except Exception:  # a DB hiccup must not end the face; say it and poll again
+                log.exception("OPC UA poll of the database failed")
+
+    async def sync(self) -> int:
+        """Read every controller from the database and update the address space; returns writes."""
+        new = await asyncio.to_thread(read_cells, self.make_session)
+        writes = 0
+        for cid in set(self.states) - set(new):  # deleted controllers leave the space
+            nodes = self.cells.pop(cid)
+            await space.remove(nodes.system)
+            await space.remove(nodes.pendant)
+            self.states.pop(cid)
+        for cid, st in new.items():
+            if cid not in self.cells:
+                self.cells[cid] = await space.add_cell(self.server, self.ns_ids, st)
+                await self._add_methods(cid, st.name, self.cells[cid])
+            else:
+                writes += await space.update_cell(self.cells[cid], self.states[cid], st)
+            self.states[cid] = st
+        for ev in await asyncio.to_thread(events_after, self.make_session, self.last_event_id):
+            await space.raise_event(self._events, ev)
+            self.last_event_id = ev.id
+        return writes
+
+    async def _add_methods(self, cid: int, name: str, nodes: space.CellNodes) -> None:
+        ns = self.ns_ids[2]
+        S, I32, D = ua.VariantType.String, ua.VariantType.Int32, ua.VariantType.Double
+
+        def arg(name: str, variant: ua.VariantType, rank: int = -1, doc: str = "") -> ua.Argument:
+            a = ua.Argument(Name=name, DataType=ua.NodeId(variant.value), ValueRank=rank,
+                            Description=ua.LocalizedText(doc))
+            if rank == 1:
+                a.ArrayDimensions = [0]
+            return a
+
+        def read_frame(_parent: ua.NodeId, table: ua.Variant,
+                       number: ua.Variant) -> list[ua.Variant] | ua.StatusCode:
+            key = _slot_key(table.Value, number.Value)
+            st = self.states[cid].slot(*key) if key else None
+            if st is None:
+                return ua.StatusCode(ua.StatusCodes.BadInvalidArgument)
+            return [ua.Variant(st.name, S), ua.Variant(st.kind, S),
+                    ua.Variant(list(st.pose), D), ua.Variant(st.version, ua.VariantType.UInt64)]
+
+        async def export_file(_parent: ua.NodeId, fmt: ua.Variant) -> list[ua.Variant] | ua.StatusCode:
+            if fmt.Value not in FORMATS:
+                return ua.StatusCode(ua.StatusCodes.BadInvalidArgument)
+            text = await asyncio.to_thread(self._export, cid, fmt.Value)
+            return [ua.Variant(text, S)]
+
+        await nodes.pendant.add_method(
+            ua.NodeId(f"Pendant.{name}.ReadFrame", ns),
+            ua.QualifiedName("ReadFrame", ns), read_frame,
+            [arg("Table", S, doc="tool or base"), arg("Number", I32, doc="1..16 tools, 1..32 bases")],
+            [arg("Name", S), arg("Kind", S),
+             arg("Frame", D, 1, "KUKA X, Y, Z (mm), A, B, C (deg)"),
+             arg("Version", ua.VariantType.UInt64)])
+        await nodes.pendant.add_method(
+            ua.NodeId(f"Pendant.{name}.ExportFile", ns),
+            ua.QualifiedName("ExportFile", ns), export_file,
+            [arg("Format", S, doc="kuka, abb, fanuc, ur or json")], [arg("Text", S)])
+
+    def _export(self, cid: int, fmt: str) -> str:
+        from server.routers.export import export_text
+
+        with self.make_session() as db:
+            crud.get_controller(db, cid)
+            return export_text(db, cid, fmt)
+
+
+def _slot_key(table: object, number: object) -> tuple[str, int] | None:
+    """The (table, number) a client asked for, or None where there is no such slot."""
+    if table not in TABLES or isinstance(number, bool) or not isinstance(number, int):
+        return None
+    return (str(table), number) if 1 <= number <= TABLES[str(table)] else None
+
+
+async def run(make_session: sessionmaker[Session], host: str, port: int) -> None:
+    """Serve until cancelled (``pendant opcua``)."""
+    face = PendantOpcUa(make_session, f"opc.tcp://{host}:{port}/pendant/")
+    await face.start()
+    log.warning("pendant OPC UA server at %s", face.endpoint)
+    try:
+        await asyncio.Event().wait()
+    finally:
+        await face.stop()

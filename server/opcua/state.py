@@ -1,0 +1,127 @@
+"""What the OPC UA face shows of a controller, read from the database as plain values.
+
+The OPC UA server holds no state of its own: every ``poll`` reads the controllers, their
+slots and open sessions into these frozen dataclasses, and the address space is updated
+where a value differs from the last read. Several API workers or hosts write the same
+database, so a change made anywhere reaches the OPC UA clients through the database.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+from typing import Any
+
+from sqlalchemy import func, select
+from sqlalchemy.orm import Session, sessionmaker
+
+from db import crud
+from db.models import CalibSession, Controller, Event, FrameEntry
+from server.routers.common import robot_of
+
+
+@dataclass(frozen=True)
+class SlotState:
+    """One TOOL_DATA / BASE_DATA slot: pose as KUKA x, y, z (mm), a, b, c (deg)."""
+
+    table: str
+    number: int
+    name: str
+    kind: str
+    pose: tuple[float, ...]
+    mass_kg: float | None
+    com_mm: tuple[float, float, float]
+    inertia_kgm2: tuple[float, float, float]
+    version: int
+    method: str | None
+    error_rms_mm: float | None
+    error_max_mm: float | None
+    updated_at: str
+
+
+@dataclass(frozen=True)
+class SessionState:
+    """An open or computed calibration session, as MES sees its progress."""
+
+    id: int
+    method: str
+    target: str
+    state: str
+    points: int
+
+
+@dataclass(frozen=True)
+class ControllerState:
+    id: int
+    name: str
+    robot_name: str
+    joints_deg: tuple[float, ...]
+    joint_limits_deg: tuple[tuple[float, float], ...]
+    active_tool_no: int
+    active_base_no: int
+    slots: tuple[SlotState, ...]
+    sessions: tuple[SessionState, ...]
+
+    def slot(self, table: str, number: int) -> SlotState | None:
+        return next((s for s in self.slots if s.table == table and s.number == number), None)
+
+
+def slot_version(e: FrameEntry) -> int:
+    """The slot's version as REST's ETag carries it (0 where the schema has none yet)."""
+    return int(getattr(e, "version", 0) or 0)
+
+
+def slot_state(e: FrameEntry) -> SlotState:
+    def vec(*vals: Any) -> tuple[float, float, float]:
+        return tuple(float(v or 0.0) for v in vals)  # type: ignore[return-value]
+
+    return SlotState(
+        table=e.entry_table, number=e.number, name=e.name, kind=e.kind,
+        pose=tuple(float(v) for v in e.pose_values()), mass_kg=e.mass_kg,
+        com_mm=vec(e.com_x_mm, e.com_y_mm, e.com_z_mm),
+        inertia_kgm2=vec(e.inertia_x_kgm2, e.inertia_y_kgm2, e.inertia_z_kgm2),
+        version=slot_version(e), method=e.method, error_rms_mm=e.error_rms_mm,
+        error_max_mm=e.error_max_mm, updated_at=e.updated_at.isoformat() if e.updated_at else "")
+
+
+def controller_state(db: Session, c: Controller) -> ControllerState:
+    robot = robot_of(c)
+    live = db.scalars(select(CalibSession).where(
+        CalibSession.controller_id == c.id,
+        CalibSession.state.in_(("open", "computed"))).order_by(CalibSession.id)).all()
+    sessions = tuple(SessionState(s.id, s.method, f"{s.target_table} {s.target_no}", s.state,
+                                  len(s.points)) for s in live)
+    return ControllerState(
+        id=c.id, name=c.name, robot_name=robot.name,
+        joints_deg=tuple(float(q) for q in c.joints_deg),
+        joint_limits_deg=tuple((float(lo), float(hi)) for lo, hi in robot.limits_deg()),
+        active_tool_no=c.active_tool_no, active_base_no=c.active_base_no,
+        slots=tuple(slot_state(e) for e in crud.list_entries(db, c.id)), sessions=sessions)
+
+
+def read_cells(make_session: sessionmaker[Session]) -> dict[int, ControllerState]:
+    """Every controller's state by id, in one read transaction."""
+    with make_session() as db:
+        return {c.id: controller_state(db, c) for c in crud.list_controllers(db)}
+
+
+@dataclass(frozen=True)
+class EventState:
+    id: int
+    kind: str
+    controller: str | None
+    payload: dict[str, Any]
+    created_at: str
+
+
+def latest_event_id(make_session: sessionmaker[Session]) -> int:
+    """The newest event's id: the face raises what comes after it (no replay at start)."""
+    with make_session() as db:
+        return int(db.scalar(select(func.max(Event.id))) or 0)
+
+
+def events_after(make_session: sessionmaker[Session], after_id: int,
+                 limit: int = 500) -> list[EventState]:
+    with make_session() as db:
+        rows = db.scalars(select(Event).where(Event.id > after_id).order_by(Event.id).limit(limit))
+        return [EventState(e.id, e.kind, e.controller_name, e.payload, e.created_at.isoformat())
+                for e in rows]

@@ -1,0 +1,321 @@
+"""The MES face: an OPC UA client (asyncua) on loopback against pendant's OPC UA server.
+
+MES browses MotionDeviceSystem → MotionDevices → Axes, reads a tool frame, exports a file
+and watches a REST change arrive through a subscription. The server runs in a thread of its
+own with its own event loop, on the same SQLite file as the REST app.
+"""
+
+from __future__ import annotations
+
+import asyncio
+import json
+import logging
+import threading
+import time
+from collections.abc import Iterator
+
+import numpy as np
+import pytest
+from asyncua import Client, Node, ua
+from scipy.spatial.transform import Rotation
+
+from api_helpers import C, make_client, ok
+from browser_helpers import free_port
+from server.opcua.service import PendantOpcUa
+from server.opcua.space import DI_URI, PENDANT_URI, ROBOTICS_URI
+
+MANDATORY = ua.NodeId(ua.ObjectIds.ModellingRule_Mandatory)
+
+
+class LogRecords(logging.Handler):
+    def __init__(self) -> None:
+        super().__init__(logging.DEBUG)
+        self.records: list[logging.LogRecord] = []
+
+    def emit(self, record: logging.LogRecord) -> None:
+        self.records.append(record)
+
+
+@pytest.fixture(scope="module")
+def face(tmp_path_factory: pytest.TempPathFactory) -> Iterator[dict]:
+    """The REST app (TestClient) and the OPC UA server on one SQLite file."""
+    db_url = f"sqlite:///{tmp_path_factory.mktemp('opcua') / 'pendant.db'}"
+    logs = LogRecords()
+    logging.getLogger("asyncua").addHandler(logs)
+    loop = asyncio.new_event_loop()
+    thread = threading.Thread(target=loop.run_forever, name="opcua", daemon=True)
+    thread.start()
+    with make_client(db_url) as rest:
+        server = PendantOpcUa(rest.app.state.sessionmaker,
+                              f"opc.tcp://127.0.0.1:{free_port()}/pendant/", poll_s=0.1)
+        asyncio.run_coroutine_threadsafe(server.start(), loop).result(timeout=120)
+        yield {"rest": rest, "server": server, "logs": logs}
+        asyncio.run_coroutine_threadsafe(server.stop(), loop).result(timeout=30)
+    loop.call_soon_threadsafe(loop.stop)
+    thread.join(timeout=10)
+    logging.getLogger("asyncua").removeHandler(logs)
+
+
+def on_client(face: dict, body) -> object:  # noqa: ANN001
+    """Run ``body(client, ns)`` with a connected asyncua Client; ns = {di, rob, pendant}."""
+    async def run() -> object:
+        async with Client(face["server"].endpoint, timeout=10) as client:
+            ns = {"di": await client.get_namespace_index(DI_URI),
+                  "rob": await client.get_namespace_index(ROBOTICS_URI),
+                  "pendant": await client.get_namespace_index(PENDANT_URI)}
+            return await body(client, ns)
+    return asyncio.run(run())
+
+
+async def cell(client: Client, ns: dict, name: str = "cell-1") -> Node:
+    return await client.nodes.objects.get_child([f"{ns['di']}:DeviceSet", f"{ns['pendant']}:{name}"])
+
+
+async def pendant(client: Client, ns: dict, name: str = "cell-1") -> Node:
+    return await client.nodes.objects.get_child([f"{ns['pendant']}:Pendant", f"{ns['pendant']}:{name}"])
+
+
+def test_the_nodesets_load_without_errors(face: dict) -> None:
+    errors = [r.getMessage() for r in face["logs"].records if r.levelno >= logging.ERROR]
+    assert errors == []
+
+
+def test_mes_browses_motion_devices_to_axes_and_reads_the_joints(face: dict) -> None:
+    joints = ok(face["rest"].get(f"{C}/robot"))["joints_deg"]
+
+    async def body(client: Client, ns: dict) -> tuple[list[str], list[float]]:
+        devices = await (await cell(client, ns)).get_child([f"{ns['rob']}:MotionDevices"])
+        (arm,) = await devices.get_children()
+        axes = await (await arm.get_child([f"{ns['rob']}:Axes"])).get_children()
+        names = [(await a.read_browse_name()).Name for a in axes]
+        values = [await (await a.get_child([f"{ns['di']}:ParameterSet",
+                                            f"{ns['rob']}:ActualPosition"])).read_value()
+                  for a in axes]
+        return [(await arm.read_browse_name()).Name] + names, values
+
+    names, values = on_client(face, body)
+    assert names == ["KUKA KR 6 R900 sixx", "A1", "A2", "A3", "A4", "A5", "A6"]
+    assert values == pytest.approx(joints, abs=1e-12)
+
+
+def test_a_tool_frame_reads_as_rest_has_it_and_rotates_the_same(face: dict) -> None:
+    pose = {"x": 12.5, "y": -3.0, "z": 180.0, "a": 30.0, "b": -20.0, "c": 10.0}
+    ok(face["rest"].put(f"{C}/tools/2", json={"name": "torch", "pose": pose}))
+    time.sleep(0.5)  # the server polls the database every 0.1 s
+
+    async def body(client: Client, ns: dict) -> tuple:
+        obj = await pendant(client, ns)
+        out = await obj.call_method(f"{ns['pendant']}:ReadFrame", "tool", 2)
+        frame = await obj.get_child([f"{ns['pendant']}:Tools", f"{ns['pendant']}:Tool2",
+                                     f"{ns['pendant']}:Frame"])
+        return out, await frame.read_value()
+
+    (name, kind, xyzabc, _version), frame = on_client(face, body)
+    assert (name, kind) == ("torch", "tool")
+    assert xyzabc == pytest.approx([12.5, -3.0, 180.0, 30.0, -20.0, 10.0])
+    o = frame.Orientation  # OPC UA: A about X, B about Y, C about Z, intrinsic z-y'-x''
+    R_opc = Rotation.from_euler("ZYX", [o.C, o.B, o.A], degrees=True).as_matrix()
+    R_kuka = Rotation.from_euler("ZYX", [30.0, -20.0, 10.0], degrees=True).as_matrix()
+    assert np.abs(R_opc - R_kuka).max() < 1e-12
+    p = frame.CartesianCoordinates
+    assert (p.X, p.Y, p.Z) == (12.5, -3.0, 180.0)
+
+
+def test_a_rest_change_reaches_a_subscribed_client_within_a_second(face: dict) -> None:
+    class Inbox:
+        def __init__(self) -> None:
+            self.seen: list[tuple[float, object]] = []
+
+        def datachange_notification(self, node, val, data) -> None:  # noqa: ANN001
+            self.seen.append((time.monotonic(), val))
+
+    async def body(client: Client, ns: dict) -> float:
+        name = await (await pendant(client, ns)).get_child(
+            [f"{ns['pendant']}:Tools", f"{ns['pendant']}:Tool3", f"{ns['pendant']}:Name"])
+        inbox = Inbox()
+        sub = await client.create_subscription(50, inbox)
+        await sub.subscribe_data_change(name)
+        await asyncio.sleep(0.3)  # the initial value arrives first
+        sent = time.monotonic()
+        await asyncio.to_thread(face["rest"].put, f"{C}/tools/3", json={"name": "spindle"})
+        while time.monotonic() - sent < 3.0:
+            arrived = [t for t, v in inbox.seen if v == "spindle"]
+            if arrived:
+                return arrived[0] - sent
+            await asyncio.sleep(0.02)
+        return float("inf")
+
+    assert on_client(face, body) < 1.0
+
+
+def test_a_jog_moves_the_axis_actual_position(face: dict) -> None:
+    before = ok(face["rest"].get(f"{C}/robot"))["joints_deg"][0]
+    ok(face["rest"].post(f"{C}/robot/jog", json={"mode": "joint", "axis": "A1", "increment": 2.5}))
+    time.sleep(0.5)
+
+    async def body(client: Client, ns: dict) -> float:
+        devices = await (await cell(client, ns)).get_child([f"{ns['rob']}:MotionDevices"])
+        (arm,) = await devices.get_children()
+        a1 = await arm.get_child([f"{ns['rob']}:Axes", f"{ns['rob']}:A1",
+                                  f"{ns['di']}:ParameterSet", f"{ns['rob']}:ActualPosition"])
+        return await a1.read_value()
+
+    assert on_client(face, body) == pytest.approx(before + 2.5)
+
+
+def test_export_file_is_the_rest_export(face: dict) -> None:
+    rest_text = face["rest"].get(f"{C}/export", params={"format": "abb"}).text
+
+    async def body(client: Client, ns: dict) -> str:
+        return await (await pendant(client, ns)).call_method(f"{ns['pendant']}:ExportFile", "abb")
+
+    assert on_client(face, body) == rest_text
+
+
+def test_a_slot_outside_the_table_is_a_bad_argument(face: dict) -> None:
+    async def body(client: Client, ns: dict) -> None:
+        await (await pendant(client, ns)).call_method(f"{ns['pendant']}:ReadFrame", "tool", 17)
+
+    with pytest.raises(ua.UaStatusCodeError) as err:
+        on_client(face, body)
+    assert err.value.code == ua.StatusCodes.BadInvalidArgument
+
+
+def test_a_controller_made_over_rest_appears_and_leaves_when_deleted(face: dict) -> None:
+    made = ok(face["rest"].post("/controllers", json={"name": "cell-7",
+                                                      "robot": "abb_irb120"}))
+    time.sleep(1.0)
+
+    async def axes(client: Client, ns: dict) -> list[str]:
+        devices = await (await cell(client, ns, "cell-7")).get_child([f"{ns['rob']}:MotionDevices"])
+        (arm,) = await devices.get_children()
+        return [(await a.read_browse_name()).Name
+                for a in await (await arm.get_child([f"{ns['rob']}:Axes"])).get_children()]
+
+    assert on_client(face, axes) == [f"A{i}" for i in range(1, 7)]
+    assert face["rest"].delete(f"/controllers/{made['id']}").status_code == 204
+    time.sleep(1.0)
+    with pytest.raises(ua.UaStatusCodeError):
+        on_client(face, axes)
+
+
+async def mandatory_children(client: Client, type_node: Node) -> set[str]:
+    """Browse names of the type's (and its supertypes') Mandatory instance declarations."""
+    names: set[str] = set()
+    node: Node | None = type_node
+    while node is not None:
+        for child in await node.get_children(refs=ua.ObjectIds.HierarchicalReferences):
+            rules = await child.get_referenced_nodes(ua.ObjectIds.HasModellingRule)
+            if any(r.nodeid == MANDATORY for r in rules):
+                names.add((await child.read_browse_name()).to_string())
+        supers = await node.get_referenced_nodes(ua.ObjectIds.HasSubtype, ua.BrowseDirection.Inverse)
+        node = supers[0] if supers else None
+    return names
+
+
+async def missing_mandatory(client: Client, node: Node, path: str,
+                            checked: list[str]) -> list[str]:
+    """Every mandatory child of every instance below ``node`` that is not there; ``checked``
+    collects each mandatory child that was looked for."""
+    missing: list[str] = []
+    children = await node.get_children(refs=ua.ObjectIds.HierarchicalReferences)
+    have = {(await c.read_browse_name()).to_string() for c in children}
+    type_id = await node.read_type_definition()
+    if type_id is not None:
+        for name in await mandatory_children(client, client.get_node(type_id)):
+            checked.append(f"{path}/{name.split(':', 1)[-1]}")
+            if name not in have:
+                missing.append(f"{path}/{name}")
+    for c in children:
+        if await c.read_node_class() in (ua.NodeClass.Object, ua.NodeClass.Variable):
+            missing += await missing_mandatory(
+                client, c, f"{path}/{(await c.read_browse_name()).Name}", checked)
+    return missing
+
+
+def test_instances_have_every_mandatory_child_of_their_types(face: dict) -> None:
+    checked: list[str] = []
+
+    async def body(client: Client, ns: dict) -> list[str]:
+        system = await cell(client, ns)
+        frame = await (await pendant(client, ns)).get_child(
+            [f"{ns['pendant']}:Tools", f"{ns['pendant']}:Tool1", f"{ns['pendant']}:Frame"])
+        return (await missing_mandatory(client, system, "cell-1", checked)
+                + await missing_mandatory(client, frame, "Tool1/Frame", checked))
+
+    assert on_client(face, body) == []
+    for expected in ("cell-1/MotionDevices", "cell-1/MotionDevices/KUKA KR 6 R900 sixx/Axes",
+                     "Axes/A1/MotionProfile", "cell-1/Controllers/cell-1/CurrentUser",
+                     "Tool1/Frame/CartesianCoordinates", "Tool1/Frame/Orientation/C"):
+        assert expected in " ".join(checked), expected
+
+
+def test_serve_with_an_opcua_port_starts_the_face_beside_the_rest_service(tmp_path) -> None:  # noqa: ANN001
+    """``pendant serve --opcua-port``: both faces as processes on one SQLite file."""
+    import subprocess
+    import sys
+
+    import httpx
+
+    rest_port, ua_port = free_port(), free_port()
+    db_url = f"sqlite:///{tmp_path / 'pendant.db'}"
+    proc = subprocess.Popen([sys.executable, "-m", "server.cli", "serve", "--port", str(rest_port),
+                             "--opcua-port", str(ua_port), "--db", db_url],
+                            stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL)
+
+    async def a1() -> float:
+        deadline = time.monotonic() + 120
+        while True:
+            try:
+                async with Client(f"opc.tcp://127.0.0.1:{ua_port}/pendant/", timeout=5) as client:
+                    ns = {"di": await client.get_namespace_index(DI_URI),
+                          "rob": await client.get_namespace_index(ROBOTICS_URI),
+                          "pendant": await client.get_namespace_index(PENDANT_URI)}
+                    devices = await (await cell(client, ns)).get_child([f"{ns['rob']}:MotionDevices"])
+                    (arm,) = await devices.get_children()
+                    node = await arm.get_child([f"{ns['rob']}:Axes", f"{ns['rob']}:A2",
+                                                f"{ns['di']}:ParameterSet",
+                                                f"{ns['rob']}:ActualPosition"])
+                    return await node.read_value()
+            except (OSError, asyncio.TimeoutError, ua.UaError):
+                if time.monotonic() > deadline:
+                    raise
+                await asyncio.sleep(0.5)
+
+    try:
+        value = asyncio.run(a1())
+        joints = httpx.get(f"http://127.0.0.1:{rest_port}/controllers/1/robot").json()["joints_deg"]
+        assert value == pytest.approx(joints[1])
+    finally:
+        proc.terminate()
+        proc.wait(timeout=20)
+
+
+def test_a_frame_committed_over_rest_arrives_as_an_opcua_event(face: dict) -> None:
+    class Inbox:
+        def __init__(self) -> None:
+            self.events: list[tuple[float, object]] = []
+
+        def event_notification(self, event) -> None:  # noqa: ANN001
+            self.events.append((time.monotonic(), event))
+
+    async def body(client: Client, ns: dict) -> tuple[float, object]:
+        inbox = Inbox()
+        sub = await client.create_subscription(50, inbox)
+        etype = await client.nodes.base_event_type.get_child([f"{ns['pendant']}:PendantEventType"])
+        await sub.subscribe_events(client.nodes.server, etype)
+        await asyncio.sleep(0.3)
+        sent = time.monotonic()
+        await asyncio.to_thread(face["rest"].put, f"{C}/bases/4", json={"name": "fixture"})
+        while time.monotonic() - sent < 3.0:
+            if inbox.events:
+                t, ev = inbox.events[0]
+                return t - sent, ev
+            await asyncio.sleep(0.02)
+        return float("inf"), None
+
+    delay, ev = on_client(face, body)
+    assert delay < 1.0
+    assert (ev.Kind, ev.Controller) == ("frame-committed", "cell-1")
+    payload = json.loads(ev.Payload)
+    assert (payload["table"], payload["number"], payload["name"]) == ("base", 4, "fixture")
