@@ -18,12 +18,10 @@ import paho.mqtt.client as mqtt
 import pytest
 from fastapi.testclient import TestClient
 
-from api_helpers import C, calibrate, ok
+from api_helpers import C, calibrate, db_url, edit_slot, make_client, ok  # noqa: F401 (fixture db_url)
 from browser_helpers import free_port
-from server.app import create_app
 from server.events.dispatcher import Dispatcher, WebhookSink
 from server.events.signing import HEADER, verify
-from server.settings import Settings
 
 
 class Receiver:
@@ -68,11 +66,9 @@ def wait_for(check: Callable[[], object], timeout: float = 10.0) -> object:
 
 
 @pytest.fixture
-def service(tmp_path) -> Iterator[TestClient]:  # noqa: ANN001
-    """The app with its dispatcher running, retries 0.2 s apart."""
-    app = create_app(Settings(db_url=f"sqlite:///{tmp_path / 'pendant.db'}",
-                              events_backoff_s=0.2))
-    with TestClient(app, raise_server_exceptions=False) as client:
+def service(db_url: str) -> Iterator[TestClient]:  # noqa: F811
+    """The app (as its Administrator) with its dispatcher running, retries 0.2 s apart."""
+    with make_client(db_url, events_backoff_s=0.2) as client:
         yield client
 
 
@@ -108,7 +104,7 @@ def test_a_delivery_that_failed_once_is_retried_and_arrives(service: TestClient)
     receiver = Receiver(fail_first=1)
     try:
         hook = ok(service.post("/webhooks", json={"url": receiver.url}))
-        ok(service.put(f"{C}/tools/2", json={"name": "gripper"}))
+        ok(edit_slot(service, f"{C}/tools/2", {"name": "gripper"}))
         log = wait_for(lambda: [d for d in ok(service.get(f"/webhooks/{hook['id']}/deliveries"))
                                 if d["state"] == "delivered"])
         assert [(d["attempts"], d["last_status"], d["last_error"]) for d in log] == [(2, 204, None)]
@@ -146,12 +142,13 @@ def test_compute_sends_calibration_computed_with_its_quality_figures(service: Te
     assert doc["payload"]["position_bound95_mm"] == pytest.approx(report["position_bound95_mm"])
 
 
-def test_two_dispatchers_deliver_each_event_exactly_once(tmp_path, receiver: Receiver) -> None:  # noqa: ANN001
-    app = create_app(Settings(db_url=f"sqlite:///{tmp_path / 'p.db'}", dispatch_events=False))
-    with TestClient(app) as service:
+def test_two_dispatchers_deliver_each_event_exactly_once(db_url: str,  # noqa: F811
+                                                        receiver: Receiver) -> None:
+    with make_client(db_url, dispatch_events=False) as service:
+        app = service.app
         ok(service.post("/webhooks", json={"url": receiver.url}))
         for k in range(1, 17):
-            ok(service.put(f"{C}/tools/{k}", json={"name": f"t{k}"}))
+            ok(edit_slot(service, f"{C}/tools/{k}", {"name": f"t{k}"}))
         pair = [Dispatcher(app.state.sessionmaker, {"webhook": WebhookSink()}, poll_s=0.01,
                            batch=4) for _ in range(2)]
         for d in pair:
@@ -202,7 +199,8 @@ def _listening(port: int) -> bool:
         return s.connect_ex(("127.0.0.1", port)) == 0
 
 
-def test_events_are_published_on_unified_namespace_topics(tmp_path, broker: int) -> None:  # noqa: ANN001
+def test_events_are_published_on_unified_namespace_topics(db_url: str,  # noqa: F811
+                                                          broker: int) -> None:
     got: list[tuple[str, dict]] = []
     sub = mqtt.Client(mqtt.CallbackAPIVersion.VERSION2)
     sub.on_message = lambda _c, _u, m: got.append((m.topic, json.loads(m.payload)))
@@ -211,11 +209,9 @@ def test_events_are_published_on_unified_namespace_topics(tmp_path, broker: int)
     sub.loop_start()
     try:
         time.sleep(0.3)
-        app = create_app(Settings(db_url=f"sqlite:///{tmp_path / 'p.db'}",
-                                  mqtt_url=f"mqtt://127.0.0.1:{broker}", uns_site="plant1",
-                                  uns_area="body-shop"))
-        with TestClient(app) as service:
-            ok(service.put(f"{C}/tools/5", json={"name": "welding torch"}))
+        with make_client(db_url, mqtt_url=f"mqtt://127.0.0.1:{broker}", uns_site="plant1",
+                         uns_area="body-shop") as service:
+            ok(edit_slot(service, f"{C}/tools/5", {"name": "welding torch"}))
             wait_for(lambda: got)
         (topic, doc), = got
         assert topic == "plant1/body-shop/cell-1/pendant/frame-committed"

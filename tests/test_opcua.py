@@ -10,6 +10,7 @@ from __future__ import annotations
 import asyncio
 import json
 import logging
+import os
 import threading
 import time
 from collections.abc import Iterator
@@ -19,7 +20,7 @@ import pytest
 from asyncua import Client, Node, ua
 from scipy.spatial.transform import Rotation
 
-from api_helpers import C, make_client, ok
+from api_helpers import ADMIN_TOKEN, C, edit_slot, make_client, ok
 from browser_helpers import free_port
 from server.opcua.service import PendantOpcUa
 from server.opcua.space import DI_URI, PENDANT_URI, ROBOTICS_URI
@@ -39,7 +40,9 @@ class LogRecords(logging.Handler):
 @pytest.fixture(scope="module")
 def face(tmp_path_factory: pytest.TempPathFactory) -> Iterator[dict]:
     """The REST app (TestClient) and the OPC UA server on one SQLite file."""
-    db_url = f"sqlite:///{tmp_path_factory.mktemp('opcua') / 'pendant.db'}"
+    from db_backends import fresh_url
+
+    db_url = fresh_url(tmp_path_factory.mktemp("opcua"))
     logs = LogRecords()
     logging.getLogger("asyncua").addHandler(logs)
     loop = asyncio.new_event_loop()
@@ -100,7 +103,7 @@ def test_mes_browses_motion_devices_to_axes_and_reads_the_joints(face: dict) -> 
 
 def test_a_tool_frame_reads_as_rest_has_it_and_rotates_the_same(face: dict) -> None:
     pose = {"x": 12.5, "y": -3.0, "z": 180.0, "a": 30.0, "b": -20.0, "c": 10.0}
-    ok(face["rest"].put(f"{C}/tools/2", json={"name": "torch", "pose": pose}))
+    ok(edit_slot(face["rest"], f"{C}/tools/2", {"name": "torch", "pose": pose}))
     time.sleep(0.5)  # the server polls the database every 0.1 s
 
     async def body(client: Client, ns: dict) -> tuple:
@@ -137,7 +140,7 @@ def test_a_rest_change_reaches_a_subscribed_client_within_a_second(face: dict) -
         await sub.subscribe_data_change(name)
         await asyncio.sleep(0.3)  # the initial value arrives first
         sent = time.monotonic()
-        await asyncio.to_thread(face["rest"].put, f"{C}/tools/3", json={"name": "spindle"})
+        await asyncio.to_thread(edit_slot, face["rest"], f"{C}/tools/3", {"name": "spindle"})
         while time.monotonic() - sent < 3.0:
             arrived = [t for t, v in inbox.seen if v == "spindle"]
             if arrived:
@@ -259,9 +262,10 @@ def test_serve_with_an_opcua_port_starts_the_face_beside_the_rest_service(tmp_pa
 
     rest_port, ua_port = free_port(), free_port()
     db_url = f"sqlite:///{tmp_path / 'pendant.db'}"
+    env = {**os.environ, "PENDANT_ADMIN_TOKEN": ADMIN_TOKEN}
     proc = subprocess.Popen([sys.executable, "-m", "server.cli", "serve", "--port", str(rest_port),
-                             "--opcua-port", str(ua_port), "--db", db_url],
-                            stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL)
+                             "--opcua-port", str(ua_port), "--db", db_url, "--job-workers", "0"],
+                            stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL, env=env)
 
     async def a1() -> float:
         deadline = time.monotonic() + 120
@@ -284,7 +288,8 @@ def test_serve_with_an_opcua_port_starts_the_face_beside_the_rest_service(tmp_pa
 
     try:
         value = asyncio.run(a1())
-        joints = httpx.get(f"http://127.0.0.1:{rest_port}/controllers/1/robot").json()["joints_deg"]
+        joints = httpx.get(f"http://127.0.0.1:{rest_port}/controllers/1/robot",
+                           headers={"Authorization": f"Bearer {ADMIN_TOKEN}"}).json()["joints_deg"]
         assert value == pytest.approx(joints[1])
     finally:
         proc.terminate()
@@ -306,7 +311,7 @@ def test_a_frame_committed_over_rest_arrives_as_an_opcua_event(face: dict) -> No
         await sub.subscribe_events(client.nodes.server, etype)
         await asyncio.sleep(0.3)
         sent = time.monotonic()
-        await asyncio.to_thread(face["rest"].put, f"{C}/bases/4", json={"name": "fixture"})
+        await asyncio.to_thread(edit_slot, face["rest"], f"{C}/bases/4", {"name": "fixture"})
         while time.monotonic() - sent < 3.0:
             if inbox.events:
                 t, ev = inbox.events[0]
