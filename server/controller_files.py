@@ -17,6 +17,7 @@ from sqlalchemy.orm import Session
 from db import crud
 from db.models import Controller
 from db.models import FrameEntry as SlotRow
+from db.outbox import emit
 from server import formats
 from server.formats.model import ParsedFile, family_of
 from solvers.errors import CalibrationError
@@ -178,4 +179,8 @@ def apply_import(db: Session, controller: Controller, fmt: str, text: str,
                          error_rms_mm=None)
             crud.change_entry(db, row, after, reason="import")
     crud.store_controller_file(db, controller.id, fmt, text)
+    emit(db, "import-applied", controller, {
+        "format": fmt, "entries": result.entries, "skipped": len(result.skipped),
+        "changed": [{"table": c.table, "number": c.number, "kind_change": c.kind_change}
+                    for c in result.slots if c.changed]})
     return result

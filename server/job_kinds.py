@@ -41,7 +41,13 @@ def run_analysis(sm: sessionmaker[Session], params: dict[str, Any], progress: Pr
     report["recording_id"] = rid
 
     def apply(db: Session) -> dict[str, Any]:
-        return {"analysis_id": crud.store_document(db, "analyses", report)}
+        from db.outbox import emit
+
+        analysis_id = crud.store_document(db, "analyses", report)
+        emit(db, "analysis-finished", None, {
+            "analysis_id": analysis_id, "recording_id": rid, "verdict": report.get("verdict"),
+            "findings": [f.get("effect") for f in report.get("findings", [])]})
+        return {"analysis_id": analysis_id}
 
     return apply
 

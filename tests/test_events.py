@@ -220,3 +220,26 @@ def test_events_are_published_on_unified_namespace_topics(db_url: str,  # noqa: 
     finally:
         sub.loop_stop()
         sub.disconnect()
+
+
+def test_an_import_and_an_analysis_send_their_events(service: TestClient,
+                                                    receiver: Receiver) -> None:
+    from api_helpers import analyze
+    from solvers.physics import Imperfections
+    from solvers.simulate import simulate_recording
+
+    ok(service.post("/webhooks", json={"url": receiver.url,
+                                       "kinds": ["import-applied", "analysis-finished"]}))
+    kuka = service.get(f"{C}/export", params={"format": "kuka"}).text
+    ok(service.post(f"{C}/import", json={"format": "kuka", "text": kuka, "dry_run": True}))
+    ok(service.post(f"{C}/import", json={"format": "kuka", "text": kuka}))
+    doc = simulate_recording("touch", "ur10", Imperfections(noise_mm=0.02), 8, seed=3)
+    report = analyze(service, ok(service.post("/recordings", json=doc))["id"])
+    wait_for(lambda: len(receiver.requests) >= 2)
+    time.sleep(0.3)
+    imported, analysed = receiver.bodies()  # the dry run sent nothing
+    assert (imported["kind"], imported["controller"], imported["payload"]["format"]) == (
+        "import-applied", "cell-1", "kuka")
+    assert analysed["kind"] == "analysis-finished"
+    assert analysed["payload"]["analysis_id"] == report["id"]
+    assert analysed["payload"]["verdict"] == report["verdict"]
