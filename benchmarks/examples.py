@@ -11,7 +11,7 @@ from pathlib import Path
 
 import numpy as np
 
-from server.emulator import approach, cell_for, home_joints
+from emulator import approach, cell_for, home_joints
 from server.methods import METHODS
 from solvers.dh import forward_kinematics
 from solvers.frames import Pose

@@ -19,7 +19,7 @@ import numpy as np
 import pytest
 
 from browser_helpers import VIEWPORT, compute, idle, kuka_frame, open_pendant, save, wizard
-from server.emulator import cell_for
+from emulator import cell_for
 from solvers.robots import ROBOTS
 
 CELL = cell_for(ROBOTS["kuka_kr6_r900_sixx"], 1)  # the demo cell's hidden truth, for the asserts only

@@ -133,7 +133,7 @@ def set_active(controller_id: int, body: ActiveIn, db: SessionDep, response: Res
 
 def approach_angles(cell: emulator.Cell, target: str,
                     flange_orientation: list[list[float]]) -> tuple[float, float, float]:
-    """(tilt, around, spin) in deg of :func:`server.emulator.approach_rotation` that puts the
+    """(tilt, around, spin) in deg of :func:`emulator.approach_rotation` that puts the
     flange at ``flange_orientation`` (R_world_flange) while the true tool touches ``target``.
 
     The held tool's frame is ``R_world_tool = R_world_flange @ R_flange_tool`` and
