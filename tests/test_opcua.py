@@ -59,10 +59,16 @@ def face(tmp_path_factory: pytest.TempPathFactory) -> Iterator[dict]:
     logging.getLogger("asyncua").removeHandler(logs)
 
 
-def on_client(face: dict, body) -> object:  # noqa: ANN001
-    """Run ``body(client, ns)`` with a connected asyncua Client; ns = {di, rob, pendant}."""
+def on_client(face: dict, body, user: str | None = "admin",  # noqa: ANN001
+              password: str | None = ADMIN_TOKEN) -> object:
+    """Run ``body(client, ns)`` with an asyncua Client logged in as ``user`` (the first
+    Administrator by default; None: anonymous); ns = {di, rob, pendant}."""
     async def run() -> object:
-        async with Client(face["server"].endpoint, timeout=10) as client:
+        client = Client(face["server"].endpoint, timeout=10)
+        if user is not None:
+            client.set_user(user)
+            client.set_password(password)
+        async with client:
             ns = {"di": await client.get_namespace_index(DI_URI),
                   "rob": await client.get_namespace_index(ROBOTICS_URI),
                   "pendant": await client.get_namespace_index(PENDANT_URI)}
@@ -271,7 +277,10 @@ def test_serve_with_an_opcua_port_starts_the_face_beside_the_rest_service(tmp_pa
         deadline = time.monotonic() + 120
         while True:
             try:
-                async with Client(f"opc.tcp://127.0.0.1:{ua_port}/pendant/", timeout=5) as client:
+                client = Client(f"opc.tcp://127.0.0.1:{ua_port}/pendant/", timeout=5)
+                client.set_user("admin")
+                client.set_password(ADMIN_TOKEN)
+                async with client:
                     ns = {"di": await client.get_namespace_index(DI_URI),
                           "rob": await client.get_namespace_index(ROBOTICS_URI),
                           "pendant": await client.get_namespace_index(PENDANT_URI)}
@@ -324,3 +333,91 @@ def test_a_frame_committed_over_rest_arrives_as_an_opcua_event(face: dict) -> No
     assert (ev.Kind, ev.Controller) == ("frame-committed", "cell-1")
     payload = json.loads(ev.Payload)
     assert (payload["table"], payload["number"], payload["name"]) == ("base", 4, "fixture")
+
+
+def user_with_role(face: dict, name: str, role: str) -> str:
+    """A user of ``role`` made over REST by the Administrator; returns its token."""
+    ok(face["rest"].post("/users", json={"name": name, "role": role}))
+    return ok(face["rest"].post(f"/users/{name}/tokens", json={}))["token"]
+
+
+async def commit(client: Client, ns: dict, number: int, frame: list[float], name: str,
+                 version: int) -> int:
+    return await (await pendant(client, ns)).call_method(
+        f"{ns['pendant']}:CommitFrame", "tool", number, frame, name,
+        ua.Variant(version, ua.VariantType.UInt64))
+
+
+def test_an_anonymous_session_may_read_nothing(face: dict) -> None:
+    async def body(client: Client, ns: dict) -> object:
+        return await (await cell(client, ns)).read_browse_name()
+
+    with pytest.raises(ua.UaStatusCodeError) as err:
+        on_client(face, body, user=None)
+    assert err.value.code == ua.StatusCodes.BadUserAccessDenied
+
+
+def test_a_wrong_password_is_refused_at_login(face: dict) -> None:
+    async def body(client: Client, ns: dict) -> None:
+        return None
+
+    with pytest.raises(ua.UaStatusCodeError) as err:
+        on_client(face, body, user="admin", password="pdt_not-a-token")
+    assert err.value.code in (ua.StatusCodes.BadUserAccessDenied, ua.StatusCodes.BadIdentityTokenRejected,
+                              ua.StatusCodes.BadIdentityTokenInvalid)
+
+
+def test_an_expert_commits_a_frame_rest_sees_it_and_the_audit_names_the_user(face: dict) -> None:
+    token = user_with_role(face, "erik", "Expert")
+    version = int(face["rest"].get(f"{C}/tools/7").headers["ETag"].strip('W/"'))
+
+    async def body(client: Client, ns: dict) -> int:
+        return await commit(client, ns, 7, [10.0, -20.0, 150.0, 90.0, 0.0, 180.0], "drill",
+                            version)
+
+    new_version = on_client(face, body, user="erik", password=token)
+    slot = ok(face["rest"].get(f"{C}/tools/7"))
+    assert slot["name"] == "drill"
+    assert [slot["pose"][k] for k in "xyzabc"] == pytest.approx([10, -20, 150, 90, 0, 180])
+    assert new_version == version + 1
+    (rec,) = [r for r in ok(face["rest"].get("/audit", params={"user": "erik"}))
+              if r.get("number") == 7]
+    assert (rec["source"], rec["role"]) == ("opcua", "Expert")
+
+
+def test_an_operators_commit_is_user_access_denied_and_changes_nothing(face: dict) -> None:
+    token = user_with_role(face, "otto", "Operator")
+    before = ok(face["rest"].get(f"{C}/tools/8"))
+
+    async def body(client: Client, ns: dict) -> int:
+        return await commit(client, ns, 8, [1.0, 2.0, 3.0, 0.0, 0.0, 0.0], "nope", 1)
+
+    with pytest.raises(ua.UaStatusCodeError) as err:
+        on_client(face, body, user="otto", password=token)
+    assert err.value.code == ua.StatusCodes.BadUserAccessDenied
+    assert ok(face["rest"].get(f"{C}/tools/8")) == before
+
+    async def read(client: Client, ns: dict) -> list:
+        return await (await pendant(client, ns)).call_method(f"{ns['pendant']}:ReadFrame", "tool", 8)
+
+    assert on_client(face, read, user="otto", password=token)[0] == before["name"]
+
+
+def test_a_stale_version_is_refused_and_a_bad_frame_is_a_bad_argument(face: dict) -> None:
+    version = int(face["rest"].get(f"{C}/tools/9").headers["ETag"].strip('W/"'))
+    ok(edit_slot(face["rest"], f"{C}/tools/9", {"name": "edited over REST"}))
+
+    async def stale(client: Client, ns: dict) -> int:
+        return await commit(client, ns, 9, [0.0] * 6, "late", version)
+
+    with pytest.raises(ua.UaStatusCodeError) as err:
+        on_client(face, stale)
+    assert err.value.code == ua.StatusCodes.BadInvalidState
+    assert ok(face["rest"].get(f"{C}/tools/9"))["name"] == "edited over REST"
+
+    async def bad(client: Client, ns: dict) -> int:
+        return await commit(client, ns, 9, [0.0, 0.0, 1e12, 0.0, 0.0, 0.0], "far", version + 1)
+
+    with pytest.raises(ua.UaStatusCodeError) as err:
+        on_client(face, bad)
+    assert err.value.code == ua.StatusCodes.BadInvalidArgument

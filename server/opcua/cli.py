@@ -36,7 +36,7 @@ def run_opcua(args: argparse.Namespace) -> int:
     logging.basicConfig(level=logging.WARNING, format="%(levelname)s %(name)s: %(message)s")
     app = create_app(Settings(db_url=args.db) if args.db else Settings())
     try:
-        asyncio.run(run(app.state.sessionmaker, args.host, args.port))
+        asyncio.run(run(app.state.sessionmaker, args.host, args.port, app.state.settings.auth))
     except KeyboardInterrupt:
         pass
     return 0

@@ -18,7 +18,7 @@ from asyncua import Server, ua
 from sqlalchemy.orm import Session, sessionmaker
 
 from db import crud
-from server.opcua import space
+from server.opcua import access, commit, space
 from server.opcua.state import ControllerState, events_after, latest_event_id, read_cells
 
 log = logging.getLogger("pendant.opcua")
@@ -33,18 +33,24 @@ class PendantOpcUa:
     make_session: sessionmaker[Session]
     endpoint: str = "opc.tcp://127.0.0.1:4840/pendant/"
     poll_s: float = 0.2
+    auth: bool = True  # False: the --no-auth demo, everyone an Administrator (as on REST)
     server: Server = field(init=False)
     cells: dict[int, space.CellNodes] = field(default_factory=dict, init=False)
     states: dict[int, ControllerState] = field(default_factory=dict, init=False)
     ns_ids: tuple[int, int, int] = field(default=(0, 0, 0), init=False)
     last_event_id: int = field(default=0, init=False)
     _events: object = field(default=None, init=False)  # the PendantEventType generator
+    rules: access.PendantRules = field(init=False)
     _task: asyncio.Task | None = field(default=None, init=False)
 
     async def start(self) -> None:
-        self.server = Server()
+        self.server = Server(user_manager=access.PendantUsers(self.make_session, self.auth))
         await self.server.init()
         self.server.set_endpoint(self.endpoint)
+        self.rules = access.PendantRules(self.make_session, self.auth)
+        self.server.set_security_policy([ua.SecurityPolicyType.NoSecurity],
+                                        permission_ruleset=self.rules)
+        self.server.set_identity_tokens([ua.AnonymousIdentityToken, ua.UserNameIdentityToken])
         self.server.set_server_name("pendant")
         await self.server.set_application_uri(space.PENDANT_URI)
         self.ns_ids = await space.load_nodesets(self.server)
@@ -115,17 +121,42 @@ class PendantOpcUa:
             text = await asyncio.to_thread(self._export, cid, fmt.Value)
             return [ua.Variant(text, S)]
 
-        await nodes.pendant.add_method(
-            ua.NodeId(f"Pendant.{name}.ReadFrame", ns),
-            ua.QualifiedName("ReadFrame", ns), read_frame,
-            [arg("Table", S, doc="tool or base"), arg("Number", I32, doc="1..16 tools, 1..32 bases")],
-            [arg("Name", S), arg("Kind", S),
-             arg("Frame", D, 1, "KUKA X, Y, Z (mm), A, B, C (deg)"),
-             arg("Version", ua.VariantType.UInt64)])
-        await nodes.pendant.add_method(
-            ua.NodeId(f"Pendant.{name}.ExportFile", ns),
-            ua.QualifiedName("ExportFile", ns), export_file,
-            [arg("Format", S, doc="kuka, abb, fanuc, ur or json")], [arg("Text", S)])
+        async def commit_frame(_parent: ua.NodeId, table: ua.Variant, number: ua.Variant,
+                               frame: ua.Variant, slot_name: ua.Variant,
+                               expected: ua.Variant) -> list[ua.Variant] | ua.StatusCode:
+            key = _slot_key(table.Value, number.Value)
+            caller = access.CURRENT.get()
+            if key is None or caller is None:
+                return ua.StatusCode(ua.StatusCodes.BadInvalidArgument if key is None
+                                     else ua.StatusCodes.BadUserAccessDenied)
+            outcome = await asyncio.to_thread(
+                commit.commit_frame, self.make_session, cid, *key, frame.Value, slot_name.Value,
+                expected.Value, caller.audit_actor())
+            if isinstance(outcome, ua.StatusCode):
+                return outcome
+            await self.sync()  # the client reads its own write at once
+            return [ua.Variant(outcome, ua.VariantType.UInt64)]
+
+        methods = (
+            ("ReadFrame", read_frame,
+             [arg("Table", S, doc="tool or base"), arg("Number", I32, doc="1..16 tools, 1..32 bases")],
+             [arg("Name", S), arg("Kind", S), arg("Frame", D, 1, "KUKA X, Y, Z (mm), A, B, C (deg)"),
+              arg("Version", ua.VariantType.UInt64)]),
+            ("ExportFile", export_file, [arg("Format", S, doc="kuka, abb, fanuc, ur or json")],
+             [arg("Text", S)]),
+            ("CommitFrame", commit_frame,
+             [arg("Table", S, doc="tool or base"), arg("Number", I32, doc="1..16 tools, 1..32 bases"),
+              arg("Frame", D, 1, "KUKA X, Y, Z (mm), A, B, C (deg)"),
+              arg("Name", S, doc="the slot's name; empty keeps it"),
+              arg("ExpectedVersion", ua.VariantType.UInt64,
+                  doc="the Version read before; a slot changed since is refused")],
+             [arg("NewVersion", ua.VariantType.UInt64)]),
+        )
+        for method_name, func, inputs, outputs in methods:
+            node = await nodes.pendant.add_method(
+                ua.NodeId(f"Pendant.{name}.{method_name}", ns), ua.QualifiedName(method_name, ns),
+                func, inputs, outputs)
+            self.rules.method_names[node.nodeid] = method_name
 
     def _export(self, cid: int, fmt: str) -> str:
         from server.routers.export import export_text
@@ -142,9 +173,9 @@ def _slot_key(table: object, number: object) -> tuple[str, int] | None:
     return (str(table), number) if 1 <= number <= TABLES[str(table)] else None
 
 
-async def run(make_session: sessionmaker[Session], host: str, port: int) -> None:
+async def run(make_session: sessionmaker[Session], host: str, port: int, auth: bool = True) -> None:
     """Serve until cancelled (``pendant opcua``)."""
-    face = PendantOpcUa(make_session, f"opc.tcp://{host}:{port}/pendant/")
+    face = PendantOpcUa(make_session, f"opc.tcp://{host}:{port}/pendant/", auth=auth)
     await face.start()
     log.warning("pendant OPC UA server at %s", face.endpoint)
     try:

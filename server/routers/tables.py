@@ -25,6 +25,34 @@ def _precondition(e: FrameEntry, if_match: str | None) -> None:
           f"{e.entry_table} {e.number} of controller {e.controller_id}", required=True)
 
 
+def edit_values(e: FrameEntry, body: EntryIn) -> dict:
+    """The values a hand edit (``body``) writes into slot ``e``; CalibrationError naming the
+    field for a kind the table does not hold or a coordinated base without its unit. The REST
+    edit and the OPC UA CommitFrame both write through this."""
+    table = e.entry_table
+    values: dict = {}
+    if body.name is not None:
+        values["name"] = body.name
+    if body.kind is not None:
+        if body.kind not in crud.KINDS_OF_TABLE[table]:
+            kinds = " or ".join(crud.KINDS_OF_TABLE[table])
+            raise CalibrationError(("kind",),
+                                   f"a {table} slot holds {kinds}, not {body.kind!r}")
+        values["kind"] = body.kind
+    kind = values.get("kind", e.kind)
+    if body.mech_unit is not None or kind != "coordinated_base":
+        values["mech_unit"] = body.mech_unit if kind == "coordinated_base" else None
+    if kind == "coordinated_base" and not values.get("mech_unit", e.mech_unit):
+        raise CalibrationError(("mech_unit",), "a coordinated_base names the mechanical "
+                               "unit that moves it")
+    if body.pose is not None:
+        values.update(zip(("x_mm", "y_mm", "z_mm", "a_deg", "b_deg", "c_deg"),
+                          body.pose.to_pose().as_array().tolist()))
+        values.update(method="numeric", session_id=None, error_max_mm=None, error_rms_mm=None)
+    values.update(load_values(body.load))
+    return values
+
+
 def table_router(table: str, path: str, tag: str) -> APIRouter:
     """Routes of ``/controllers/{id}/{path}``: the ``table`` ('tool' | 'base') slots."""
     router = APIRouter(prefix=f"/controllers/{{controller_id}}/{path}", tags=[tag])
@@ -48,26 +76,7 @@ def table_router(table: str, path: str, tag: str) -> APIRouter:
                   response: Response, if_match: IfMatch = None) -> EntryOut:
         """``If-Match`` is required: 428 without it, 412 (with the current slot) if stale."""
         e = crud.get_entry(db, controller_id, table, number)
-        values: dict = {}
-        if body.name is not None:
-            values["name"] = body.name
-        if body.kind is not None:
-            if body.kind not in crud.KINDS_OF_TABLE[table]:
-                kinds = " or ".join(crud.KINDS_OF_TABLE[table])
-                raise CalibrationError(("kind",),
-                                       f"a {table} slot holds {kinds}, not {body.kind!r}")
-            values["kind"] = body.kind
-        kind = values.get("kind", e.kind)
-        if body.mech_unit is not None or kind != "coordinated_base":
-            values["mech_unit"] = body.mech_unit if kind == "coordinated_base" else None
-        if kind == "coordinated_base" and not values.get("mech_unit", e.mech_unit):
-            raise CalibrationError(("mech_unit",), "a coordinated_base names the mechanical "
-                                   "unit that moves it")
-        if body.pose is not None:
-            values.update(zip(("x_mm", "y_mm", "z_mm", "a_deg", "b_deg", "c_deg"),
-                              body.pose.to_pose().as_array().tolist()))
-            values.update(method="numeric", session_id=None, error_max_mm=None, error_rms_mm=None)
-        values.update(load_values(body.load))
+        values = edit_values(e, body)
         _precondition(e, if_match)  # after the body's checks: a wrong body is a 422 either way
         crud.change_entry(db, e, values, reason="edit")
         set_etag(response, db, e)

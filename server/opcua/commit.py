@@ -1,0 +1,56 @@
+"""CommitFrame: an OPC UA client writes a slot through the REST edit's own code and transaction.
+
+The same as ``PUT /controllers/{id}/tools|bases/{n}`` with ``If-Match``: the body is checked by
+the API's ``EntryIn`` (one set of bounds), the values come from
+:func:`server.routers.tables.edit_values`, the controller's row is locked (PostgreSQL) in a
+writer's transaction (SQLite ``BEGIN IMMEDIATE``), a stale version is refused, and
+:func:`db.crud.change_entry` records history, the audit (source ``opcua``) and the
+``frame-committed`` event in that transaction.
+"""
+
+from __future__ import annotations
+
+from typing import Any
+
+from asyncua import ua
+from pydantic import ValidationError
+from sqlalchemy.orm import Session, sessionmaker
+
+from db import crud
+from db.session import write_session
+from server.auth import audit
+from server.routers.tables import edit_values
+from server.schemas import EntryIn
+from solvers.errors import CalibrationError
+
+
+def commit_frame(make_session: sessionmaker[Session], controller_id: int, table: str, number: int,
+                 frame: Any, name: str | None, expected_version: int,
+                 who: dict[str, Any]) -> int | ua.StatusCode:
+    """The slot's new version, or the status that refuses the commit:
+
+    - ``BadInvalidArgument``: not six finite numbers, or a value outside the API's bounds;
+    - ``BadInvalidState``: the slot changed since ``expected_version`` was read (read again);
+    - ``BadNodeIdUnknown``: the controller is gone.
+    """
+    try:
+        values6 = [float(v) for v in frame]
+        if len(values6) != 6:
+            raise ValueError("Frame needs X, Y, Z, A, B, C")
+        body = EntryIn(name=name or None, pose=dict(zip("xyzabc", values6)))
+    except (TypeError, ValueError, ValidationError):
+        return ua.StatusCode(ua.StatusCodes.BadInvalidArgument)
+    with audit.acting_as(who), write_session(make_session) as db:
+        try:
+            crud.lock_controller(db, controller_id)
+            e = crud.get_entry(db, controller_id, table, number)
+            values = edit_values(e, body)
+        except crud.NotFound:
+            return ua.StatusCode(ua.StatusCodes.BadNodeIdUnknown)
+        except CalibrationError:
+            return ua.StatusCode(ua.StatusCodes.BadInvalidArgument)
+        if e.version != int(expected_version):
+            return ua.StatusCode(ua.StatusCodes.BadInvalidState)
+        crud.change_entry(db, e, values, reason="edit")
+        db.commit()
+        return int(e.version)
