@@ -173,3 +173,15 @@ def test_cli_import_dry_run_then_import(db_url, tmp_path, capsys):
     bad.write_text(ABB[:ABB.index("ENDMODULE")])
     assert main(["import", str(bad), "--controller", "cell-1", "--db", db_url]) == 2
     assert f"line {line_of(ABB, 'ENDMODULE') - 1}.ENDMODULE" in capsys.readouterr().err
+
+
+def test_a_slot_the_tables_do_not_have_is_refused_naming_its_line(client):
+    before = backup_hash(client)
+    text = ABB.replace("  PERS tooldata tTorch", '  ! pendant: tool 17 "torch"\n  PERS tooldata tTorch')
+    r = imp(client, "abb", text)
+    assert r.status_code == 422
+    assert r.json()["detail"][0]["loc"] == ["body", "text",
+                                            f"line {line_of(text, 'PERS tooldata tTorch')}",
+                                            "tool 17"]
+    assert "1..16" in r.json()["detail"][0]["msg"]
+    assert backup_hash(client) == before

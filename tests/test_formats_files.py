@@ -268,3 +268,17 @@ def test_no_name_can_add_a_line_to_any_format(name):
         assert len(text.splitlines()) == len(writer(clean).splitlines()), fmt
         back = READERS[fmt](text).entries
         assert [e.number for e in back] == [1, 2], fmt
+
+
+def test_kuka_unit_patch_takes_the_machine_index_and_a_file_without_the_array_gets_it():
+    entries = read_kuka(KUKA).entries
+    moved = [replace(e, mech_unit="KR 210 R2700-2") if e.kind == "coordinated_base" else e
+             for e in entries]
+    out = export_kuka(moved, template=KUKA)
+    assert changed_lines(KUKA, out)[1] == \
+        'MACHINE_FRAME_DAT[3]={MACH_DEF_INDEX 1,PARENT[] "KR 210 R2700-2",GEOMETRY[] " "}'
+    # a $config.dat without MACHINE_FRAME_DAT: the array is added before ENDDAT
+    plain = "".join(s for s in KUKA.splitlines(True) if "MACHINE_FRAME" not in s)
+    out = export_kuka(entries, template=plain)
+    assert read_kuka(out).entries == entries
+    assert out.count("MACHINE_FRAME_DAT[") == 33  # DECL and the 32 slots
