@@ -185,3 +185,19 @@ def test_a_slot_the_tables_do_not_have_is_refused_naming_its_line(client):
                                             "tool 17"]
     assert "1..16" in r.json()["detail"][0]["msg"]
     assert backup_hash(client) == before
+
+
+def test_the_json_backup_keeps_the_imported_file(client):
+    ok(imp(client, "kuka", KUKA))
+    ok(client.put(f"{C}/bases/8", json={"name": "Pallet 3"}))
+    backup = client.get(f"{C}/export", params={"format": "json"}).text
+    other = f"/controllers/{ok(client.post('/controllers', json={'name': 'restored'}))['id']}"
+    ok(client.post(f"{other}/import", json={"format": "json", "text": backup}))
+    out = client.get(f"{other}/export", params={"format": "kuka"}).text
+    assert [a for a, b in zip(KUKA.splitlines(), out.splitlines()) if a != b] == \
+        ['BASE_NAME[8,]="Pallet 2"']
+    doc = __import__("json").loads(backup)
+    doc["files"][0]["text"] = KUKA[:KUKA.index("ENDDAT")]
+    r = client.post(f"{other}/import", json={"format": "json", "text": __import__("json").dumps(doc)})
+    assert r.status_code == 422 and r.json()["detail"][0]["loc"][:4] == ["body", "text", "files", 0]
+    assert "ENDDAT" in r.json()["detail"][0]["msg"]
