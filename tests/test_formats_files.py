@@ -282,3 +282,13 @@ def test_kuka_unit_patch_takes_the_machine_index_and_a_file_without_the_array_ge
     out = export_kuka(entries, template=plain)
     assert read_kuka(out).entries == entries
     assert out.count("MACHINE_FRAME_DAT[") == 33  # DECL and the 32 slots
+
+
+def test_abb_a_held_work_object_moved_to_a_base_slot_takes_its_loaddata_along():
+    """Tool 5 emptied (its wobjdata and loaddata go), base 7 new (declared before ENDMODULE)."""
+    slots = by_slot(read_abb(ABB).entries)
+    panel = slots.pop(("tool", 5))
+    slots[("base", 7)] = replace(panel, number=7, kind="base", load=None)
+    out = export_abb(list(slots.values()), template=ABB)
+    assert "wDoorPanel_load" not in out
+    assert read_abb(out).entries == canonical_order(slots.values())
