@@ -177,7 +177,8 @@ def test_cli_import_dry_run_then_import(db_url, tmp_path, capsys):
 
 def test_a_slot_the_tables_do_not_have_is_refused_naming_its_line(client):
     before = backup_hash(client)
-    text = ABB.replace("  PERS tooldata tTorch", '  ! pendant: tool 17 "torch"\n  PERS tooldata tTorch')
+    text = ABB.replace("  PERS tooldata tTorch",
+                       '  ! pendant: tool 17 "torch"\n  PERS tooldata tTorch')
     r = imp(client, "abb", text)
     assert r.status_code == 422
     assert r.json()["detail"][0]["loc"] == ["body", "text",
@@ -198,6 +199,7 @@ def test_the_json_backup_keeps_the_imported_file(client):
         ['BASE_NAME[8,]="Pallet 2"']
     doc = __import__("json").loads(backup)
     doc["files"][0]["text"] = KUKA[:KUKA.index("ENDDAT")]
-    r = client.post(f"{other}/import", json={"format": "json", "text": __import__("json").dumps(doc)})
+    r = client.post(f"{other}/import",
+                    json={"format": "json", "text": __import__("json").dumps(doc)})
     assert r.status_code == 422 and r.json()["detail"][0]["loc"][:4] == ["body", "text", "files", 0]
     assert "ENDDAT" in r.json()["detail"][0]["msg"]

@@ -152,7 +152,8 @@ def test_abb_patch_changes_kinds_loads_and_adds_and_removes_declarations():
     slots = by_slot(read_abb(ABB).entries)
     slots[("tool", 5)] = replace(slots[("tool", 5)], load=None)  # its loaddata goes
     slots[("base", 1)] = replace(slots[("base", 1)], load=None)  # tool0's load
-    slots[("tool", 3)] = replace(slots[("tool", 3)], kind="workpiece", load=None)  # tooldata -> wobjdata
+    # tooldata -> wobjdata
+    slots[("tool", 3)] = replace(slots[("tool", 3)], kind="workpiece", load=None)
     del slots[("tool", 4)]
     slots[("base", 9)] = FrameEntry(9, "Fixture B", "coordinated_base", Pose(1, 2, 3, 4, 5, 6),
                                     mech_unit="STN1")
