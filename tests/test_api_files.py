@@ -110,6 +110,10 @@ BAD = {  # what is wrong: (format, text, line, field)
                   line_of(ABB, "TASK PERS tooldata tGripper"), "tGripper.tframe.trans[3]"),
     "ufmec of 40": ("abb", ABB.replace('"STN1"', '"' + "S" * 40 + '"'),
                     line_of(ABB, "PERS wobjdata wTurntable"), "wTurntable.mech_unit"),
+    "name of 1e6": ("abb", ABB.replace("  TASK PERS tooldata tGripper",
+                                       '  ! pendant: tool 1 "' + "g" * 10**6 + '"\n'
+                                       "  TASK PERS tooldata tGripper"),
+                    line_of(ABB, "TASK PERS tooldata tGripper"), "tGripper.name"),
 }
 
 
