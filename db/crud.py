@@ -220,6 +220,11 @@ def get_controller_file(db: Session, controller_id: int, fmt: str) -> Controller
                                                   ControllerFile.format == fmt))
 
 
+def list_controller_files(db: Session, controller_id: int) -> list[ControllerFile]:
+    return list(db.scalars(select(ControllerFile).where(
+        ControllerFile.controller_id == controller_id).order_by(ControllerFile.format)))
+
+
 def store_controller_file(db: Session, controller_id: int, fmt: str, text: str) -> None:
     """Keep ``text`` as the controller's ``fmt`` file (replacing an earlier one)."""
     row = get_controller_file(db, controller_id, fmt)
@@ -367,6 +372,7 @@ def backup(db: Session, c: Controller) -> dict[str, Any]:
                       "created_at": _iso(s.created_at), "result": s.result_values(),
                       "report": s.report, "points": [point(p) for p in s.points]}
                      for s in list_sessions(db, c.id)],
+        "files": [{"format": f.format, "text": f.text} for f in list_controller_files(db, c.id)],
     }
 
 
@@ -375,7 +381,8 @@ def _dt(s: str | None) -> datetime | None:
 
 
 def restore_backup(db: Session, c: Controller, doc: dict[str, Any]) -> tuple[int, int]:
-    """Replace the controller's tables, history and sessions by a :func:`backup` document.
+    """Replace the controller's tables, history, sessions and kept controller files by a
+    :func:`backup` document.
 
     Session ids are renumbered; provenance and history keep pointing at the right session.
     Returns (entries, history rows) restored. Raises KeyError/TypeError/ValueError on a
@@ -420,6 +427,11 @@ def restore_backup(db: Session, c: Controller, doc: dict[str, Any]) -> tuple[int
                             changed_at=_dt(hd.get("changed_at")) or utcnow(), before=hd["before"],
                             after=hd["after"]))
         n_hist += 1
+    for f in list_controller_files(db, c.id):
+        db.delete(f)
+    db.flush()
+    for fd in doc.get("files", []):
+        db.add(ControllerFile(controller_id=c.id, format=fd["format"], text=fd["text"]))
     ctl = doc.get("controller") or {}
     if "joints_deg" in ctl:
         c.joints_deg = [float(q) for q in ctl["joints_deg"]]

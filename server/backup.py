@@ -191,18 +191,40 @@ class ControllerIn(_Doc):
     active_base_no: int = Field(0, ge=0, le=SLOTS["base"])
 
 
+class FileIn(_Doc):
+    """A kept controller file (the last one imported in its format): it must read back."""
+
+    format: Literal["kuka", "abb", "fanuc", "ur"]
+    text: str = Field(max_length=5_000_000)
+
+    @model_validator(mode="after")
+    def _reads(self) -> "FileIn":
+        from server.formats import READERS
+
+        try:
+            READERS[self.format](self.text)
+        except CalibrationError as err:
+            raise ValueError(f"the kept {self.format} file does not read: "
+                             f"{'.'.join(str(x) for x in err.loc)}: {err.reason}") from None
+        return self
+
+
 class BackupIn(_Doc):
     format: Literal["pendant-backup/1"]
     controller: ControllerIn | None = None
     entries: list[EntryIn]
     history: list[HistoryIn] = Field(default_factory=list)
     sessions: list[SessionIn] = Field(default_factory=list)
+    files: list[FileIn] = Field(default_factory=list)
 
     @model_validator(mode="after")
     def _unique_sessions(self) -> "BackupIn":
         ids = [s.id for s in self.sessions]
         if len(set(ids)) != len(ids):
             raise ValueError("two sessions have the same id")
+        formats = [f.format for f in self.files]
+        if len(set(formats)) != len(formats):
+            raise ValueError("two kept files have the same format")
         return self
 
 

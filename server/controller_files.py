@@ -46,8 +46,8 @@ def to_frame_entry(e: SlotRow) -> formats.FrameEntry:
     if e.kind == "coordinated_base" and not unit:
         raise CalibrationError((e.entry_table, e.number, "mech_unit"),
                                "a coordinated_base needs the mechanical unit that moves it")
-    return formats.FrameEntry(e.number, e.name, e.kind, Pose(*e.pose_values()),  # type: ignore[arg-type]
-                              load, unit)
+    pose = Pose(*e.pose_values())
+    return formats.FrameEntry(e.number, e.name, e.kind, pose, load, unit)  # type: ignore[arg-type]
 
 
 def to_frame_entries(rows: list[SlotRow]) -> list[formats.FrameEntry]:

@@ -110,6 +110,10 @@ BAD = {  # what is wrong: (format, text, line, field)
                   line_of(ABB, "TASK PERS tooldata tGripper"), "tGripper.tframe.trans[3]"),
     "ufmec of 40": ("abb", ABB.replace('"STN1"', '"' + "S" * 40 + '"'),
                     line_of(ABB, "PERS wobjdata wTurntable"), "wTurntable.mech_unit"),
+    "name of 1e6": ("abb", ABB.replace("  TASK PERS tooldata tGripper",
+                                       '  ! pendant: tool 1 "' + "g" * 10**6 + '"\n'
+                                       "  TASK PERS tooldata tGripper"),
+                    line_of(ABB, "TASK PERS tooldata tGripper"), "tGripper.name"),
 }
 
 
@@ -173,3 +177,33 @@ def test_cli_import_dry_run_then_import(db_url, tmp_path, capsys):
     bad.write_text(ABB[:ABB.index("ENDMODULE")])
     assert main(["import", str(bad), "--controller", "cell-1", "--db", db_url]) == 2
     assert f"line {line_of(ABB, 'ENDMODULE') - 1}.ENDMODULE" in capsys.readouterr().err
+
+
+def test_a_slot_the_tables_do_not_have_is_refused_naming_its_line(client):
+    before = backup_hash(client)
+    text = ABB.replace("  PERS tooldata tTorch",
+                       '  ! pendant: tool 17 "torch"\n  PERS tooldata tTorch')
+    r = imp(client, "abb", text)
+    assert r.status_code == 422
+    assert r.json()["detail"][0]["loc"] == ["body", "text",
+                                            f"line {line_of(text, 'PERS tooldata tTorch')}",
+                                            "tool 17"]
+    assert "1..16" in r.json()["detail"][0]["msg"]
+    assert backup_hash(client) == before
+
+
+def test_the_json_backup_keeps_the_imported_file(client):
+    ok(imp(client, "kuka", KUKA))
+    ok(client.put(f"{C}/bases/8", json={"name": "Pallet 3"}))
+    backup = client.get(f"{C}/export", params={"format": "json"}).text
+    other = f"/controllers/{ok(client.post('/controllers', json={'name': 'restored'}))['id']}"
+    ok(client.post(f"{other}/import", json={"format": "json", "text": backup}))
+    out = client.get(f"{other}/export", params={"format": "kuka"}).text
+    assert [a for a, b in zip(KUKA.splitlines(), out.splitlines()) if a != b] == \
+        ['BASE_NAME[8,]="Pallet 2"']
+    doc = __import__("json").loads(backup)
+    doc["files"][0]["text"] = KUKA[:KUKA.index("ENDDAT")]
+    r = client.post(f"{other}/import",
+                    json={"format": "json", "text": __import__("json").dumps(doc)})
+    assert r.status_code == 422 and r.json()["detail"][0]["loc"][:4] == ["body", "text", "files", 0]
+    assert "ENDDAT" in r.json()["detail"][0]["msg"]

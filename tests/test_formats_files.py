@@ -27,9 +27,7 @@ from server.formats import (
     LoadData,
     canonical_order,
     export_abb,
-    export_fanuc,
     export_kuka,
-    export_ur,
     read_abb,
     read_fanuc,
     read_kuka,
@@ -152,7 +150,8 @@ def test_abb_patch_changes_kinds_loads_and_adds_and_removes_declarations():
     slots = by_slot(read_abb(ABB).entries)
     slots[("tool", 5)] = replace(slots[("tool", 5)], load=None)  # its loaddata goes
     slots[("base", 1)] = replace(slots[("base", 1)], load=None)  # tool0's load
-    slots[("tool", 3)] = replace(slots[("tool", 3)], kind="workpiece", load=None)  # tooldata -> wobjdata
+    # tooldata -> wobjdata
+    slots[("tool", 3)] = replace(slots[("tool", 3)], kind="workpiece", load=None)
     del slots[("tool", 4)]
     slots[("base", 9)] = FrameEntry(9, "Fixture B", "coordinated_base", Pose(1, 2, 3, 4, 5, 6),
                                     mech_unit="STN1")
@@ -268,3 +267,27 @@ def test_no_name_can_add_a_line_to_any_format(name):
         assert len(text.splitlines()) == len(writer(clean).splitlines()), fmt
         back = READERS[fmt](text).entries
         assert [e.number for e in back] == [1, 2], fmt
+
+
+def test_kuka_unit_patch_takes_the_machine_index_and_a_file_without_the_array_gets_it():
+    entries = read_kuka(KUKA).entries
+    moved = [replace(e, mech_unit="KR 210 R2700-2") if e.kind == "coordinated_base" else e
+             for e in entries]
+    out = export_kuka(moved, template=KUKA)
+    assert changed_lines(KUKA, out)[1] == \
+        'MACHINE_FRAME_DAT[3]={MACH_DEF_INDEX 1,PARENT[] "KR 210 R2700-2",GEOMETRY[] " "}'
+    # a $config.dat without MACHINE_FRAME_DAT: the array is added before ENDDAT
+    plain = "".join(s for s in KUKA.splitlines(True) if "MACHINE_FRAME" not in s)
+    out = export_kuka(entries, template=plain)
+    assert read_kuka(out).entries == entries
+    assert out.count("MACHINE_FRAME_DAT[") == 33  # DECL and the 32 slots
+
+
+def test_abb_a_held_work_object_moved_to_a_base_slot_takes_its_loaddata_along():
+    """Tool 5 emptied (its wobjdata and loaddata go), base 7 new (declared before ENDMODULE)."""
+    slots = by_slot(read_abb(ABB).entries)
+    panel = slots.pop(("tool", 5))
+    slots[("base", 7)] = replace(panel, number=7, kind="base", load=None)
+    out = export_abb(list(slots.values()), template=ABB)
+    assert "wDoorPanel_load" not in out
+    assert read_abb(out).entries == canonical_order(slots.values())

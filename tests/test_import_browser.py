@@ -45,7 +45,8 @@ def test_import_preview_then_confirm(page, site):
     assert slot(page, site, "/tools/3")["name"] == ""  # a preview writes nothing
 
     form.get_by_role("button", name="Import these changes").click()
-    page.wait_for_function("() => document.querySelector('#import-summary').textContent.startsWith('Imported')")
+    page.wait_for_function(
+        "() => document.querySelector('#import-summary').textContent.startsWith('Imported')")
     idle(page)
     assert slot(page, site, "/tools/3")["kind"] == "workpiece"
     assert "Door panel LH" in page.locator("#tool-table").inner_text()

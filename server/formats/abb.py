@@ -44,7 +44,6 @@ from solvers.frames import Pose, abb_from_matrix, kuka_from_matrix, matrix_from_
 
 from server.bounds import check_name, check_value
 from server.formats.model import (
-    ROBOT_HELD,
     FormatError,
     FrameEntry,
     LoadData,

@@ -207,10 +207,11 @@ def read_fanuc(text: str) -> ParsedFile:
             units = ("kg", "mm", "mm", "mm", "kgm2", "kgm2", "kgm2")
             v = [_number(c, u, n, f"{fld}.{k}") for c, u, k in
                  zip(cells, units, ("Mass", "X", "Y", "Z", "IX", "IY", "IZ"))]
-            payloads[number] = (LoadData(v[0], tuple(10.0 * x for x in v[1:4]),  # type: ignore[arg-type]
-                                         tuple(x / KGF_CM_S2_PER_KG_M2 for x in v[4:])), n)
-        elif _SECTION.match(raw):
-            section = "UTOOL" if _SECTION.match(raw).group(1) == "MNUTOOL" else "UFRAME"  # type: ignore[union-attr]
+            com = tuple(10.0 * x for x in v[1:4])
+            inertia = tuple(x / KGF_CM_S2_PER_KG_M2 for x in v[4:])
+            payloads[number] = (LoadData(v[0], com, inertia), n)  # type: ignore[arg-type]
+        elif (sec := _SECTION.match(raw)) is not None:
+            section = "UTOOL" if sec.group(1) == "MNUTOOL" else "UFRAME"
         elif section and _ROLE_LINE.match(raw):
             m = _ROLE_LINE.match(raw)
             roles[(section, int(m.group(2)))] = m.group(3)  # type: ignore[union-attr]
@@ -223,7 +224,8 @@ def read_fanuc(text: str) -> ParsedFile:
             raise FormatError.at_line(line, f"{label} {number}", f"unknown role {role!r}")
         load = payloads[number][0] if label == "UTOOL" and number in payloads else None
         try:
-            entries.append(FrameEntry(number, name, kind, pose, load, unit))  # type: ignore[arg-type]
+            entry = FrameEntry(number, name, kind, pose, load, unit)  # type: ignore[arg-type]
+            entries.append(entry)
         except CalibrationError as err:
             raise FormatError.at_line(line, f"{label} {number}", err.reason) from None
         where[(family_of(kind), number)] = line

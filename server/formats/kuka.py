@@ -107,9 +107,9 @@ def _name(name: str) -> str:
     return f'"{clean or " "}"'
 
 
-def _machine_frame(unit: str | None) -> str:
+def _machine_frame(unit: str | None, index: int = 0) -> str:
     parent = one_line(unit or "").replace('"', " ") or " "
-    return f'{{MACH_DEF_INDEX 0,PARENT[] "{parent}",GEOMETRY[] " "}}'
+    return f'{{MACH_DEF_INDEX {index},PARENT[] "{parent}",GEOMETRY[] " "}}'
 
 
 def _base_load_line(n: int, load: LoadData) -> str:
@@ -234,6 +234,8 @@ _BASE_LOAD = re.compile(r"^\s*;\s*pendant\s+BASE_LOAD\[(\d+)\]\s*=\s*(\{.*\})\s*
 _TOKEN = re.compile(
     r'\s*(?:(\{)|(\})|(,)|(' + _NUM + r')(?![\w.])|(#\w+)|("[^"]*")|([A-Za-z_]\w*(?:\[\])?))')
 _DEFDAT = re.compile(r"^\s*DEFDAT\b", re.IGNORECASE)
+_MACHINE_DEF = re.compile(r'^\s*MACHINE_DEF\[(\d+)\]\s*=\s*\{\s*NAME\[\]\s*"([^"]*)"',
+                          re.IGNORECASE | re.MULTILINE)
 _ENDDAT = re.compile(r"^\s*ENDDAT\b", re.IGNORECASE)
 _UNITS = {"X": "mm", "Y": "mm", "Z": "mm", "A": "deg", "B": "deg", "C": "deg"}
 
@@ -639,6 +641,17 @@ def _patch(template: str, entries: list[FrameEntry]) -> str:
     eol = "\r\n" if lines and lines[0].endswith("\r\n") else "\n"
     inserts: dict[int, list[str]] = {}  # after 1-based line -> new lines
     new = {(family_of(e.kind), e.number): e for e in entries}
+    machines = {name.strip(): int(i) for i, name in _MACHINE_DEF.findall(template)}
+    if not p.values["MACHINE_FRAME_DAT"] and "MACHINE_FRAME_DAT" not in p.sizes and any(
+            e.kind == "coordinated_base" for e in entries) and sizes["BASE"]:
+        size = sizes["BASE"]  # the template has no MACHINE_FRAME_DAT: add the array
+        units = {e.number: e.mech_unit for e in entries if e.kind == "coordinated_base"}
+        block = [f"DECL MACHINE_FRAME_T MACHINE_FRAME_DAT[{size}]"]
+        for n in range(1, size + 1):
+            unit = units.get(n)
+            block.append(f"MACHINE_FRAME_DAT[{n}]="
+                         f"{_machine_frame(unit, machines.get(unit or '', 0))}")
+        inserts.setdefault(p.enddat - 1, []).extend(block)
 
     def put(arr: str, n: int, text: str) -> None:
         val = p.values[arr][n]
@@ -676,7 +689,7 @@ def _patch(template: str, entries: list[FrameEntry]) -> str:
                 put("LOAD_DATA", n, _patch_numbers(rhs, _load_target(e.load if e else None),
                                                    val.line, f"LOAD_DATA[{n}]"))
             if family == "BASE":
-                _patch_base_extras(p, lines, inserts, n, old, e, put)
+                _patch_base_extras(p, lines, inserts, n, old, e, machines)
     out: list[str] = []
     for i, raw in enumerate(lines, 1):
         out.append(raw)
@@ -688,8 +701,10 @@ def _patch(template: str, entries: list[FrameEntry]) -> str:
 
 
 def _patch_base_extras(p: _Parsed, lines: list[str], inserts: dict[int, list[str]], n: int,
-                       old: FrameEntry | None, e: FrameEntry | None, put) -> None:  # noqa: ANN001
-    """A BASE slot's stationary-tool load comment and its MACHINE_FRAME_DAT."""
+                       old: FrameEntry | None, e: FrameEntry | None,
+                       machines: dict[str, int]) -> None:
+    """A BASE slot's stationary-tool load comment and its MACHINE_FRAME_DAT (PARENT and the
+    MACH_DEF_INDEX of the machine of that name in the template's MACHINE_DEF, else 0)."""
     old_load, new_load = (old.load if old else None), (e.load if e else None)
     type_line = p.values["BASE_TYPE"][n].line
     if old_load != new_load:
@@ -709,9 +724,9 @@ def _patch_base_extras(p: _Parsed, lines: list[str], inserts: dict[int, list[str
             raw = lines[val.line - 1]
             a, b = val.span
             parent = one_line(new_unit or "").replace('"', " ") or " "
+            index = machines.get(new_unit or "", 0)
             rhs = re.sub(r'(PARENT\[\]\s*)"[^"]*"', lambda m: f'{m.group(1)}"{parent}"',
                          raw[a:b], count=1, flags=re.IGNORECASE)
+            rhs = re.sub(r"(MACH_DEF_INDEX\s+)\d+", lambda m: f"{m.group(1)}{index}", rhs,
+                         count=1, flags=re.IGNORECASE)
             lines[val.line - 1] = raw[:a] + rhs + raw[b:]
-        elif new_unit is not None:
-            inserts.setdefault(type_line, []).append(
-                f"MACHINE_FRAME_DAT[{n}]={_machine_frame(new_unit)}")

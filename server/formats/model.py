@@ -82,11 +82,11 @@ class LoadData:
         if not (math.isfinite(self.mass_kg) and self.mass_kg >= 0):
             raise CalibrationError(("load", "mass_kg"),
                                    f"must be finite and >= 0, got {self.mass_kg}")
-        for field in ("com_mm", "inertia_kgm2", "inertia_axes_deg"):
-            v = tuple(float(x) for x in getattr(self, field))
+        for name in ("com_mm", "inertia_kgm2", "inertia_axes_deg"):
+            v = tuple(float(x) for x in getattr(self, name))
             if len(v) != 3 or not all(math.isfinite(x) for x in v):
-                raise CalibrationError(("load", field), f"must be 3 finite numbers, got {v}")
-            object.__setattr__(self, field, v)
+                raise CalibrationError(("load", name), f"must be 3 finite numbers, got {v}")
+            object.__setattr__(self, name, v)
         if any(x < 0 for x in self.inertia_kgm2):
             raise CalibrationError(("load", "inertia_kgm2"), "moments of inertia must be >= 0")
         object.__setattr__(self, "mass_kg", float(self.mass_kg))

@@ -195,15 +195,13 @@ def read_ur(text: str) -> ParsedFile:
         if g and g.group(1) == var:
             v = _numbers(g.group(2), 6, ("mm",) * 3 + ("deg",) * 3, n, var)
             cur["pose"] = Pose.from_matrix(matrix_from_ur(v))
-        elif _PAYLOAD.search(raw):
-            m = _PAYLOAD.search(raw)
-            cur["mass"] = _numbers(m.group(1), 1, ("kg",), n, f"{var}.payload")[0]  # type: ignore[union-attr]
-            com = _numbers(m.group(2), 3, ("mm",) * 3, n, f"{var}.payload")  # type: ignore[union-attr]
+        elif (m := _PAYLOAD.search(raw)) is not None:
+            cur["mass"] = _numbers(m.group(1), 1, ("kg",), n, f"{var}.payload")[0]
+            com = _numbers(m.group(2), 3, ("mm",) * 3, n, f"{var}.payload")
             cur["com"] = tuple(1000.0 * x for x in com)
-        elif _INERTIA.match(raw):
-            m = _INERTIA.match(raw)
-            cur["inertia"] = tuple(_numbers(m.group(1), 3, ("kgm2",) * 3, n, f"{var}.inertia"))  # type: ignore[union-attr]
-            cur["axes"] = tuple(_numbers(m.group(2), 3, ("deg",) * 3, n, f"{var}.inertia"))  # type: ignore[union-attr]
+        elif (m := _INERTIA.match(raw)) is not None:
+            cur["inertia"] = tuple(_numbers(m.group(1), 3, ("kgm2",) * 3, n, f"{var}.inertia"))
+            cur["axes"] = tuple(_numbers(m.group(2), 3, ("deg",) * 3, n, f"{var}.inertia"))
     entries, where = [], {}
     for f in found:
         var = f"{f['kind']}_{f['number']}"

@@ -1,4 +1,4 @@
-"""Workpiece menu: robot-held workpieces, in the tool table (KUKA TOOL_DATA of type #BASE)."""
+"""Workpiece menu: robot-held workpieces, in the tool table (KUKA TOOL_DATA of type #TCP)."""
 
 from __future__ import annotations
 
