@@ -62,7 +62,10 @@ def parse_effects(specs: list[str], n_joints: int, noise_mm: float):  # noqa: AN
                 cyclic[joint] = (float(amp), float(periods or 1))
                 continue
             if name == "gear":
-                amp, periods, phase = (value.split("@") + ["1", "0"])[:3]
+                parts = value.split("@")
+                if not 1 <= len(parts) <= 3:
+                    raise ValueError
+                amp, periods, phase = parts + ["1", "0"][len(parts) - 1:]
                 if joint is None or not 1 <= joint <= n_joints:
                     raise ValueError
                 gears.append((joint, float(amp), float(periods), float(phase)))

@@ -107,3 +107,11 @@ def test_cli_bad_effect_names_the_option(tmp_path, capsys) -> None:
     imp = parse_effects(["a:3=0.1", "cyclic:2=0.01@3", "latency=2", "backlash:1=0.01"], 6, 0.01)
     assert imp.dh_delta == {("a_mm", 3): 0.1} and imp.cyclic_error == {2: (0.01, 3.0)}
     assert imp.trigger_latency_ms == 2 and imp.backlash_deg[0] == 0.01
+
+
+def test_cli_reads_warmup_and_gear_effects() -> None:
+    imp = parse_effects(["drift=0.2", "tau=1800", "gear:2=0.01@3@40", "gear:2=0.005@7"], 6, 0.01)
+    assert imp.thermal_drift_mm == 0.2 and imp.thermal_tau_s == 1800.0
+    assert imp.gear_transmission_error == ((2, 0.01, 3.0, 40.0), (2, 0.005, 7.0, 0.0))
+    with pytest.raises(CalibrationError):
+        parse_effects(["gear=0.01@3"], 6, 0.0)       # a gear error needs its joint

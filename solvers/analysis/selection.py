@@ -197,7 +197,9 @@ def batch_f_tests(Q: FloatArray, X_all: FloatArray, blocks: list[slice], y_perp:
     ``X_all`` holds every group's columns, each normalised (``normalise``); ``blocks`` the
     column slice of each group. One product projects them all out of span(Q); each group's
     test then needs only its small Gram matrix. Returns (ratio, gain, p, k) arrays, equal to
-    the one-at-a-time functions (the rank tolerance of ``f_test``'s ``orth(., 1e-6)``).
+    the one-at-a-time functions (the rank tolerance of ``f_test``'s ``orth(., 1e-6)``); the
+    ratio, a smallest singular value taken from the Gram matrix, to about 1e-8 absolute (it
+    is only compared with the identifiability tolerance, 3e-3).
     With ``ident_tol`` each group is first cut to its :func:`identifiable_part` (directions
     standing out of span(Q) by at least ``ident_tol``), as the structure groups are tested.
     ``projected``: ``X_all`` is already projected out of span(Q) (kept up to date by the
