@@ -50,9 +50,10 @@ def face(tmp_path_factory: pytest.TempPathFactory) -> Iterator[dict]:
     thread.start()
     with make_client(db_url) as rest:
         server = PendantOpcUa(rest.app.state.sessionmaker,
-                              f"opc.tcp://127.0.0.1:{free_port()}/pendant/", poll_s=0.1)
+                              f"opc.tcp://127.0.0.1:{free_port()}/pendant/", poll_s=0.1,
+                              pki_dir=tmp_path_factory.mktemp("pki"))
         asyncio.run_coroutine_threadsafe(server.start(), loop).result(timeout=120)
-        yield {"rest": rest, "server": server, "logs": logs}
+        yield {"rest": rest, "server": server, "logs": logs, "db_url": db_url}
         asyncio.run_coroutine_threadsafe(server.stop(), loop).result(timeout=30)
     loop.call_soon_threadsafe(loop.stop)
     thread.join(timeout=10)
@@ -421,3 +422,60 @@ def test_a_stale_version_is_refused_and_a_bad_frame_is_a_bad_argument(face: dict
     with pytest.raises(ua.UaStatusCodeError) as err:
         on_client(face, bad)
     assert err.value.code == ua.StatusCodes.BadInvalidArgument
+
+
+def client_certificate(folder, uri: str) -> tuple[str, str]:  # noqa: ANN001
+    """A client's self-signed application certificate and key (as a cell PC would have)."""
+    import socket
+
+    from asyncua.crypto.cert_gen import (dump_private_key_as_pem, generate_private_key,
+                                         generate_self_signed_app_certificate)
+    from cryptography import x509
+    from cryptography.hazmat.primitives.serialization import Encoding
+    from cryptography.x509.oid import ExtendedKeyUsageOID
+
+    key = generate_private_key()
+    cert = generate_self_signed_app_certificate(
+        key, "mes-client", {"organizationName": "pendant tests"},
+        [x509.UniformResourceIdentifier(uri), x509.DNSName(socket.gethostname())],
+        [ExtendedKeyUsageOID.CLIENT_AUTH])
+    cert_path, key_path = folder / "client-cert.der", folder / "client-key.pem"
+    cert_path.write_bytes(cert.public_bytes(Encoding.DER))
+    key_path.write_bytes(dump_private_key_as_pem(key))
+    return str(cert_path), str(key_path)
+
+
+def test_a_registered_certificate_logs_in_over_the_encrypted_endpoint(face: dict,
+                                                                    tmp_path) -> None:  # noqa: ANN001
+    from asyncua.crypto.security_policies import SecurityPolicyBasic256Sha256
+
+    from server.cli import main
+
+    uri = "urn:pendant:tests:mes-client"
+    cert, key = client_certificate(tmp_path, uri)
+    (tmp_path / "other").mkdir()
+    stranger = client_certificate(tmp_path / "other", uri)  # valid, but no user's
+    ok(face["rest"].post("/users", json={"name": "mes-cell-3", "role": "Expert"}))
+    assert main(["users", "cert", "mes-cell-3", cert, "--db", face["db_url"]]) == 0
+    version = int(face["rest"].get(f"{C}/tools/11").headers["ETag"].strip('W/"'))
+
+    async def login(cert: str, key: str) -> int:
+        client = Client(face["server"].endpoint, timeout=10)
+        client.application_uri = uri
+        await client.set_security(SecurityPolicyBasic256Sha256, cert, key,
+                                  mode=ua.MessageSecurityMode.SignAndEncrypt)
+        await client.load_client_certificate(cert)  # the X509 identity token
+        await client.load_private_key(key)
+        async with client:
+            ns = {"pendant": await client.get_namespace_index(PENDANT_URI)}
+            return await commit(client, ns, 11, [5.0, 5.0, 90.0, 0.0, 0.0, 0.0], "scanner",
+                                version)
+
+    assert asyncio.run(login(cert, key)) == version + 1
+    (rec,) = [r for r in ok(face["rest"].get("/audit", params={"user": "mes-cell-3"}))
+              if r.get("number") == 11]
+    assert (rec["source"], rec["role"]) == ("opcua", "Expert")
+    with pytest.raises(ua.UaStatusCodeError) as err:
+        asyncio.run(login(*stranger))
+    assert err.value.code == ua.StatusCodes.BadUserAccessDenied
+    assert ok(face["rest"].get(f"{C}/tools/11"))["name"] == "scanner"

@@ -3,6 +3,7 @@
     pendant users add NAME --role ROLE [--db URL]     (Operator, Programmer, Expert,
     pendant users list [--db URL]                      Administrator or a site role)
     pendant users revoke NAME [--db URL]
+    pendant users cert NAME FILE [--days 365] [--db URL]   (an OPC UA certificate login)
     pendant tokens create NAME [--days 90 | --no-expiry] [--label TEXT] [--db URL]
     pendant roles add NAME PERMISSION... [--description TEXT] [--db URL]
     pendant roles list [--db URL]
@@ -16,6 +17,7 @@ from __future__ import annotations
 import getpass
 import sys
 from contextlib import contextmanager
+from pathlib import Path
 from typing import Any, Iterator
 
 from sqlalchemy.orm import Session
@@ -24,6 +26,7 @@ from db.crud import StateConflict
 
 from server.auth import audit, tokens
 from server.auth.permissions import PERMISSIONS
+from server.opcua.access import certificate_secret
 
 
 @contextmanager
@@ -62,15 +65,36 @@ def run_users(args: Any) -> int:
             elif args.action == "revoke":
                 u = tokens.revoke_user(db, args.name)
                 print(f"user {u.name} revoked with every token and login")
+            elif args.action == "cert":
+                der = certificate_der(args.file)
+                tokens.create_token(db, tokens.get_user(db, args.name), args.days,
+                                    "opcua certificate", secret=certificate_secret(der))
+                print(f"certificate {args.file.name} logs {args.name} in over OPC UA "
+                      f"(valid {args.days:g} days; pendant users revoke ends it)")
             else:
                 print(f"{'id':>4}  {'name':24s} {'role':16s} {'created (UTC)':20s} revoked")
                 for u in tokens.list_users(db):
                     revoked = u.revoked_at.strftime("%Y-%m-%d %H:%M") if u.revoked_at else ""
                     print(f"{u.id:4d}  {u.name:24s} {u.role:16s} "
                           f"{u.created_at.strftime('%Y-%m-%d %H:%M'):20s} {revoked}")
-        except (ValueError, StateConflict) as err:
+        except (ValueError, StateConflict, OSError) as err:
             return _fail(err)
     return 0
+
+
+def certificate_der(path: Path) -> bytes:
+    """The DER bytes of an X.509 certificate file (PEM or DER); ValueError naming the file."""
+    from cryptography import x509
+
+    data = path.read_bytes()
+    try:
+        cert = (x509.load_pem_x509_certificate(data) if b"-----BEGIN" in data
+                else x509.load_der_x509_certificate(data))
+    except ValueError:
+        raise ValueError(f"{path}: not an X.509 certificate (PEM or DER)") from None
+    from cryptography.hazmat.primitives.serialization import Encoding
+
+    return cert.public_bytes(Encoding.DER)
 
 
 def run_tokens(args: Any) -> int:
@@ -111,7 +135,11 @@ def add_auth_commands(subparsers: Any) -> None:
     us.add_parser("list", help="every user with role and revocation")
     r = us.add_parser("revoke", help="revoke a user with every token and login")
     r.add_argument("name")
-    for p in (a, us.choices["list"], r):
+    ce = us.add_parser("cert", help="let a user log in to the OPC UA face with a certificate")
+    ce.add_argument("name")
+    ce.add_argument("file", type=Path, help="the client's X.509 certificate (PEM or DER)")
+    ce.add_argument("--days", type=float, default=365.0, help="how long it logs in (365)")
+    for p in (a, us.choices["list"], r, ce):
         p.add_argument("--db", help="database URL")
         p.set_defaults(func=run_users)
 

@@ -12,6 +12,7 @@ import asyncio
 import logging
 import subprocess
 import sys
+from pathlib import Path
 
 
 def add_opcua_commands(sub: argparse._SubParsersAction) -> None:
@@ -20,6 +21,9 @@ def add_opcua_commands(sub: argparse._SubParsersAction) -> None:
     add_opcua_arguments(o)
     o.add_argument("--db", help="database URL (default: PENDANT_DB_URL, else the SQLite file in "
                                 "the user data dir)")
+    o.add_argument("--pki", type=Path, help="folder of the server's certificate and key (made on "
+                                            "first start; default: opcua-pki in the user data "
+                                            "dir)")
     o.set_defaults(func=run_opcua)
 
 
@@ -36,10 +40,17 @@ def run_opcua(args: argparse.Namespace) -> int:
     logging.basicConfig(level=logging.WARNING, format="%(levelname)s %(name)s: %(message)s")
     app = create_app(Settings(db_url=args.db) if args.db else Settings())
     try:
-        asyncio.run(run(app.state.sessionmaker, args.host, args.port, app.state.settings.auth))
+        asyncio.run(run(app.state.sessionmaker, args.host, args.port, app.state.settings.auth,
+                        args.pki or default_pki_dir()))
     except KeyboardInterrupt:
         pass
     return 0
+
+
+def default_pki_dir() -> Path:
+    import platformdirs
+
+    return Path(platformdirs.user_data_dir("pendant")) / "opcua-pki"
 
 
 def start_beside(host: str, port: int, db_url: str | None) -> subprocess.Popen:

@@ -13,6 +13,7 @@ from __future__ import annotations
 import asyncio
 import logging
 from dataclasses import dataclass, field
+from pathlib import Path
 
 from asyncua import Server, ua
 from sqlalchemy.orm import Session, sessionmaker
@@ -34,6 +35,8 @@ class PendantOpcUa:
     endpoint: str = "opc.tcp://127.0.0.1:4840/pendant/"
     poll_s: float = 0.2
     auth: bool = True  # False: the --no-auth demo, everyone an Administrator (as on REST)
+    pki_dir: Path | None = None  # the server's certificate and key (made on first start):
+    # with it, a Basic256Sha256 SignAndEncrypt endpoint and certificate (X509) logins
     server: Server = field(init=False)
     cells: dict[int, space.CellNodes] = field(default_factory=dict, init=False)
     states: dict[int, ControllerState] = field(default_factory=dict, init=False)
@@ -48,9 +51,14 @@ class PendantOpcUa:
         await self.server.init()
         self.server.set_endpoint(self.endpoint)
         self.rules = access.PendantRules(self.make_session, self.auth)
-        self.server.set_security_policy([ua.SecurityPolicyType.NoSecurity],
-                                        permission_ruleset=self.rules)
-        self.server.set_identity_tokens([ua.AnonymousIdentityToken, ua.UserNameIdentityToken])
+        policies = [ua.SecurityPolicyType.NoSecurity]
+        identities: list[type] = [ua.AnonymousIdentityToken, ua.UserNameIdentityToken]
+        if self.pki_dir is not None:
+            await self._load_certificate(self.pki_dir)
+            policies.append(ua.SecurityPolicyType.Basic256Sha256_SignAndEncrypt)
+            identities.append(ua.X509IdentityToken)
+        self.server.set_security_policy(policies, permission_ruleset=self.rules)
+        self.server.set_identity_tokens(identities)
         self.server.set_server_name("pendant")
         await self.server.set_application_uri(space.PENDANT_URI)
         self.ns_ids = await space.load_nodesets(self.server)
@@ -59,6 +67,22 @@ class PendantOpcUa:
         await self.sync()
         await self.server.start()
         self._task = asyncio.create_task(self._poll_forever(), name="pendant-opcua-poll")
+
+    async def _load_certificate(self, pki: Path) -> None:
+        """The server's application certificate (self-signed, made once, kept in ``pki``)."""
+        import socket
+
+        from asyncua.crypto.cert_gen import setup_self_signed_certificate
+        from cryptography.x509.oid import ExtendedKeyUsageOID
+
+        pki.mkdir(parents=True, exist_ok=True)
+        key, cert = pki / "pendant-server-key.pem", pki / "pendant-server-cert.der"
+        await setup_self_signed_certificate(
+            key, cert, space.PENDANT_URI, socket.gethostname(),
+            [ExtendedKeyUsageOID.SERVER_AUTH, ExtendedKeyUsageOID.CLIENT_AUTH],
+            {"organizationName": "pendant", "commonName": "pendant OPC UA"})
+        await self.server.load_certificate(str(cert))
+        await self.server.load_private_key(str(key))
 
     async def stop(self) -> None:
         if self._task is not None:
@@ -173,9 +197,11 @@ def _slot_key(table: object, number: object) -> tuple[str, int] | None:
     return (str(table), number) if 1 <= number <= TABLES[str(table)] else None
 
 
-async def run(make_session: sessionmaker[Session], host: str, port: int, auth: bool = True) -> None:
+async def run(make_session: sessionmaker[Session], host: str, port: int, auth: bool = True,
+              pki_dir: Path | None = None) -> None:
     """Serve until cancelled (``pendant opcua``)."""
-    face = PendantOpcUa(make_session, f"opc.tcp://{host}:{port}/pendant/", auth=auth)
+    face = PendantOpcUa(make_session, f"opc.tcp://{host}:{port}/pendant/", auth=auth,
+                        pki_dir=pki_dir)
     await face.start()
     log.warning("pendant OPC UA server at %s", face.endpoint)
     try:
