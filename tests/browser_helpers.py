@@ -84,6 +84,21 @@ def browser() -> Iterator[object]:
             b.close()
 
 
+@contextmanager
+def browser_page(chromium, timeout_ms: int = 15_000, **context_options) -> Iterator[object]:  # noqa: ANN001
+    """A page in a fresh context (VIEWPORT); fails the test if the page threw a JavaScript error."""
+    context = chromium.new_context(viewport=VIEWPORT, **context_options)
+    context.set_default_timeout(timeout_ms)
+    p = context.new_page()
+    errors: list[str] = []
+    p.on("pageerror", lambda e: errors.append(str(e)))
+    try:
+        yield p
+    finally:
+        context.close()
+    assert not errors, f"JavaScript errors on the page: {errors}"
+
+
 # ------------------------------------------------------------------------------ the person
 
 def idle(page) -> None:  # noqa: ANN001

@@ -14,7 +14,7 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from browser_helpers import (VIEWPORT, compute, idle, kuka_frame, open_menu, open_pendant, save, walk_steps,
+from browser_helpers import (browser_page, compute, idle, kuka_frame, open_menu, open_pendant, save, walk_steps,
                              wizard)
 from server.emulator import cell_for
 from solvers.robots import ROBOTS
@@ -23,15 +23,9 @@ CELL = cell_for(ROBOTS["kuka_kr6_r900_sixx"], 1)  # the demo cell's hidden truth
 
 
 @pytest.fixture
-def page(chromium, site: str):  # noqa: ANN001, ANN201
-    context = chromium.new_context(viewport=VIEWPORT, accept_downloads=True)
-    context.set_default_timeout(15_000)
-    p = context.new_page()
-    errors: list[str] = []
-    p.on("pageerror", lambda e: errors.append(str(e)))
-    yield p
-    context.close()
-    assert not errors, f"JavaScript errors on the page: {errors}"
+def page(chromium):  # noqa: ANN001, ANN201
+    with browser_page(chromium, accept_downloads=True) as p:
+        yield p
 
 
 def api(page, site: str, path: str) -> dict:  # noqa: ANN001
