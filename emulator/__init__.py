@@ -11,6 +11,6 @@ from emulator.controller import (APPROACH_S, CARTESIAN_AXES, DEMO_ROBOT, THERMAL
                                  TOUCH_UP_S, Cell, CycleRun, RobotPhysics, approach,
                                  build_cell, cell_for, home_joints, imperfections_document,
                                  imperfections_from_document, jog, motion_duration_s,
-                                 robot_from_custom, run_beam_cycle, solve_ik, tcp_pose,
+                                 robot_from_custom, rot, run_beam_cycle, solve_ik, tcp_pose,
                                  true_pose, updated_signs)
 from emulator.state import ControllerState, after_cycle, moved, touched_up  # noqa: F401

@@ -26,14 +26,19 @@ import csv
 import difflib
 import errno
 import io
+import itertools
 import json
 import os
 import subprocess
 import signal
 import socket
 import sys
+import threading
+import time
+from collections.abc import Iterator
+from contextlib import contextmanager
 from pathlib import Path
-from typing import Any, Sequence
+from typing import Any, Sequence, TextIO
 
 import numpy as np
 
@@ -434,6 +439,39 @@ def _serve(app, host: str, port: int) -> None:  # noqa: ANN001
     Server(uvicorn.Config(app, host=host, port=port)).run()
 
 
+SPINNER = "|/-\\"
+
+
+@contextmanager
+def progress_line(label: str, stream: TextIO | None = None) -> Iterator[None]:
+    """On a terminal, a line that shows ``label`` is still running: a spinner and the seconds
+    so far, redrawn ten times a second and erased at the end. Elsewhere (a pipe, a file, a
+    test) it prints nothing. For work whose length is not known in advance (an analysis)."""
+    stream = stream or sys.stderr
+    if not stream.isatty():
+        yield
+        return
+    done = threading.Event()
+    start = time.monotonic()
+
+    def draw() -> None:
+        for k in itertools.count():
+            stream.write(f"\r{SPINNER[k % 4]} {label} {time.monotonic() - start:5.1f} s")
+            stream.flush()
+            if done.wait(0.1):
+                break
+        stream.write("\r\033[K")
+        stream.flush()
+
+    thread = threading.Thread(target=draw, daemon=True)
+    thread.start()
+    try:
+        yield
+    finally:
+        done.set()
+        thread.join()
+
+
 def _check_port_free(host: str, port: int) -> None:
     """Refuse a port already in use before starting uvicorn, suggesting --port."""
     with socket.socket(socket.AF_INET6 if ":" in host else socket.AF_INET) as probe:
@@ -555,7 +593,11 @@ def main(argv: Sequence[str] | None = None) -> int:
             return 0
         if args.command == "import":
             return import_file(args)
-        return int(args.func(args) or 0) if hasattr(args, "func") else 2
+        if not hasattr(args, "func"):
+            return 2
+        name = Path(args.file).name if getattr(args, "file", None) else ""
+        with progress_line(f"pendant {args.command} {name}".rstrip() + ": working"):
+            return int(args.func(args) or 0)
     except SchemaOutOfDate as err:
         print(f"pendant: {err}", file=sys.stderr)
         return 2

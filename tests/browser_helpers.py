@@ -115,6 +115,28 @@ def browser() -> Iterator[object]:
             b.close()
 
 
+@contextmanager
+def browser_page(chromium, site: str | None = None, timeout_ms: int = 15_000,  # noqa: ANN001
+                 **context_options) -> Iterator[object]:
+    """A page in a fresh context (VIEWPORT), logged in to ``site`` as its first Administrator
+    (the login link's cookie, and the bearer header); fails the test if the page threw a
+    JavaScript error."""
+    if site is not None:
+        context_options.setdefault("extra_http_headers", auth_headers())
+    context = chromium.new_context(viewport=VIEWPORT, **context_options)
+    if site is not None:
+        log_in(context, site)  # a download carries the login cookie, not the bearer header
+    context.set_default_timeout(timeout_ms)
+    p = context.new_page()
+    errors: list[str] = []
+    p.on("pageerror", lambda e: errors.append(str(e)))
+    try:
+        yield p
+    finally:
+        context.close()
+    assert not errors, f"JavaScript errors on the page: {errors}"
+
+
 # ------------------------------------------------------------------------------ the person
 
 def idle(page) -> None:  # noqa: ANN001

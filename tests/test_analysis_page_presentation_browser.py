@@ -10,26 +10,19 @@ from pathlib import Path
 
 import pytest
 
-from browser_helpers import VIEWPORT
+from browser_helpers import VIEWPORT, browser_page
 
 UR10 = Path(__file__).resolve().parent / "data" / "ur10-laser-tracker" / "recording-series-d.json"
 
 
 @pytest.fixture
 def page(chromium, site: str):  # noqa: ANN001, ANN201
-    context = chromium.new_context(viewport=VIEWPORT)
-    context.set_default_timeout(60_000)
-    p = context.new_page()
-    errors: list[str] = []
-    p.on("pageerror", lambda e: errors.append(str(e)))
-    posts: list[str] = []
-    p.on("request", lambda r: posts.append(r.url) if r.method == "POST" else None)
-    p.goto(site + "/analysis.html")
-    idle(p)
-    p.posts = posts
-    yield p
-    context.close()
-    assert not errors, f"JavaScript errors on the page: {errors}"
+    with browser_page(chromium, site, timeout_ms=60_000) as p:
+        p.posts = []  # the POSTs the page sent
+        p.on("request", lambda r: p.posts.append(r.url) if r.method == "POST" else None)
+        p.goto(site + "/analysis.html")
+        idle(p)
+        yield p
 
 
 def idle(page) -> None:  # noqa: ANN001

@@ -88,3 +88,34 @@ def test_base_3point_with_an_empty_touching_tool_is_refused_at_open(client):  # 
     d = r.json()["detail"][0]
     assert d["loc"] == ["body", "params", "tool_no"] and "tool 5 is empty" in d["msg"]
     assert ok(client.get(f"{C}/sessions")) == []
+
+
+def test_the_guidance_jogs_reach_the_suggested_orientation(client):  # noqa: F811
+    """The guidance in jog terms is right: touch-up j's flange orientation turned by Tool jog
+    (TOOL 0) A, then B, then C by the stated whole degrees, R_j Rz(A) Ry(B) Rx(C), is within
+    1.5 deg of next_orientation. (On the arm such jogs can meet a software limit, e.g. A6 at
+    -350 deg here; Move to takes another joint solution.)"""
+    import re
+
+    from scipy.spatial.transform import Rotation
+
+    from solvers.frames import Pose
+
+    url = open_session(client, "tool.xyz_4point", 1)
+    for st in ok(client.get(url))["steps"]:
+        ok(client.post(f"{C}/robot/approach", json={"target": st["target"], "tilt_deg": st["tilt_deg"],
+                                                    "around_deg": st["around_deg"], "spin_deg": st["spin_deg"]}))
+        ok(client.post(f"{url}/touch-up", json={"step": st["index"]}))
+    report = ok(client.post(f"{url}/compute"))
+    text = report["guidance"]
+    assert "report.next_orientation" not in text
+    m = re.search(r"from the orientation of touch-up (\d+), tilt \d+ deg: with TOOL 0 in Tool jog, jog (.*?) "
+                  r"\(in that order\), then X, Y, Z back onto the point", text)
+    assert m, text
+    flange = ok(client.get(url))["steps"][int(m.group(1)) - 1]["point"]["flange_pose"]
+    R = Pose(*(flange[k] for k in "xyzabc")).as_matrix()[:3, :3]
+    for axis, value in re.findall(r"([ABC]) ([+-]\d+) deg", m.group(2)):
+        R = R @ Rotation.from_euler("ZYX"["ABC".index(axis)], float(value), degrees=True).as_matrix()
+    R_next = np.array(report["next_orientation"])
+    angle = np.degrees(np.arccos(np.clip((np.trace(R_next.T @ R) - 1) / 2, -1, 1)))
+    assert angle < 1.5, (angle, text)

@@ -125,7 +125,7 @@ def test_no_500_with_a_stack_trace_on_garbage(client):
 
 
 def test_walk_refuses_a_step_beyond_the_menu(client):
-    ok(client.put(f"{C}/tools/1", json={"pose": {"x": 0, "y": 0, "z": 150, "a": 0, "b": 0, "c": 0}}))
+    ok(client.put(f"{C}/tools/1", json={"pose": {"x": 0, "y": 0, "z": 150, "a": 0, "b": 0, "c": 0}}, headers={"If-Match": "*"}))
     url = open_session(client, "base.3point", 2, tool_no=1)
     walk(client, url)
     r = client.post(f"{url}/touch-up")

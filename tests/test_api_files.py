@@ -33,7 +33,7 @@ def test_import_then_export_is_byte_identical_and_an_edit_touches_only_its_slot(
     assert res["entries"] == 9 and res["skipped"] == []
     assert client.get(f"{C}/export", params={"format": "kuka"}).text == KUKA
     ok(client.put(f"{C}/tools/2", json={"pose": {"x": 148.32, "y": -2.105, "z": 357.125,
-                                                 "a": 0, "b": 67.5, "c": 0}}))
+                                                 "a": 0, "b": 67.5, "c": 0}}, headers={"If-Match": "*"}))
     out = client.get(f"{C}/export", params={"format": "kuka"}).text
     changed = [a for a, b in zip(KUKA.splitlines(), out.splitlines()) if a != b]
     assert changed == ["TOOL_DATA[2]={X 148.320,Y -2.10500,Z 356.870,A 0.0,B 67.5000,C 0.0}"]
@@ -65,14 +65,14 @@ def test_kinds_loads_and_units_reach_the_tables(client):
 
 
 def test_an_import_replaces_each_named_slot_whole(client):
-    ok(client.put(f"{C}/tools/4", json={"name": "spindle", "load": {"mass_kg": 9.0}}))
-    ok(client.put(f"{C}/tools/9", json={"name": "left over", "pose": {"z": 50}}))
+    ok(client.put(f"{C}/tools/4", json={"name": "spindle", "load": {"mass_kg": 9.0}}, headers={"If-Match": "*"}))
+    ok(client.put(f"{C}/tools/9", json={"name": "left over", "pose": {"z": 50}}, headers={"If-Match": "*"}))
     ok(imp(client, "kuka", KUKA))
     assert ok(client.get(f"{C}/tools/4"))["load"] is None  # LOAD_DATA[4] M -1: not set
     assert ok(client.get(f"{C}/tools/9"))["name"] == ""  # the file lists slot 9 as unused
     assert ok(client.get(f"{C}/tools/2"))["load"]["mass_kg"] == 6.8
     # the ABB module names tool 2 (tTorch) with a load and tool 4 (tSpare) without one
-    ok(client.put(f"{C}/tools/4", json={"load": {"mass_kg": 9.0}}))
+    ok(client.put(f"{C}/tools/4", json={"load": {"mass_kg": 9.0}}, headers={"If-Match": "*"}))
     ok(imp(client, "abb", ABB))
     assert ok(client.get(f"{C}/tools/4"))["load"] is None
     hist = ok(client.get(f"{C}/tools/4/history"))
@@ -129,14 +129,14 @@ def test_bad_files_are_refused_naming_line_and_field_and_nothing_changes(client,
 
 
 def test_one_set_of_bounds_on_every_path(client):
-    r = client.put(f"{C}/tools/1", json={"name": "x" * 65})
+    r = client.put(f"{C}/tools/1", json={"name": "x" * 65}, headers={"If-Match": "*"})
     assert r.status_code == 422 and r.json()["detail"][0]["loc"][-1] == "name"
-    r = client.put(f"{C}/tools/1", json={"name": "two\u2028lines"})
+    r = client.put(f"{C}/tools/1", json={"name": "two\u2028lines"}, headers={"If-Match": "*"})
     assert r.status_code == 422 and "U+2028" in r.text
-    r = client.put(f"{C}/tools/1", json={"pose": {"z": 2e7}})
+    r = client.put(f"{C}/tools/1", json={"pose": {"z": 2e7}}, headers={"If-Match": "*"})
     assert r.status_code == 422
     # the backup path refuses what the API refuses
-    ok(client.put(f"{C}/tools/1", json={"name": "x" * 64, "pose": {"z": 1e6}}))
+    ok(client.put(f"{C}/tools/1", json={"name": "x" * 64, "pose": {"z": 1e6}}, headers={"If-Match": "*"}))
     doc = client.get(f"{C}/export", params={"format": "json"}).json()
     assert ok(client.post(f"{C}/import", json={"format": "json",
                                                 "text": __import__("json").dumps(doc)}))
@@ -146,9 +146,9 @@ def test_one_set_of_bounds_on_every_path(client):
 
 
 def test_export_without_an_imported_file_is_a_whole_file_that_reads_back(client):
-    ok(client.put(f"{C}/tools/1", json={"name": "pointer", "pose": {"z": 180}}))
+    ok(client.put(f"{C}/tools/1", json={"name": "pointer", "pose": {"z": 180}}, headers={"If-Match": "*"}))
     ok(client.put(f"{C}/bases/2", json={"name": "turntable", "kind": "coordinated_base",
-                                        "mech_unit": "STN1", "pose": {"z": 400}}))
+                                        "mech_unit": "STN1", "pose": {"z": 400}}, headers={"If-Match": "*"}))
     for fmt in ("kuka", "abb", "fanuc", "ur"):
         text = client.get(f"{C}/export", params={"format": fmt}).text
         other = f"/controllers/{ok(client.post('/controllers', json={'name': f'c-{fmt}'}))['id']}"
@@ -194,7 +194,7 @@ def test_a_slot_the_tables_do_not_have_is_refused_naming_its_line(client):
 
 def test_the_json_backup_keeps_the_imported_file(client):
     ok(imp(client, "kuka", KUKA))
-    ok(client.put(f"{C}/bases/8", json={"name": "Pallet 3"}))
+    ok(client.put(f"{C}/bases/8", json={"name": "Pallet 3"}, headers={"If-Match": "*"}))
     backup = client.get(f"{C}/export", params={"format": "json"}).text
     other = f"/controllers/{ok(client.post('/controllers', json={'name': 'restored'}))['id']}"
     ok(client.post(f"{other}/import", json={"format": "json", "text": backup}))

@@ -47,7 +47,7 @@ def test_a_new_touch_up_makes_the_result_stale(client):
 @pytest.mark.parametrize("method", ["tool.xyz_4point", "base.3point"])
 def test_discarded_session_writes_nothing(client, method):
     if method.startswith("base"):  # a touching tool in slot 2 (an empty one is refused at Open)
-        ok(client.put(f"{C}/tools/2", json={"pose": {"x": 0, "y": 0, "z": 150, "a": 0, "b": 0, "c": 0}}))
+        ok(client.put(f"{C}/tools/2", json={"pose": {"x": 0, "y": 0, "z": 150, "a": 0, "b": 0, "c": 0}}, headers={"If-Match": "*"}))
     url = open_session(client, method, 1, **({"tool_no": 2} if method.startswith("base") else {}))
     ok(client.post(f"{url}/discard"))
     assert ok(client.get(f"{C}/tools/1/history")) == []

@@ -37,7 +37,7 @@ def audit(client: TestClient, **query) -> list[dict]:
 
 def test_unauthenticated_write_is_401_and_changes_nothing(client):
     before = ok(client.get(f"{C}/tools/1"))
-    r = anonymous(client).put(f"{C}/tools/1", json={"name": "forged"})
+    r = anonymous(client).put(f"{C}/tools/1", json={"name": "forged"}, headers={"If-Match": "*"})
     assert r.status_code == 401
     assert r.json()["detail"][0]["loc"] == ["header", "authorization"]
     assert r.headers["www-authenticate"].startswith("Bearer")
@@ -52,7 +52,7 @@ def test_bad_expired_and_revoked_tokens_are_401(client):
     assert client.get(C, headers={"Authorization": "Basic abc"}).status_code == 401
     eva = add_user(client, "eva", "Expert", days=0.00001)  # < 1 s
     time.sleep(1.1)
-    r = client.put(f"{C}/tools/1", json={"name": "x"}, headers=eva)
+    r = client.put(f"{C}/tools/1", json={"name": "x"}, headers={**eva, "If-Match": "*"})
     assert r.status_code == 401 and "expired" in r.json()["detail"][0]["msg"]
     bob = bearer(ok(client.post("/users/eva/tokens", json={}))["token"])
     assert client.get(C, headers=bob).status_code == 200
@@ -94,8 +94,8 @@ def test_audit_survives_restore_and_delete(client):
     and the controller's delete, the audit still shows every change and who made it."""
     eva = add_user(client, "eva", "Expert")
     calibrate(client, "tool.xyz_4point", 1)  # admin
-    ok(client.put(f"{C}/tools/1", json={"name": "pointer"}, headers=eva))
-    ok(client.put(f"{C}/tools/2", json={"pose": {"x": 10}}, headers=eva))
+    ok(client.put(f"{C}/tools/1", json={"name": "pointer"}, headers={**eva, "If-Match": "*"}))
+    ok(client.put(f"{C}/tools/2", json={"pose": {"x": 10}}, headers={**eva, "If-Match": "*"}))
     hist = ok(client.get(f"{C}/tools/1/history"))
     ok(client.post(f"{C}/tools/1/restore/{hist[-1]['id']}", headers=eva))  # back to "tool1"
     backup = json.loads(client.get(f"{C}/export?format=json").text)
@@ -129,8 +129,8 @@ def test_audit_survives_restore_and_delete(client):
 def test_audit_filters_and_csv(client):
     eva = add_user(client, "eva", "Expert")
     t0 = datetime.now(timezone.utc)
-    ok(client.put(f"{C}/tools/1", json={"name": "a"}, headers=eva))
-    ok(client.put(f"{C}/bases/3", json={"name": "b"}))
+    ok(client.put(f"{C}/tools/1", json={"name": "a"}, headers={**eva, "If-Match": "*"}))
+    ok(client.put(f"{C}/bases/3", json={"name": "b"}, headers={"If-Match": "*"}))
     assert [r["user"] for r in audit(client, table="base", number=3)] == ["admin"]
     assert [r["number"] for r in audit(client, user="eva")] == [1]
     assert len(audit(client, since=t0.isoformat(), controller_id=1)) == 2
@@ -183,9 +183,9 @@ def test_cookie_login_needs_the_csrf_token_for_commands(db_url):
         assert c.get(C).status_code == 200  # reads need no CSRF token
         r = c.post(f"{C}/robot/home")
         assert r.status_code == 403 and r.json()["detail"][0]["type"] == "csrf"
-        r = c.put(f"{C}/tools/1", json={"name": "x"}, headers={"X-CSRF-Token": "wrong"})
+        r = c.put(f"{C}/tools/1", json={"name": "x"}, headers={"X-CSRF-Token": "wrong", "If-Match": "*"})
         assert r.status_code == 403
-        assert ok(c.put(f"{C}/tools/1", json={"name": "x"}, headers={"X-CSRF-Token": csrf}))
+        assert ok(c.put(f"{C}/tools/1", json={"name": "x"}, headers={"X-CSRF-Token": csrf, "If-Match": "*"}))
         assert audit(c, user="admin")[-1]["source"] == "pendant"
         assert c.post("/auth/logout", headers={"X-CSRF-Token": csrf}).status_code == 204
         assert c.get(C).status_code == 401
@@ -196,11 +196,11 @@ def test_idle_login_drops_to_operator(db_url):
         eva = add_user(admin, "eva", "Expert")["Authorization"].split()[1]
     with make_client(db_url, token=None, idle_timeout_s=1.0) as c:
         csrf = {"X-CSRF-Token": login(c, eva)}
-        assert ok(c.put(f"{C}/tools/1", json={"name": "a"}, headers=csrf))
+        assert ok(c.put(f"{C}/tools/1", json={"name": "a"}, headers={**csrf, "If-Match": "*"}))
         time.sleep(1.2)
         me = ok(c.get("/auth/me"))
         assert me["role"] == "Operator" and me["idle"] is True and me["user"] == "eva"
-        r = c.put(f"{C}/tools/1", json={"name": "b"}, headers=csrf)
+        r = c.put(f"{C}/tools/1", json={"name": "b"}, headers={**csrf, "If-Match": "*"})
         assert r.status_code == 403 and "idle" in r.json()["detail"][0]["msg"]
         ok(c.post(f"{C}/robot/jog", json={"mode": "joint", "axis": "A1", "increment": 1},
                   headers=csrf))  # an Operator may still jog
@@ -241,7 +241,7 @@ def test_cors_closed_unless_configured(db_url, tmp_path):
     with make_client(f"sqlite:///{tmp_path / 'b.db'}", cors_origins=("http://cell-pc:3000",)) as c:
         r = c.options(f"{C}/tools/1", headers=pre)
         assert r.headers["access-control-allow-origin"] == "http://cell-pc:3000"
-        assert c.put(f"{C}/tools/1", json={"name": "x"}, headers={"Origin": pre["Origin"]}) \
+        assert c.put(f"{C}/tools/1", json={"name": "x"}, headers={"Origin": pre["Origin"], "If-Match": "*"}) \
             .status_code == 200
 
 
@@ -272,5 +272,5 @@ def test_first_start_makes_an_administrator_once(db_url):
 
 def test_no_auth_demo_mode_acts_as_administrator(db_url):
     with make_client(db_url, token=None, auth=False) as c:
-        assert ok(c.put(f"{C}/tools/1", json={"name": "demo"}))["name"] == "demo"
+        assert ok(c.put(f"{C}/tools/1", json={"name": "demo"}, headers={"If-Match": "*"}))["name"] == "demo"
         assert audit(c)[-1]["user"] == "no-auth"

@@ -66,7 +66,7 @@ def snapshot(api: httpx.Client, sid: int) -> dict:
 def test_cross_origin_page_changes_nothing(chromium, site, attacker):  # noqa: ANN001
     api = httpx.Client(base_url=site, headers={"Authorization": f"Bearer {ADMIN_TOKEN}"})
     calibrate(api, "tool.xyz_4point", 1)  # tool 1 has a history entry to restore
-    ok(api.put("/controllers/1/tools/1", json={"name": "pointer"}))
+    ok(api.put("/controllers/1/tools/1", json={"name": "pointer"}, headers={"If-Match": "*"}))
     url = open_session(api, "tool.xyz_4point", 1)
     walk(api, url)
     ok(api.post(f"{url}/compute"))  # a computed session a forged save would write

@@ -35,7 +35,7 @@ def test_users_tokens_roles(tmp_path, capsys):
 
     with make_client(db, token=token) as c:
         assert c.get("/auth/me").json()["user"] == "eva"
-        assert c.put("/controllers/1/tools/1", json={"name": "x"}).status_code == 200
+        assert c.put("/controllers/1/tools/1", json={"name": "x"}, headers={"If-Match": "*"}).status_code == 200
         assert main(["users", "revoke", "eva", "--db", db]) == 0
         assert c.get("/controllers/1").status_code == 401
         audit = c.get("/audit", headers={"Authorization": "Bearer " + ADMIN_TOKEN}).json()

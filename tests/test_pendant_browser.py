@@ -14,7 +14,7 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from browser_helpers import (VIEWPORT, auth_headers, compute, log_in, idle, kuka_frame, open_menu, open_pendant, save, walk_steps,
+from browser_helpers import (browser_page, compute, idle, kuka_frame, open_menu, open_pendant, save, walk_steps,
                              wizard)
 from emulator import cell_for
 from solvers.robots import ROBOTS
@@ -24,16 +24,8 @@ CELL = cell_for(ROBOTS["kuka_kr6_r900_sixx"], 1)  # the demo cell's hidden truth
 
 @pytest.fixture
 def page(chromium, site: str):  # noqa: ANN001, ANN201
-    context = chromium.new_context(viewport=VIEWPORT, accept_downloads=True,
-                                   extra_http_headers=auth_headers())
-    log_in(context, site)  # the KUKA download carries the login cookie, not the bearer header
-    context.set_default_timeout(15_000)
-    p = context.new_page()
-    errors: list[str] = []
-    p.on("pageerror", lambda e: errors.append(str(e)))
-    yield p
-    context.close()
-    assert not errors, f"JavaScript errors on the page: {errors}"
+    with browser_page(chromium, site, accept_downloads=True) as p:
+        yield p
 
 
 def api(page, site: str, path: str) -> dict:  # noqa: ANN001

@@ -18,7 +18,7 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from browser_helpers import VIEWPORT, compute, idle, kuka_frame, open_pendant, save, wizard
+from browser_helpers import VIEWPORT, browser_page, compute, idle, kuka_frame, open_pendant, wizard
 from emulator import cell_for
 from solvers.robots import ROBOTS
 
@@ -28,14 +28,8 @@ README = Path(__file__).resolve().parent.parent / "README.md"
 
 @pytest.fixture
 def page(chromium, site: str):  # noqa: ANN001, ANN201
-    context = chromium.new_context(viewport=VIEWPORT, accept_downloads=True)
-    context.set_default_timeout(15_000)
-    p = context.new_page()
-    errors: list[str] = []
-    p.on("pageerror", lambda e: errors.append(str(e)))
-    yield p
-    context.close()
-    assert not errors, f"JavaScript errors on the page: {errors}"
+    with browser_page(chromium, site, accept_downloads=True) as p:
+        yield p
 
 
 def messages(page) -> list[str]:  # noqa: ANN001
