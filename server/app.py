@@ -10,6 +10,8 @@ data dir); ``pendant serve --workers N`` starts N such processes on one database
 
 from __future__ import annotations
 
+from collections.abc import AsyncIterator
+from contextlib import asynccontextmanager
 from pathlib import Path
 
 from fastapi import FastAPI
@@ -71,9 +73,15 @@ def check_schema(engine, migrate: bool) -> None:  # noqa: ANN001
                               f"needs {head}: run `pendant db upgrade` first")
 
 
+@asynccontextmanager
+async def _lifespan(app: FastAPI) -> AsyncIterator[None]:
+    yield
+    app.state.engine.dispose()  # close the pooled connections (a PostgreSQL server counts them)
+
+
 def create_app(settings: Settings | None = None) -> FastAPI:
     settings = settings or Settings()
-    app = FastAPI(title="pendant", version="0.1.0", openapi_tags=TAGS,
+    app = FastAPI(title="pendant", version="0.1.0", openapi_tags=TAGS, lifespan=_lifespan,
                   description="A controller-side teach-pendant emulator: tool, base, "
                               "fixed-tool and workpiece calibration menus as a REST service.")
     engine = make_engine(settings.db_url)
