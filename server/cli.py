@@ -194,6 +194,9 @@ def _settings(db: str | None):  # noqa: ANN202
     return Settings(db_url=db) if db else Settings()
 
 
+WORKER_HEALTHCHECK_S = 60
+
+
 class SchemaOutOfDate(RuntimeError):
     """Raised by ``serve --no-migrate`` on an old schema (server.app.SchemaOutOfDate)."""
 
@@ -227,7 +230,10 @@ def serve(args: argparse.Namespace) -> int:
         raise SchemaOutOfDate(str(err)) from None
     os.environ[ENV_DB_URL] = settings.db_url  # the workers build server.app:app from these
     os.environ[ENV_MIGRATE] = "0" if args.no_migrate else "1"
-    uvicorn.run("server.app:app", host=args.host, port=args.port, workers=args.workers)
+    # a worker imports numpy/scipy before it can answer the supervisor's ping: on a busy host
+    # that takes longer than uvicorn's 5 s default, and the worker would be killed as hung
+    uvicorn.run("server.app:app", host=args.host, port=args.port, workers=args.workers,
+                timeout_worker_healthcheck=WORKER_HEALTHCHECK_S)
     return 0
 
 
