@@ -86,11 +86,15 @@ def head_revision(engine: Engine) -> str:
     return ScriptDirectory.from_config(alembic_config(_url(engine))).get_current_head()
 
 
+def current_revision(engine: Engine) -> str | None:
+    """The database's Alembic revision (None when it has no schema yet)."""
+    with engine.connect() as conn:
+        return MigrationContext.configure(conn).get_current_revision()
+
+
 def schema_status(engine: Engine) -> tuple[str | None, str]:
     """(the database's Alembic revision or None when empty, the code's head revision)."""
-    with engine.connect() as conn:
-        current = MigrationContext.configure(conn).get_current_revision()
-    return current, head_revision(engine)
+    return current_revision(engine), head_revision(engine)
 
 
 @contextlib.contextmanager

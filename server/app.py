@@ -20,8 +20,8 @@ from fastapi.staticfiles import StaticFiles
 from fastapi_offline import FastAPIOffline
 
 from db import crud
-from db.session import (make_engine, make_sessionmaker, migration_lock, schema_status, upgrade,
-                        write_session)
+from db.session import (current_revision, make_engine, make_sessionmaker, migration_lock,
+                        schema_status, upgrade, write_session)
 from emulator import DEMO_ROBOT, home_joints
 from server import __version__, deps, errors, idempotency
 from server.auth import audit, guard, tokens
@@ -107,7 +107,7 @@ def event_dispatcher(app: FastAPI) -> Dispatcher:
 
 @asynccontextmanager
 async def lifespan(app: FastAPI) -> AsyncIterator[None]:
-    """Deliver events while the service runs."""
+    """Deliver events while the service runs; close the DB pool at the end."""
     dispatcher = event_dispatcher(app) if app.state.settings.dispatch_events else None
     if dispatcher is not None:
         dispatcher.start()
@@ -117,6 +117,7 @@ async def lifespan(app: FastAPI) -> AsyncIterator[None]:
     finally:
         if dispatcher is not None:
             dispatcher.stop()
+        app.state.engine.dispose()  # close the pooled connections (a PostgreSQL server counts them)
 
 
 def create_app(settings: Settings | None = None) -> FastAPI:
@@ -166,8 +167,7 @@ def _install_health(app: FastAPI) -> None:
     def healthz() -> dict[str, str]:
         """``{"status": "ok", "schema": <revision>}`` when the database answers (load
         balancers and compose health checks poll this)."""
-        current, _ = schema_status(app.state.engine)
-        return {"status": "ok", "schema": current or ""}
+        return {"status": "ok", "schema": current_revision(app.state.engine) or ""}
 
 
 def _mount_web(app: FastAPI, web: Path) -> None:

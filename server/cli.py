@@ -486,6 +486,9 @@ def _check_port_free(host: str, port: int) -> None:
                                    f"{err.strerror}") from None
 
 
+WORKER_HEALTHCHECK_S = 60
+
+
 class SchemaOutOfDate(RuntimeError):
     """Raised by ``serve --no-migrate`` on an old schema (server.app.SchemaOutOfDate)."""
 
@@ -549,7 +552,10 @@ def serve(args: argparse.Namespace) -> int:
         if args.workers == 1:
             _serve(application, args.host, args.port)
         else:
-            uvicorn.run("server.app:app", host=args.host, port=args.port, workers=args.workers)
+            # a worker imports numpy/scipy before it can answer the supervisor's ping: on a busy
+            # host that takes longer than uvicorn's 5 s default, and it would be killed as hung
+            uvicorn.run("server.app:app", host=args.host, port=args.port, workers=args.workers,
+                        timeout_worker_healthcheck=WORKER_HEALTHCHECK_S)
     finally:
         for child in (workers, face):
             if child is not None:

@@ -52,3 +52,16 @@ def test_stored_documents(tmp_path):
 def test_db_url_from_the_environment(monkeypatch):
     monkeypatch.setenv(ENV_DB_URL, "sqlite:////tmp/elsewhere.db")
     assert default_db_url() == "sqlite:////tmp/elsewhere.db"
+
+
+def test_migrations_build_exactly_the_models_on_the_suite_backend(tmp_path):
+    """The same check on the suite's backend (PostgreSQL in tests/run's second pass)."""
+    from db.session import upgrade
+    from db_backends import fresh_url
+
+    engine = make_engine(fresh_url(tmp_path, migrated=False))
+    upgrade(engine)
+    with engine.connect() as conn:
+        diff = compare_metadata(MigrationContext.configure(conn), Base.metadata)
+    engine.dispose()
+    assert diff == []

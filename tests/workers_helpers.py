@@ -73,7 +73,8 @@ def start(db_url: str, workers: int, log: Path, port: int | None = None) -> Serv
            "OPENBLAS_NUM_THREADS": "1"}
     f = log.open("ab")
     proc = subprocess.Popen([sys.executable, "-m", "uvicorn", "server.app:app", "--host",
-                             "127.0.0.1", "--port", str(port), "--workers", str(workers)],
+                             "127.0.0.1", "--port", str(port), "--workers", str(workers),
+                             "--timeout-worker-healthcheck", "60"],
                             cwd=ROOT, env=env, stdout=f, stderr=subprocess.STDOUT,
                             start_new_session=True)
     f.close()
