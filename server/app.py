@@ -12,7 +12,7 @@ from pathlib import Path
 
 from fastapi import FastAPI
 from fastapi.responses import FileResponse, HTMLResponse
-from fastapi.staticfiles import StaticFiles
+from starlette.exceptions import HTTPException as StarletteHTTPException
 
 from db import crud
 from db.session import make_engine, make_sessionmaker, run_migrations
@@ -40,6 +40,8 @@ TAGS = [
     {"name": "Jobs", "description": "Analyses and restores run by the worker processes: state, "
                                     "progress, cancel, result."},
 ]
+
+WEB_SUFFIXES = (".html", ".js", ".css", ".json", ".png", ".svg")  # what web/ serves
 
 PLACEHOLDER = """<!doctype html><html><head><meta charset="utf-8"><title>pendant</title></head>
 <body><h1>pendant</h1><p>The pendant page (web/index.html) is not installed. The REST API is
@@ -78,14 +80,25 @@ def create_app(settings: Settings | None = None) -> FastAPI:
 
 
 def _mount_web(app: FastAPI, web: Path) -> None:
+    """``/`` is the pendant page, ``/{file}`` the page's files (GET and HEAD only).
+
+    Files are routes rather than a mount at ``/``: a mount would answer every path and
+    method, so a wrong method on an API path would get the mount's 405 (without ``Allow``)
+    instead of the API route's.
+    """
     index = web / "index.html"
+    root = web.resolve()
 
     @app.get("/", include_in_schema=False, response_model=None)
     def pendant_page() -> FileResponse | HTMLResponse:
         return FileResponse(index) if index.is_file() else HTMLResponse(PLACEHOLDER)
 
-    if web.is_dir():  # pendant.js, pendant.css next to index.html; API routes match first
-        app.mount("/", StaticFiles(directory=web), name="web")
+    @app.api_route("/{name}", methods=["GET", "HEAD"], include_in_schema=False)
+    def web_file(name: str) -> FileResponse:
+        path = (root / name).resolve()
+        if path.parent != root or path.suffix not in WEB_SUFFIXES or not path.is_file():
+            raise StarletteHTTPException(status_code=404)
+        return FileResponse(path)
 
 
 def __getattr__(name: str) -> FastAPI:
