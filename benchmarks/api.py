@@ -227,6 +227,8 @@ def main() -> int:
         return 2
     joints = touch_joints()
     counts = [int(w) for w in args.workers.split(",")]
+    print(f"load average before: {' '.join(f'{v:.2f}' for v in os.getloadavg())} "
+          f"({os.cpu_count()} CPUs)")
     with tempfile.TemporaryDirectory() as tmp_s:
         tmp = Path(tmp_s)
         if args.pg_inner:
@@ -244,6 +246,7 @@ def main() -> int:
     best = max(counts, key=lambda n: results[n]["touch-up"]["rps"])
     pg = pg_touch_rps(best, args)
     t = results[best]["touch-up"]
+    print(f"load average after: {' '.join(f'{v:.2f}' for v in os.getloadavg())}")
     print(f"best worker count for touch-up: {best}")
     print(f"rps={t['rps']:.1f} p99_ms={t['p99_ms']:.1f} pg_rps={pg}")
     return 0

@@ -9,8 +9,8 @@ from __future__ import annotations
 from datetime import datetime, timezone
 from typing import Any
 
-from sqlalchemy import (JSON, BigInteger, DateTime, ForeignKey, LargeBinary, MetaData, String, Text,
-                        TypeDecorator, UniqueConstraint)
+from sqlalchemy import (JSON, BigInteger, DateTime, Double, ForeignKey, LargeBinary, MetaData,
+                        String, Text, TypeDecorator, UniqueConstraint)
 from sqlalchemy.orm import DeclarativeBase, Mapped, mapped_column, relationship
 
 NAMING_CONVENTION = {
@@ -51,7 +51,9 @@ def _session_fk(ondelete: str) -> ForeignKey:
 
 class Base(DeclarativeBase):
     metadata = MetaData(naming_convention=NAMING_CONVENTION)
-    type_annotation_map = {dict[str, Any]: JSON, list[float]: JSON, datetime: UTCDateTime()}
+    # float -> DOUBLE as the migrations have it (SQLAlchemy 2.1's default; 2.0 would say FLOAT)
+    type_annotation_map = {dict[str, Any]: JSON, list[float]: JSON, datetime: UTCDateTime(),
+                           float: Double()}
 
 
 class PoseColumns:

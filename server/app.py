@@ -16,8 +16,8 @@ from pathlib import Path
 
 from fastapi import Depends, FastAPI
 from fastapi.responses import FileResponse, HTMLResponse
-from fastapi.staticfiles import StaticFiles
 from fastapi_offline import FastAPIOffline
+from starlette.exceptions import HTTPException as StarletteHTTPException
 
 from db import crud
 from db.session import (current_revision, make_engine, make_sessionmaker, migration_lock,
@@ -56,6 +56,8 @@ TAGS = [
     {"name": "Events", "description": "Webhooks for MES: frame committed, calibration computed, "
                                       "import applied, analysis finished (signed, retried)."},
 ]
+
+WEB_SUFFIXES = (".html", ".js", ".css", ".json", ".png", ".svg")  # what web/ serves
 
 PLACEHOLDER = """<!doctype html><html><head><meta charset="utf-8"><title>pendant</title></head>
 <body><h1>pendant</h1><p>The pendant page (web/index.html) is not installed. The REST API is
@@ -171,14 +173,25 @@ def _install_health(app: FastAPI) -> None:
 
 
 def _mount_web(app: FastAPI, web: Path) -> None:
+    """``/`` is the pendant page, ``/{file}`` the page's files (GET and HEAD only).
+
+    Files are routes rather than a mount at ``/``: a mount would answer every path and
+    method, so a wrong method on an API path would get the mount's 405 (without ``Allow``)
+    instead of the API route's.
+    """
     index = web / "index.html"
+    root = web.resolve()
 
     @app.get("/", include_in_schema=False, response_model=None)
     def pendant_page() -> FileResponse | HTMLResponse:
         return FileResponse(index) if index.is_file() else HTMLResponse(PLACEHOLDER)
 
-    if web.is_dir():  # pendant.js, pendant.css next to index.html; API routes match first
-        app.mount("/", StaticFiles(directory=web), name="web")
+    @app.api_route("/{name}", methods=["GET", "HEAD"], include_in_schema=False)
+    def web_file(name: str) -> FileResponse:
+        path = (root / name).resolve()
+        if path.parent != root or path.suffix not in WEB_SUFFIXES or not path.is_file():
+            raise StarletteHTTPException(status_code=404)
+        return FileResponse(path)
 
 
 def __getattr__(name: str) -> FastAPI:

@@ -163,6 +163,9 @@ def test_a_killed_job_process_fails_the_job_naming_the_signal(db_url, big_record
         worker = start_worker(db_url, "--processes", "1")
         try:
             wait_state(client, job["id"], ("running",))
+            deadline = time.monotonic() + 30  # claimed first, then its process is started
+            while not _children(worker.pid) and time.monotonic() < deadline:
+                time.sleep(0.05)
             (child,) = _children(worker.pid)
             os.kill(child, signal.SIGKILL)
             job = wait_state(client, job["id"], ("done", "failed", "cancelled"), 10)

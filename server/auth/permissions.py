@@ -34,6 +34,7 @@ S = C + "/sessions/{session_id}"
 # (method, path template as in the OpenAPI) -> the permission it needs
 ROUTES: Final[dict[tuple[str, str], str]] = {
     ("GET", "/"): PUBLIC,
+    ("GET", "/{name}"): PUBLIC,  # the page's files (web/), not in the OpenAPI
     ("POST", "/auth/login"): PUBLIC,
     ("POST", "/auth/logout"): SIGNED_IN,
     ("GET", "/auth/me"): SIGNED_IN,
