@@ -95,8 +95,10 @@ def _call(base: str, method: str, path: str, body: bytes | None = None) -> Any:
     import urllib.error
     import urllib.request
 
+    from server.settings import bearer_headers
+
     req = urllib.request.Request(base.rstrip("/") + path, data=body, method=method,
-                                 headers={"content-type": "application/json"})
+                                 headers={"content-type": "application/json", **bearer_headers()})
     try:
         with urllib.request.urlopen(req, timeout=60) as r:
             return json.loads(r.read() or b"null")
@@ -208,7 +210,7 @@ def add_analysis_commands(subparsers: Any) -> None:
     a.add_argument("--json", action="store_true", help="print the analysis-report/1 JSON")
     a.add_argument("--folds", type=int, default=5, help="K of the K-fold cross-validation (5)")
     a.add_argument("--seed", type=int, default=0, help="seed of the fold assignment (0)")
-    a.add_argument("--service", metavar="URL", help="analyse on a pendant service (e.g. "
+    a.add_argument("--service", metavar="URL", help="($PENDANT_TOKEN: its token) analyse on a pendant service (e.g. "
                    "http://127.0.0.1:8000): the recording and report are stored there, the "
                    "analysis runs as a job in its workers (Ctrl-C cancels it)")
     a.set_defaults(func=run_analyze)

@@ -15,7 +15,14 @@ ENV_ADMIN_TOKEN = "PENDANT_ADMIN_TOKEN"  # the first administrator's token (else
 ENV_NO_AUTH = "PENDANT_NO_AUTH"  # "1": the --no-auth demo (loopback only)
 ENV_ALLOWED_HOSTS = "PENDANT_ALLOWED_HOSTS"  # Host names besides loopback, comma-separated
 ENV_CORS_ORIGINS = "PENDANT_CORS_ORIGINS"  # origins whose pages may call the API
+ENV_TOKEN = "PENDANT_TOKEN"  # the CLI's bearer token when it talks to a service (--service/--url)
 LOOPBACK_HOSTS = ("127.0.0.1", "localhost", "::1")
+
+
+def bearer_headers() -> dict[str, str]:
+    """``Authorization: Bearer $PENDANT_TOKEN`` for the CLI's requests to a service, if set."""
+    token = os.environ.get(ENV_TOKEN)
+    return {"Authorization": f"Bearer {token}"} if token else {}
 
 
 def _env_list(name: str) -> tuple[str, ...]:

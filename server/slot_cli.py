@@ -18,6 +18,8 @@ import urllib.error
 import urllib.request
 from typing import Any
 
+from server.settings import bearer_headers
+
 EXIT_STALE = 3
 
 
@@ -25,7 +27,8 @@ def _call(method: str, url: str, body: dict | None = None,
           headers: dict[str, str] | None = None) -> tuple[int, Any, Any]:
     data = None if body is None else json.dumps(body).encode()
     req = urllib.request.Request(url, data=data, method=method, headers={
-        **({"Content-Type": "application/json"} if data else {}), **(headers or {})})
+        **({"Content-Type": "application/json"} if data else {}), **bearer_headers(),
+        **(headers or {})})
     try:
         with urllib.request.urlopen(req, timeout=30) as r:
             return r.status, r.headers, json.loads(r.read() or b"null")
@@ -93,7 +96,8 @@ def add_slot_command(subparsers: Any) -> None:
                                            "(sends If-Match: never a blind overwrite)")
     s.add_argument("table", choices=["tool", "base"])
     s.add_argument("number", type=int)
-    s.add_argument("--url", default="http://127.0.0.1:8000", help="the service")
+    s.add_argument("--url", default="http://127.0.0.1:8000",
+                   help="the service (its token in $PENDANT_TOKEN: pendant tokens create NAME)")
     s.add_argument("--controller", default="1", help="controller id (1 = cell-1)")
     s.add_argument("--name")
     s.add_argument("--kind", choices=["tool", "workpiece", "base", "fixed_tool"])

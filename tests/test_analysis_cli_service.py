@@ -15,9 +15,22 @@ from solvers.simulate import simulate_recording
 
 @pytest.fixture(scope="module")
 def service(tmp_path_factory):  # noqa: ANN001, ANN201
+    """The real service; the CLI logs in with its Administrator's token from $PENDANT_TOKEN."""
+    import os
+
+    from api_helpers import ADMIN_TOKEN
+
     db = tmp_path_factory.mktemp("cli-service") / "pendant.db"
-    with serve(f"sqlite:///{db}") as url:
-        yield url
+    saved = os.environ.get("PENDANT_TOKEN")
+    os.environ["PENDANT_TOKEN"] = ADMIN_TOKEN
+    try:
+        with serve(f"sqlite:///{db}") as url:
+            yield url
+    finally:
+        if saved is None:
+            del os.environ["PENDANT_TOKEN"]
+        else:
+            os.environ["PENDANT_TOKEN"] = saved
 
 
 def write(tmp_path, n: int, **effects) -> str:  # noqa: ANN001

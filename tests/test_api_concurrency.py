@@ -164,23 +164,27 @@ def test_db_upgrade_then_serve_without_migrating(tmp_path, capsys):  # noqa: ANN
     create_app(Settings(db_url=url, migrate=False))  # the schema is the code's: it serves
 
 
-def test_the_cli_edits_a_slot_with_if_match(tmp_path, capsys):  # noqa: ANN001
+def test_the_cli_edits_a_slot_with_if_match(tmp_path, capsys, monkeypatch):  # noqa: ANN001
     """``pendant slot`` against a running service: reads the ETag, writes with If-Match, and
-    refuses (exit 3, nothing written) when the ETag it is given is stale."""
+    refuses (exit 3, nothing written) when the ETag it is given is stale. The CLI's token
+    comes from $PENDANT_TOKEN."""
     import httpx
 
+    from api_helpers import ADMIN_TOKEN
     from browser_helpers import serve
     from db_backends import fresh_url
     from server.cli import main
 
+    monkeypatch.setenv("PENDANT_TOKEN", ADMIN_TOKEN)
+    auth = {"Authorization": f"Bearer {ADMIN_TOKEN}"}
     with serve(fresh_url(tmp_path)) as url:
-        first = httpx.get(f"{url}{C}/tools/8").headers["ETag"]
+        first = httpx.get(f"{url}{C}/tools/8", headers=auth).headers["ETag"]
         assert main(["slot", "tool", "8", "--url", url, "--name", "pointer",
                      "--pose", "1,2,180,0,0,0"]) == 0
         assert "'pointer'" in capsys.readouterr().out
         assert main(["slot", "tool", "8", "--url", url, "--name", "late", "--etag", first]) == 3
         err = capsys.readouterr().err
         assert "changed since it was read" in err and "'pointer'" in err
-        assert httpx.get(f"{url}{C}/tools/8").json()["name"] == "pointer"
+        assert httpx.get(f"{url}{C}/tools/8", headers=auth).json()["name"] == "pointer"
         assert main(["slot", "tool", "8", "--url", url]) == 0
         assert "z 180.000" in capsys.readouterr().out
