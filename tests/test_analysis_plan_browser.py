@@ -13,28 +13,22 @@ import urllib.request
 
 import pytest
 
-from browser_helpers import VIEWPORT
+from browser_helpers import auth_headers, browser_page
 
 
 def _api(site: str, method: str, path: str, body: dict | None = None) -> object:
     req = urllib.request.Request(site + path, method=method,
                                  data=None if body is None else json.dumps(body).encode(),
-                                 headers={"Content-Type": "application/json"})
+                                 headers={"Content-Type": "application/json", **auth_headers()})
     with urllib.request.urlopen(req) as r:
         return json.loads(r.read() or b"null")
 
 
 @pytest.fixture
 def page(chromium, site: str):  # noqa: ANN001, ANN201
-    context = chromium.new_context(viewport=VIEWPORT)
-    context.set_default_timeout(30_000)
-    p = context.new_page()
-    errors: list[str] = []
-    p.on("pageerror", lambda e: errors.append(str(e)))
-    p.goto(site + "/analysis.html")
-    yield p
-    context.close()
-    assert not errors, f"JavaScript errors on the page: {errors}"
+    with browser_page(chromium, site, timeout_ms=30_000) as p:  # logged in as the Administrator
+        p.goto(site + "/analysis.html")
+        yield p
 
 
 def test_plan_then_record_then_read_the_analysis(page, site: str) -> None:  # noqa: ANN001

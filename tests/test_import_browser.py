@@ -8,21 +8,15 @@ from pathlib import Path
 
 import pytest
 
-from browser_helpers import VIEWPORT, idle, open_pendant
+from browser_helpers import browser_page, idle, open_pendant
 
 DATA = Path(__file__).parent / "data"
 
 
 @pytest.fixture
 def page(chromium, site: str):  # noqa: ANN001, ANN201
-    context = chromium.new_context(viewport=VIEWPORT)
-    context.set_default_timeout(15_000)
-    p = context.new_page()
-    errors: list[str] = []
-    p.on("pageerror", lambda e: errors.append(str(e)))
-    yield p
-    context.close()
-    assert not errors, f"JavaScript errors on the page: {errors}"
+    with browser_page(chromium, site, timeout_ms=15_000) as p:  # logged in as the Administrator
+        yield p
 
 
 def slot(page, site: str, path: str) -> dict:  # noqa: ANN001
