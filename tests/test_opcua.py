@@ -377,6 +377,14 @@ def test_an_expert_commits_a_frame_rest_sees_it_and_the_audit_names_the_user(fac
                             version)
 
     new_version = on_client(face, body, user="erik", password=token)
+
+    async def level(client: Client, ns: dict) -> str:
+        ctrl = await (await cell(client, ns)).get_child(
+            [f"{ns['rob']}:Controllers", f"{ns['rob']}:cell-1", f"{ns['rob']}:CurrentUser",
+             f"{ns['rob']}:Level"])
+        return await ctrl.read_value()
+
+    assert on_client(face, level) == "Expert"  # Robotics CurrentUser: the last writer's role
     slot = ok(face["rest"].get(f"{C}/tools/7"))
     assert slot["name"] == "drill"
     assert [slot["pose"][k] for k in "xyzabc"] == pytest.approx([10, -20, 150, 90, 0, 180])

@@ -323,6 +323,8 @@ async def update_cell(nodes: CellNodes, old: ControllerState | None, new: Contro
             writes.append((nodes.axes[i], q, dbl))
     if old is None or old.active_tool_no != new.active_tool_no:
         writes.append((nodes.active_tool, new.active_tool_no, i32))
+    if old is None or old.current_user != new.current_user:  # Robotics: CurrentUser/Level
+        writes.append((nodes.current_user, new.current_user, s_))
     if old is None or old.active_base_no != new.active_base_no:
         writes.append((nodes.active_base, new.active_base_no, i32))
     tool_old = old.slot("tool", old.active_tool_no) if old else None

@@ -15,6 +15,7 @@ from sqlalchemy import func, select
 from sqlalchemy.orm import Session, sessionmaker
 
 from db import crud
+from db.auth_models import AuditRecord
 from db.models import CalibSession, Controller, Event, FrameEntry
 from server.routers.common import robot_of
 
@@ -58,6 +59,7 @@ class ControllerState:
     joint_limits_deg: tuple[tuple[float, float], ...]
     active_tool_no: int
     active_base_no: int
+    current_user: str  # the role (user level) of whoever last changed this controller, or ""
     slots: tuple[SlotState, ...]
     sessions: tuple[SessionState, ...]
 
@@ -90,8 +92,12 @@ def controller_state(db: Session, c: Controller) -> ControllerState:
         CalibSession.state.in_(("open", "computed"))).order_by(CalibSession.id)).all()
     sessions = tuple(SessionState(s.id, s.method, f"{s.target_table} {s.target_no}", s.state,
                                   len(s.points)) for s in live)
+    last = db.execute(select(AuditRecord.user_name, AuditRecord.role)
+                      .where(AuditRecord.controller_id == c.id, AuditRecord.user_name.is_not(None))
+                      .order_by(AuditRecord.id.desc()).limit(1)).first()
     return ControllerState(
         id=c.id, name=c.name, robot_name=robot.name,
+        current_user=(last[1] or "") if last else "",
         joints_deg=tuple(float(q) for q in c.joints_deg),
         joint_limits_deg=tuple((float(lo), float(hi)) for lo, hi in robot.limits_deg()),
         active_tool_no=c.active_tool_no, active_base_no=c.active_base_no,
