@@ -230,7 +230,9 @@ def test_an_import_and_an_analysis_send_their_events(service: TestClient,
 
     ok(service.post("/webhooks", json={"url": receiver.url,
                                        "kinds": ["import-applied", "analysis-finished"]}))
-    kuka = service.get(f"{C}/export", params={"format": "kuka"}).text
+    from pathlib import Path
+
+    kuka = (Path(__file__).parent / "data" / "kuka_cell7_config.dat").read_text(encoding="utf-8")
     ok(service.post(f"{C}/import", json={"format": "kuka", "text": kuka, "dry_run": True}))
     ok(service.post(f"{C}/import", json={"format": "kuka", "text": kuka}))
     doc = simulate_recording("touch", "ur10", Imperfections(noise_mm=0.02), 8, seed=3)
