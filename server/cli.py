@@ -500,7 +500,6 @@ def serve(args: argparse.Namespace) -> int:
     refused with ``--no-migrate``), the demo controller and, on first start, the
     Administrator are made, and the Administrator's login link is printed. Each worker then
     builds its own app from the same settings (passed on in the environment)."""
-    import dataclasses
     import os
 
     import uvicorn
@@ -522,18 +521,15 @@ def serve(args: argparse.Namespace) -> int:
     extra_hosts = list(args.allow_host)
     if not loopback and args.host not in ("0.0.0.0", "::"):
         extra_hosts.append(args.host)
-    # the settings every worker reads from the environment (server.settings)
-    os.environ[ENV_DB_URL] = _settings(args.db).db_url
-    os.environ[ENV_MIGRATE] = "0" if args.no_migrate else "1"
-    os.environ[ENV_NO_AUTH] = "1" if args.no_auth else "0"
-    os.environ[ENV_ALLOWED_HOSTS] = ",".join(
-        [h for h in os.environ.get(ENV_ALLOWED_HOSTS, "").split(",") if h.strip()] + extra_hosts)
-    os.environ[ENV_CORS_ORIGINS] = ",".join(args.cors_origin)
-    settings = _settings(None)
+    base_settings = _settings(args.db)
+    overrides = {"migrate": not args.no_migrate, "auth": not args.no_auth,
+                 "allowed_hosts": base_settings.allowed_hosts + tuple(extra_hosts),
+                 "cors_origins": tuple(args.cors_origin)}
     try:
-        application = _open_app(None, migrate=not args.no_migrate)
+        application = _open_app(args.db, **overrides)
     except app_module.SchemaOutOfDate as err:
         raise SchemaOutOfDate(str(err)) from None
+    settings = application.state.settings
     shown = "localhost" if args.host in ("0.0.0.0", "::") else args.host
     base = f"http://{'[::1]' if shown == '::1' else shown}:{args.port}"
     if args.no_auth:
@@ -547,11 +543,18 @@ def serve(args: argparse.Namespace) -> int:
               f"More users: pendant users add NAME --role Expert; pendant tokens create NAME",
               file=sys.stderr)
     workers = start_job_workers(settings.db_url, args)  # the schema is current by now
-    face = start_beside(args.host, args.opcua_port, settings.db_url) if args.opcua_port else None
+    face = (start_beside(args.host, args.opcua_port, settings.db_url, auth=settings.auth)
+            if args.opcua_port else None)
     try:
         if args.workers == 1:
             _serve(application, args.host, args.port)
         else:
+            # each worker builds server.app:app from the environment (server.settings)
+            os.environ.update({
+                ENV_DB_URL: settings.db_url, ENV_MIGRATE: "0" if args.no_migrate else "1",
+                ENV_NO_AUTH: "0" if settings.auth else "1",
+                ENV_ALLOWED_HOSTS: ",".join(settings.allowed_hosts),
+                ENV_CORS_ORIGINS: ",".join(settings.cors_origins)})
             # a worker imports numpy/scipy before it can answer the supervisor's ping: on a busy
             # host that takes longer than uvicorn's 5 s default, and it would be killed as hung
             uvicorn.run("server.app:app", host=args.host, port=args.port, workers=args.workers,

@@ -53,9 +53,14 @@ def default_pki_dir() -> Path:
     return Path(platformdirs.user_data_dir("pendant")) / "opcua-pki"
 
 
-def start_beside(host: str, port: int, db_url: str | None) -> subprocess.Popen:
-    """``pendant serve --opcua-port``: the OPC UA face as a child process on the same DB."""
+def start_beside(host: str, port: int, db_url: str | None, auth: bool = True) -> subprocess.Popen:
+    """``pendant serve --opcua-port``: the OPC UA face as a child process on the same DB (and,
+    with ``serve --no-auth``, as open as the REST service)."""
+    import os
+
+    from server.settings import ENV_NO_AUTH
+
     cmd = [sys.executable, "-m", "server.cli", "opcua", "--host", host, "--port", str(port)]
     if db_url:
         cmd += ["--db", db_url]
-    return subprocess.Popen(cmd)
+    return subprocess.Popen(cmd, env={**os.environ, ENV_NO_AUTH: "0" if auth else "1"})
