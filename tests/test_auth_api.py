@@ -191,13 +191,29 @@ def test_cookie_login_needs_the_csrf_token_for_commands(db_url):
         assert c.get(C).status_code == 401
 
 
+def idle_for(client: TestClient, seconds: float) -> None:
+    """Make every browser login's last command ``seconds`` old (as if the person walked away)."""
+    from sqlalchemy import update
+
+    from db.auth_models import WebSession
+
+    with client.app.state.sessionmaker() as db:
+        db.execute(update(WebSession).values(
+            last_seen_at=datetime.now(timezone.utc) - timedelta(seconds=seconds)))
+        db.commit()
+
+
 def test_idle_login_drops_to_operator(db_url):
-    with make_client(db_url, idle_timeout_s=1.0) as admin:
+    with make_client(db_url) as admin:
         eva = add_user(admin, "eva", "Expert")["Authorization"].split()[1]
-    with make_client(db_url, token=None, idle_timeout_s=1.0) as c:
+    with make_client(db_url, token=None) as c:  # idle timeout: 600 s
         csrf = {"X-CSRF-Token": login(c, eva)}
         assert ok(c.put(f"{C}/tools/1", json={"name": "a"}, headers=csrf))
-        time.sleep(1.2)
+        idle_for(c, 590)
+        assert ok(c.get("/auth/me"))["role"] == "Expert"  # not yet
+        ok(c.put(f"{C}/tools/1", json={"name": "a"}, headers=csrf))  # a command: awake again
+        assert ok(c.get("/auth/me"))["idle"] is False
+        idle_for(c, 601)
         me = ok(c.get("/auth/me"))
         assert me["role"] == "Operator" and me["idle"] is True and me["user"] == "eva"
         r = c.put(f"{C}/tools/1", json={"name": "b"}, headers=csrf)
