@@ -73,7 +73,8 @@ def test_operator_save_is_403_expert_save_is_audited_with_quality(client):
     assert r.status_code == 403
     assert r.json()["detail"][0]["msg"] == "needs permission frames:commit; olga acts as Operator"
     assert ok(client.get(f"{C}/tools/1"))["provenance"]["method"] is None  # nothing saved
-    slot = ok(client.post(f"{url}/save", headers=eva))
+    r = client.post(f"{url}/save", headers=eva)
+    slot = ok(r)
     assert slot["provenance"]["updated_by"] == "eva"
     [rec] = audit(client, user="eva", table="tool", number=1)
     assert rec["action"] == "frame.calibration" and rec["source"] == "api"
@@ -84,7 +85,12 @@ def test_operator_save_is_403_expert_save_is_audited_with_quality(client):
     assert rec["quality"] == {"rms_error_mm": report["rms_error_mm"],
                               "max_error_mm": report["max_error_mm"],
                               "position_bound95_mm": report["position_bound95_mm"]}
-    assert rec["request_id"] and rec["client"] == "testclient"
+    assert rec["request_id"] == r.headers["x-request-id"] and rec["client"] == "testclient"
+    r = client.put(f"{C}/tools/2", json={"name": "b"}, headers={**eva, "X-Request-ID": "mes-42"})
+    assert r.headers["x-request-id"] == "mes-42"
+    assert audit(client, number=2)[0]["request_id"] == "mes-42"
+    r = client.put(f"{C}/tools/3", json={"name": "c"}, headers={**eva, "X-Request-ID": "x" * 65})
+    assert r.headers["x-request-id"] != "x" * 65  # too long: a new id
     hist = ok(client.get(f"{C}/tools/1/history"))
     assert hist[-1]["changed_by"] == "eva"
 
