@@ -1,11 +1,7 @@
 """schemathesis over the live OpenAPI, as an authenticated Expert: no input makes a 500.
 
-A bounded run for CI: two generated examples per operation (about 100 requests, ~15 s). The longer run by hand (docs/security.md)::
-
-    PENDANT_ADMIN_TOKEN=pdt_... pendant serve --port 8000 &
-    pendant users add fuzz --role Expert && pendant tokens create fuzz      # -> TOKEN
-    schemathesis run http://127.0.0.1:8000/openapi.json --checks not_a_server_error \\
-        -H "Authorization: Bearer TOKEN" --max-time 180
+A bounded run for CI: two generated examples per operation (about 100 requests, ~15 s).
+The longer run by hand is ``bash benchmarks/fuzz.sh [SECONDS]`` (figures in docs/security.md).
 """
 
 from __future__ import annotations
