@@ -15,13 +15,13 @@ from __future__ import annotations
 
 import getpass
 import sys
+from collections.abc import Iterator
 from contextlib import contextmanager
-from typing import Any, Iterator
+from typing import Any
 
 from sqlalchemy.orm import Session
 
 from db.crud import StateConflict
-
 from server.auth import audit, tokens
 from server.auth.permissions import PERMISSIONS
 
