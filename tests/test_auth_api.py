@@ -73,7 +73,8 @@ def test_operator_save_is_403_expert_save_is_audited_with_quality(client):
     assert r.status_code == 403
     assert r.json()["detail"][0]["msg"] == "needs permission frames:commit; olga acts as Operator"
     assert ok(client.get(f"{C}/tools/1"))["provenance"]["method"] is None  # nothing saved
-    slot = ok(client.post(f"{url}/save", headers=eva))
+    r = client.post(f"{url}/save", headers=eva)
+    slot = ok(r)
     assert slot["provenance"]["updated_by"] == "eva"
     [rec] = audit(client, user="eva", table="tool", number=1)
     assert rec["action"] == "frame.calibration" and rec["source"] == "api"
@@ -84,7 +85,12 @@ def test_operator_save_is_403_expert_save_is_audited_with_quality(client):
     assert rec["quality"] == {"rms_error_mm": report["rms_error_mm"],
                               "max_error_mm": report["max_error_mm"],
                               "position_bound95_mm": report["position_bound95_mm"]}
-    assert rec["request_id"] and rec["client"] == "testclient"
+    assert rec["request_id"] == r.headers["x-request-id"] and rec["client"] == "testclient"
+    r = client.put(f"{C}/tools/2", json={"name": "b"}, headers={**eva, "X-Request-ID": "mes-42"})
+    assert r.headers["x-request-id"] == "mes-42"
+    assert audit(client, number=2)[0]["request_id"] == "mes-42"
+    r = client.put(f"{C}/tools/3", json={"name": "c"}, headers={**eva, "X-Request-ID": "x" * 65})
+    assert r.headers["x-request-id"] != "x" * 65  # too long: a new id
     hist = ok(client.get(f"{C}/tools/1/history"))
     assert hist[-1]["changed_by"] == "eva"
 
@@ -191,13 +197,29 @@ def test_cookie_login_needs_the_csrf_token_for_commands(db_url):
         assert c.get(C).status_code == 401
 
 
+def idle_for(client: TestClient, seconds: float) -> None:
+    """Make every browser login's last command ``seconds`` old (as if the person walked away)."""
+    from sqlalchemy import update
+
+    from db.auth_models import WebSession
+
+    with client.app.state.sessionmaker() as db:
+        db.execute(update(WebSession).values(
+            last_seen_at=datetime.now(timezone.utc) - timedelta(seconds=seconds)))
+        db.commit()
+
+
 def test_idle_login_drops_to_operator(db_url):
-    with make_client(db_url, idle_timeout_s=1.0) as admin:
+    with make_client(db_url) as admin:
         eva = add_user(admin, "eva", "Expert")["Authorization"].split()[1]
-    with make_client(db_url, token=None, idle_timeout_s=1.0) as c:
+    with make_client(db_url, token=None) as c:  # idle timeout: 600 s
         csrf = {"X-CSRF-Token": login(c, eva)}
         assert ok(c.put(f"{C}/tools/1", json={"name": "a"}, headers={**csrf, "If-Match": "*"}))
-        time.sleep(1.2)
+        idle_for(c, 590)
+        assert ok(c.get("/auth/me"))["role"] == "Expert"  # not yet
+        ok(c.put(f"{C}/tools/1", json={"name": "a"}, headers={**csrf, "If-Match": "*"}))  # a command: awake again
+        assert ok(c.get("/auth/me"))["idle"] is False
+        idle_for(c, 601)
         me = ok(c.get("/auth/me"))
         assert me["role"] == "Operator" and me["idle"] is True and me["user"] == "eva"
         r = c.put(f"{C}/tools/1", json={"name": "b"}, headers={**csrf, "If-Match": "*"})

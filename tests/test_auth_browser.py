@@ -4,12 +4,13 @@ SameSite=Strict login cookie does go along). The page fires the bodyless command
 ``fetch(..., {mode: "no-cors", credentials: "include"})`` and a form POST; nothing changes.
 
 Also the first-start login link: ``/login.html#token=...`` logs the browser in and lands on the
-pendant with the user shown.
+pendant with the user shown, and each slot says "changed by USER at TIME".
 """
 
 from __future__ import annotations
 
 import functools
+import re
 import threading
 from http.server import SimpleHTTPRequestHandler, ThreadingHTTPServer
 
@@ -112,4 +113,10 @@ def test_cross_origin_page_changes_nothing(chromium, site, attacker):  # noqa: A
         return [r.status, (await r.json()).joints_deg];
     }""")
     assert joints[0] == 200 and joints[1] != before["robot"]
+
+    # the pendant shows who changed each slot
+    page.reload()
+    idle(page)
+    row = page.locator("#tool-table tr[data-number='1'] .changed").text_content()
+    assert re.fullmatch(r"changed by admin at \d{4}-\d\d-\d\d \d\d:\d\d", row), row
     context.close()

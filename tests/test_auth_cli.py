@@ -39,6 +39,19 @@ def test_users_tokens_roles(tmp_path, capsys):
         assert main(["users", "revoke", "eva", "--db", db]) == 0
         assert c.get("/controllers/1").status_code == 401
         audit = c.get("/audit", headers={"Authorization": "Bearer " + ADMIN_TOKEN}).json()
+    capsys.readouterr()
+    assert main(["tokens", "create", "mia", "--label", "cell-pc", "--db", db]) == 0
+    mia = capsys.readouterr().out.strip()
+    assert main(["tokens", "list", "mia", "--db", db]) == 0
+    listing = capsys.readouterr().out
+    assert "cell-pc" in listing and "pdt_" not in listing
+    token_id = int(listing.splitlines()[1].split()[0])
+    with make_client(db, token=mia) as c:
+        assert c.get("/controllers/1").status_code == 200
+        assert main(["tokens", "revoke", str(token_id), "--db", db]) == 0
+        assert c.get("/controllers/1").status_code == 401
+    assert main(["tokens", "revoke", "999", "--db", db]) == 2
+    assert "no token 999" in capsys.readouterr().err
     assert main(["users", "revoke", "zed", "--db", db]) == 2
     assert "no user 'zed'" in capsys.readouterr().err
     assert main(["users", "list", "--db", db]) == 0

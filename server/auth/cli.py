@@ -5,6 +5,8 @@
     pendant users revoke NAME [--db URL]
     pendant users cert NAME FILE [--days 365] [--db URL]   (an OPC UA certificate login)
     pendant tokens create NAME [--days 90 | --no-expiry] [--label TEXT] [--db URL]
+    pendant tokens list [NAME] [--db URL]              (ids, labels, expiry; never a secret)
+    pendant tokens revoke ID [--db URL]
     pendant roles add NAME PERMISSION... [--description TEXT] [--db URL]
     pendant roles list [--db URL]
 
@@ -16,14 +18,14 @@ from __future__ import annotations
 
 import getpass
 import sys
+from collections.abc import Iterator
 from contextlib import contextmanager
 from pathlib import Path
-from typing import Any, Iterator
+from typing import Any
 
 from sqlalchemy.orm import Session
 
 from db.crud import StateConflict
-
 from server.auth import audit, tokens
 from server.auth.permissions import PERMISSIONS
 from server.opcua.access import certificate_secret
@@ -98,6 +100,8 @@ def certificate_der(path: Path) -> bytes:
 
 
 def run_tokens(args: Any) -> int:
+    if args.action in ("list", "revoke"):
+        return run_token_admin(args)
     with cli_session(args.db) as db:
         try:
             days = None if args.no_expiry else args.days
@@ -107,6 +111,22 @@ def run_tokens(args: Any) -> int:
     until = "no expiry" if days is None else f"valid {days:g} days"
     print(f"token for {args.name} ({until}; shown once, only its hash is stored):", file=sys.stderr)
     print(secret)
+    return 0
+
+
+def run_token_admin(args: Any) -> int:
+    with cli_session(args.db) as db:
+        if args.action == "revoke":
+            t = tokens.revoke_token(db, args.token_id)
+            print(f"token {t.id} revoked")
+            return 0
+        user = tokens.get_user(db, args.name) if args.name else None
+        names = {u.id: u.name for u in tokens.list_users(db)}
+        print(f"{'id':>4}  {'user':24s} {'label':16s} {'expires (UTC)':18s} revoked")
+        for t in tokens.list_tokens(db, user):
+            exp = t.expires_at.strftime("%Y-%m-%d %H:%M") if t.expires_at else "never"
+            rev = t.revoked_at.strftime("%Y-%m-%d %H:%M") if t.revoked_at else ""
+            print(f"{t.id:4d}  {names.get(t.user_id, '?'):24s} {t.label:16s} {exp:18s} {rev}")
     return 0
 
 
@@ -150,8 +170,13 @@ def add_auth_commands(subparsers: Any) -> None:
     c.add_argument("--days", type=float, default=90.0, help="lifetime in days (90)")
     c.add_argument("--no-expiry", action="store_true", help="a token that does not expire")
     c.add_argument("--label", default="", help="what the token is for (cell PC, CI, ...)")
-    c.add_argument("--db", help="database URL")
-    c.set_defaults(func=run_tokens)
+    tl = ts.add_parser("list", help="every token (id, user, label, expiry), never a secret")
+    tl.add_argument("name", nargs="?", help="only this user's tokens")
+    tr = ts.add_parser("revoke", help="revoke one token by its id (pendant tokens list)")
+    tr.add_argument("token_id", type=int)
+    for p in (c, tl, tr):
+        p.add_argument("--db", help="database URL")
+        p.set_defaults(func=run_tokens)
 
     ro = subparsers.add_parser("roles", help="list the roles or add a site role")
     rs = ro.add_subparsers(dest="action", required=True)

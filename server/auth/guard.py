@@ -84,8 +84,7 @@ async def authorize(request: Request) -> None:
         raise _refuse(403, ("path",), f"no permission is declared for {request.method} {path} "
                       "(server/auth/permissions.py)", "forbidden")
     client = request.client.host if request.client else None
-    rid = request.headers.get("x-request-id") or uuid.uuid4().hex
-    request.state.request_id = rid
+    rid = getattr(request.state, "request_id", None) or uuid.uuid4().hex  # web.SiteGuard's
     if need == PUBLIC:
         audit.CONTEXT.set(audit.AuditContext(None, None, "api", rid, client))
         return
@@ -98,7 +97,7 @@ async def authorize(request: Request) -> None:
             raise _refuse(401, ("header", "authorization"), "log in: a bearer token "
                           "(pendant tokens create) or the pendant's login page", "unauthorized")
     request.state.actor = actor
-    audit.CONTEXT.set(audit.AuditContext(actor.name, actor.role, actor.source, rid[:64], client))
+    audit.CONTEXT.set(audit.AuditContext(actor.name, actor.role, actor.source, rid, client))
     if need != SIGNED_IN and not actor.can(need):
         raise _refuse(403, ("path",), f"needs permission {need}; {actor.name} acts as "
                       f"{actor.role}" + (" (idle: log in again)" if actor.idle else ""),

@@ -139,6 +139,20 @@ def create_token(db: Session, user: User, days: float | None = 90.0, label: str 
     return secret
 
 
+def list_tokens(db: Session, user: User | None = None) -> list[ApiToken]:
+    q = select(ApiToken).order_by(ApiToken.id)
+    return list(db.scalars(q if user is None else q.where(ApiToken.user_id == user.id)))
+
+
+def revoke_token(db: Session, token_id: int) -> ApiToken:
+    t = db.get(ApiToken, token_id)
+    if t is None:
+        raise NotFound(("token_id",), f"no token {token_id}")
+    t.revoked_at = t.revoked_at or utcnow()
+    db.flush()
+    return t
+
+
 def _active(u: User | None) -> bool:
     return u is not None and u.revoked_at is None
 

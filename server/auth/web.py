@@ -7,6 +7,8 @@ origins (then Starlette's ``CORSMiddleware`` answers for those only).
 - A command (not GET/HEAD/OPTIONS) whose ``Origin`` is neither this service nor a configured
   CORS origin is refused (403), whatever its credential: a page of another origin never
   changes anything, even where the browser would send the login cookie (same site, another port).
+- Every request gets an id (the client's ``X-Request-ID`` if it sent a short one, else a new
+  UUID), answered in ``X-Request-ID`` and written into the audit records of its changes.
 - Every response gets ``X-Content-Type-Options: nosniff``, ``X-Frame-Options: DENY`` and
   ``Referrer-Policy: same-origin``; pages get a ``Content-Security-Policy`` allowing only this
   origin (FastAPI's /docs and /redoc load their scripts from a CDN and keep their own policy).
@@ -15,6 +17,8 @@ origins (then Starlette's ``CORSMiddleware`` answers for those only).
 from __future__ import annotations
 
 import json
+import re
+import uuid
 from collections.abc import Iterable
 from urllib.parse import urlsplit
 
@@ -27,6 +31,7 @@ HEADERS = [(b"x-content-type-options", b"nosniff"), (b"x-frame-options", b"DENY"
            (b"referrer-policy", b"same-origin")]
 NO_CSP = ("/docs", "/redoc")
 SAFE_METHODS = ("GET", "HEAD", "OPTIONS")
+REQUEST_ID = re.compile(r"[A-Za-z0-9._:-]{1,64}")
 
 
 def host_name(host: str) -> str:
@@ -66,10 +71,13 @@ class SiteGuard:
                 return
         path = scope.get("path", "")
         csp = not path.startswith(NO_CSP)
+        rid = headers.get("x-request-id", "")
+        rid = rid if REQUEST_ID.fullmatch(rid) else uuid.uuid4().hex
+        scope.setdefault("state", {})["request_id"] = rid  # request.state.request_id
 
         async def send_with_headers(message: Message) -> None:
             if message["type"] == "http.response.start":
-                extra = list(HEADERS)
+                extra = list(HEADERS) + [(b"x-request-id", rid.encode())]
                 if csp:
                     extra.append((b"content-security-policy", CSP.encode()))
                 message["headers"] = list(message.get("headers", [])) + extra
