@@ -86,10 +86,12 @@ def test_operator_save_is_403_expert_save_is_audited_with_quality(client):
                               "max_error_mm": report["max_error_mm"],
                               "position_bound95_mm": report["position_bound95_mm"]}
     assert rec["request_id"] == r.headers["x-request-id"] and rec["client"] == "testclient"
-    r = client.put(f"{C}/tools/2", json={"name": "b"}, headers={**eva, "X-Request-ID": "mes-42"})
+    r = client.put(f"{C}/tools/2", json={"name": "b"},
+                   headers={**eva, "X-Request-ID": "mes-42", "If-Match": "*"})
     assert r.headers["x-request-id"] == "mes-42"
     assert audit(client, number=2)[0]["request_id"] == "mes-42"
-    r = client.put(f"{C}/tools/3", json={"name": "c"}, headers={**eva, "X-Request-ID": "x" * 65})
+    r = client.put(f"{C}/tools/3", json={"name": "c"},
+                   headers={**eva, "X-Request-ID": "x" * 65, "If-Match": "*"})
     assert r.headers["x-request-id"] != "x" * 65  # too long: a new id
     hist = ok(client.get(f"{C}/tools/1/history"))
     assert hist[-1]["changed_by"] == "eva"
