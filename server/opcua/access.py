@@ -22,6 +22,7 @@ from __future__ import annotations
 import contextvars
 import hashlib
 import time
+import uuid
 from dataclasses import dataclass, field
 from typing import Any
 
@@ -77,9 +78,9 @@ class Caller:
     permissions: frozenset[str]
 
     def audit_actor(self, client: str | None = None) -> dict[str, Any]:
-        """As :func:`server.auth.audit.actor` has it, source ``opcua``."""
+        """As :func:`server.auth.audit.actor` has it, source ``opcua``, a new request id."""
         return {"user_name": self.name, "role": self.role, "source": "opcua",
-                "request_id": None, "client": client}
+                "request_id": str(uuid.uuid4()), "client": client}
 
 
 NO_AUTH = Caller("no-auth", "Administrator", frozenset({"*"}))
