@@ -52,8 +52,8 @@ def test_analyze_on_the_service_follows_the_job_and_prints_the_stored_report(ser
     assert "job " in out.err  # its progress was shown
 
 
-def test_a_failed_job_and_a_missing_service_are_named_errors(service, tmp_path, capsys):
-    assert main(["analyze", write(tmp_path, 5), "--service", service]) == 2
+def test_a_refused_recording_and_a_missing_service_are_named_errors(service, tmp_path, capsys):
+    assert main(["analyze", write(tmp_path, 3), "--service", service]) == 2
     err = capsys.readouterr().err
     assert "pendant: body.samples:" in err and "(422)" in err, err
     url = f"http://127.0.0.1:{free_port()}"

@@ -189,10 +189,11 @@ def test_broken_recording_names_the_field_beside_the_upload_box(page, tmp_path, 
     assert page.get_by_label("or paste the JSON").get_attribute("aria-invalid") == "true"
 
 
-def test_an_analysis_job_that_fails_names_the_field_and_hides_cancel(page) -> None:
-    """Five samples are a valid recording but too few to analyse: the job fails with a 422
-    naming ``samples``, shown as a refused request is; the job's Cancel button is gone."""
-    doc = simulate_recording("tracker", "ur10", Imperfections(noise_mm=0.02), 5, seed=1)
+def test_a_recording_too_short_to_analyse_names_the_field_and_starts_no_job(page) -> None:
+    """Three samples are too few to analyse: the service refuses the recording with a 422
+    naming ``samples`` (the analysis and the store share one minimum), so no job starts and
+    no Cancel button shows. (A job that fails is shown the same way: tests/test_jobs.py.)"""
+    doc = simulate_recording("tracker", "ur10", Imperfections(noise_mm=0.02), 3, seed=1)
     paste_and_analyse(page, json.dumps(doc))
     box = page.locator("#upload-error")
     assert box.is_visible() and "(422)" in box.inner_text()

@@ -7,7 +7,7 @@ import json
 
 import numpy as np
 import pytest
-from api_helpers import client, db_url, make_client, ok  # noqa: F401  (fixtures)
+from api_helpers import analyze, client, db_url, make_client, ok  # noqa: F401  (fixtures)
 
 from server.cli import main
 from solvers.analysis.plan import (Workspace, _criterion, design_matrices, parse_effects,
@@ -85,7 +85,7 @@ def test_api_plan_then_record_then_analyse(client) -> None:  # noqa: F811
     physics = {"compliance_deg_per_Nm": [0, 1e-3, 0, 0, 0, 0], "noise_mm": 0.02, "rigid": False}
     rec = ok(client.post("/plan/recording", json={"robot": "ur10", "joints_deg": plan["joints_deg"],
                                                    "physics": physics, "payload_kg": 5.0}))
-    rep = ok(client.post(f"/recordings/{rec['id']}/analyze"))
+    rep = analyze(client, rec["id"])  # the analysis is a job: queued, run, its report read
     assert rep["findings"][0]["effect"] == "joint_compliance" and rep["findings"][0]["joint"] == 2
     bad = {"robot": "ur10", "joints_deg": plan["joints_deg"], "physics": {"noise_mm": "lots"}}
     r = client.post("/plan/recording", json=bad)

@@ -6,12 +6,13 @@ patches the imported file."""
 from __future__ import annotations
 
 import hashlib
+import json
 from pathlib import Path
 
 import pytest
 
 from api_helpers import *  # noqa: F403
-from api_helpers import C, make_client, ok
+from api_helpers import C, finish_job, make_client, ok
 from server.cli import main
 
 DATA = Path(__file__).parent / "data"
@@ -197,13 +198,14 @@ def test_the_json_backup_keeps_the_imported_file(client):
     ok(client.put(f"{C}/bases/8", json={"name": "Pallet 3"}, headers={"If-Match": "*"}))
     backup = client.get(f"{C}/export", params={"format": "json"}).text
     other = f"/controllers/{ok(client.post('/controllers', json={'name': 'restored'}))['id']}"
-    ok(client.post(f"{other}/import", json={"format": "json", "text": backup}))
+    job = finish_job(client, client.post(f"{other}/import", json={"format": "json", "text": backup}))
+    assert job["state"] == "done", job  # a restore is a job
     out = client.get(f"{other}/export", params={"format": "kuka"}).text
     assert [a for a, b in zip(KUKA.splitlines(), out.splitlines()) if a != b] == \
         ['BASE_NAME[8,]="Pallet 2"']
-    doc = __import__("json").loads(backup)
+    doc = json.loads(backup)
     doc["files"][0]["text"] = KUKA[:KUKA.index("ENDDAT")]
     r = client.post(f"{other}/import",
-                    json={"format": "json", "text": __import__("json").dumps(doc)})
+                    json={"format": "json", "text": json.dumps(doc)})
     assert r.status_code == 422 and r.json()["detail"][0]["loc"][:4] == ["body", "text", "files", 0]
     assert "ENDDAT" in r.json()["detail"][0]["msg"]

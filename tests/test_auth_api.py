@@ -12,7 +12,7 @@ import pytest
 from fastapi.testclient import TestClient
 
 from api_helpers import *  # noqa: F403
-from api_helpers import ADMIN_TOKEN, C, calibrate, make_client, ok, open_session, walk
+from api_helpers import ADMIN_TOKEN, C, calibrate, finish_job, make_client, ok, open_session, walk
 
 
 def bearer(token: str) -> dict[str, str]:
@@ -105,12 +105,15 @@ def test_audit_survives_restore_and_delete(client):
     ok(client.put(f"{C}/tools/1", json={"name": "pointer"}, headers={**eva, "If-Match": "*"}))
     ok(client.put(f"{C}/tools/2", json={"pose": {"x": 10}}, headers={**eva, "If-Match": "*"}))
     hist = ok(client.get(f"{C}/tools/1/history"))
-    ok(client.post(f"{C}/tools/1/restore/{hist[-1]['id']}", headers=eva))  # back to "tool1"
+    ok(client.post(f"{C}/tools/1/restore/{hist[-1]['id']}",
+                   headers={**eva, "If-Match": "*"}))  # back to "tool1"
     backup = json.loads(client.get(f"{C}/export?format=json").text)
     backup["history"] = [dict(backup["history"][0], changed_at="2001-01-01T00:00:00+00:00")]
     backup["entries"] = [dict(e, name="forged") if e["table"] == "tool" and e["number"] == 1
                          else e for e in backup["entries"]]
-    ok(client.post(f"{C}/import", json={"format": "json", "text": json.dumps(backup)}))
+    job = finish_job(client, client.post(f"{C}/import",
+                                         json={"format": "json", "text": json.dumps(backup)}))
+    assert job["state"] == "done", job  # the restore runs as a job, audited as who asked
     assert len(ok(client.get(f"{C}/tools/1/history"))) == 1  # the controller's history: forged
     assert client.delete("/controllers/1").status_code == 204
     assert client.get(C).status_code == 404

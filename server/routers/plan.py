@@ -20,6 +20,7 @@ from pydantic import BaseModel, Field
 from starlette.concurrency import run_in_threadpool
 
 from db.crud import store_document
+from db.session import write_session
 from solvers.analysis.plan import Workspace, parse_effects, plan_poses, record_plan
 from solvers.errors import CalibrationError
 from solvers.physics import Imperfections
@@ -52,7 +53,7 @@ class PlanRecordingIn(BaseModel):
 
 
 def _store(request: Request, doc: dict[str, Any]) -> int:
-    db = request.app.state.sessionmaker()
+    db = write_session(request.app.state.sessionmaker)  # BEGIN IMMEDIATE on SQLite
     try:
         new_id = store_document(db, "recordings", doc)
         db.commit()
@@ -97,6 +98,6 @@ async def record_from_plan(request: Request, body: PlanRecordingIn) -> dict[str,
     doc = await run_in_threadpool(lambda: record_plan(
         robot, body.joints_deg, imp, seed=body.seed,
         payload=(body.payload_kg, (0.0, 0.0, 50.0))))
-    async with request.app.state.write_lock:
+    async with request.app.state.writers:  # the writers' bulkhead (server.deps)
         rid = await run_in_threadpool(_store, request, doc)
     return {"id": rid, "kind": "tracker", "n_samples": len(body.joints_deg), "robot": robot.name}
