@@ -44,13 +44,16 @@ def test_the_ur10_report_reads_plainly(page):  # noqa: ANN001
     page.wait_for_function("() => document.querySelector('.sign-words')")  # the nominal DH arrived
     titles = page.locator("#findings .finding .title").all_inner_texts()
     assert len(titles) == len(set(titles)), titles  # a2 and d2 are two titles, not "Link length J2" twice
-    assert "Link length J2 (a2)" in titles and "Link length J2 (d2)" in titles
+    lengths = [t for t in titles if t.startswith("Link length")]
+    assert all(re.fullmatch(r"Link length J(\d) \([ad]\1\)", t) for t in lengths), lengths
+    assert {t[-3] for t in lengths} == {"a", "d"}  # both kinds, each named by its parameter
 
     first = page.locator("#findings li.finding").first
     a2 = rep["findings"][0]
     assert (a2["effect"], a2["joint"], a2["parameters"]["dh_parameter"]) == ("link_length", 2, "a")
     sign = first.locator(".sign-words").inner_text()
-    assert re.search(r"0\.824 mm longer", sign), sign  # the README's "0.82 mm longer", from a2 = -0.824
+    delta = a2["parameters"]["delta_mm"]  # a2 is negative in the table: -0.8 mm is 0.8 mm longer
+    assert delta < 0 and re.search(rf"{abs(delta):.3f} mm longer", sign), (delta, sign)
     p_text = first.locator('[data-evidence="p_value"] td').inner_text()
     assert p_text == "< 1e-15", p_text  # not 3.9e-233
     shares = page.locator('[data-evidence="structure_share"] td').all_text_contents()
@@ -61,7 +64,8 @@ def test_the_ur10_report_reads_plainly(page):  # noqa: ANN001
     assert boxes.count() == len(rep["findings"]) > 3
     assert boxes.first.get_attribute("open") is not None
     assert all(b.get_attribute("open") is None for b in boxes.all()[1:])
-    assert page.locator("#findings .finding .headline").first.inner_text().startswith("-0.8238 ± 0.03")
+    head = page.locator("#findings .finding .headline").first.inner_text()
+    assert re.fullmatch(rf"{delta:.4f} ± 0\.\d+ mm", head), head  # the value and its std
     height = page.evaluate("document.documentElement.scrollHeight")
     assert height < 3000, height  # 4,300 px with every finding open
 

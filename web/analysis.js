@@ -32,6 +32,7 @@ const EFFECTS = {
   thermal_drift: "Thermal drift",
   trigger_latency: "Trigger latency",
   tool_deflection: "Tool deflection",
+  gear_transmission_error: "Gear transmission error",
 };
 const VERDICTS = {
   explained: ["Explained", "The findings bring the residual down to the noise level."],
@@ -110,7 +111,11 @@ function el(tag, attrs = {}, ...children) {
 
 function svg(tag, attrs = {}, text) {
   const e = document.createElementNS(SVG, tag);
-  for (const [k, v] of Object.entries(attrs)) e.setAttribute(k, v);
+  for (const [k, v] of Object.entries(attrs)) {
+    // a style through the CSSOM: the page's Content-Security-Policy refuses style attributes
+    if (k === "style") e.style.cssText = v;
+    else e.setAttribute(k, v);
+  }
   if (text !== undefined) e.textContent = text;
   return e;
 }
@@ -144,7 +149,9 @@ function findingTitle(f) {
   const joint = hasJoint ? ` J${f.joint}` : "";
   const p = f.dh_parameter || (f.parameters || {}).dh_parameter;
   const dh = p ? ` (${p}${hasJoint ? f.joint : ""})` : f.effect === "link_twist" && hasJoint ? ` (α${f.joint})` : "";
-  return `${effectName(f.effect)}${joint}${dh}`;
+  const k = (f.parameters || {}).periods_per_turn;  // one gear finding per harmonic
+  const harmonic = f.effect === "gear_transmission_error" && isNum(k) ? ` (${k} per turn)` : "";
+  return `${effectName(f.effect)}${joint}${dh}${harmonic}`;
 }
 
 /** A p-value as a person reads it: 0.012, 3.1e-5, or "< 1e-15" below what a double resolves. */
