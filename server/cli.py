@@ -341,7 +341,8 @@ def start_job_workers(db_url: str, args: argparse.Namespace) -> subprocess.Popen
     cmd = [sys.executable, "-m", "server.cli", "worker", "--db", db_url, "--exit-with-parent",
            "--processes", str(args.job_workers), "--job-time-s", str(args.job_time_s),
            "--job-memory-mb", str(args.job_memory_mb)]
-    return subprocess.Popen(cmd)
+    # a session of its own: a terminal's Ctrl-C reaches serve alone, which stops its children
+    return subprocess.Popen(cmd, start_new_session=True)
 
 
 def run_worker(args: argparse.Namespace) -> int:

@@ -6,7 +6,8 @@ a variable an earlier one set, as a reader's shell would), in a scratch folder t
 the repository (``docs/`` is a copy, so a snippet may write there). When a document talks to
 ``http://127.0.0.1:8000``, the real service runs on a fresh SQLite file at a free port and
 the test writes that port in place of 8000; ``PENDANT_DB_URL`` points the CLI at the same
-file. A snippet passes when bash exits 0 and nothing printed a traceback or a refused
+file, and ``TOKEN`` / ``PENDANT_TOKEN`` hold its first Administrator's token (the login link's
+token a reader has after the first start). A snippet passes when bash exits 0 and nothing printed a traceback or a refused
 request (``"detail"``).
 
 **Illustrative snippets.** A snippet that cannot run as written (the set-up itself, one that
@@ -98,7 +99,12 @@ def test_the_shell_snippets_of_a_document_run(document: Path, tmp_path: Path):
     snippets = [s for s in shell_snippets(document) if not s.illustrative]
     work = scratch_folder(tmp_path)
     db_url = f"sqlite:///{tmp_path / 'pendant.db'}"
-    env = {**os.environ, "PYTHONPATH": str(ROOT), "PENDANT_DB_URL": db_url}
+    from api_helpers import ADMIN_TOKEN
+
+    # the reader's shell holds the first start's token as TOKEN (docs/api.md, Authentication);
+    # the CLI's service commands read it as PENDANT_TOKEN
+    env = {**os.environ, "PYTHONPATH": str(ROOT), "PENDANT_DB_URL": db_url,
+           "TOKEN": ADMIN_TOKEN, "PENDANT_TOKEN": ADMIN_TOKEN}
     if shutil.which("pendant") is None:  # the console script of `pip install -e .`
         bin_dir = tmp_path / "bin"
         bin_dir.mkdir()

@@ -10,6 +10,7 @@ from __future__ import annotations
 import argparse
 import asyncio
 import logging
+import os
 import subprocess
 import sys
 from pathlib import Path
@@ -21,6 +22,7 @@ def add_opcua_commands(sub: argparse._SubParsersAction) -> None:
     add_opcua_arguments(o)
     o.add_argument("--db", help="database URL (default: PENDANT_DB_URL, else the SQLite file in "
                                 "the user data dir)")
+    o.add_argument("--exit-with-parent", action="store_true", help=argparse.SUPPRESS)
     o.add_argument("--pki", type=Path, help="folder of the server's certificate and key (made on "
                                             "first start; default: opcua-pki in the user data "
                                             "dir)")
@@ -41,7 +43,8 @@ def run_opcua(args: argparse.Namespace) -> int:
     app = create_app(Settings(db_url=args.db) if args.db else Settings())
     try:
         asyncio.run(run(app.state.sessionmaker, args.host, args.port, app.state.settings.auth,
-                        args.pki or default_pki_dir()))
+                        args.pki or default_pki_dir(),
+                        os.getppid() if args.exit_with_parent else None))
     except KeyboardInterrupt:
         pass
     return 0
@@ -60,7 +63,10 @@ def start_beside(host: str, port: int, db_url: str | None, auth: bool = True) ->
 
     from server.settings import ENV_NO_AUTH
 
-    cmd = [sys.executable, "-m", "server.cli", "opcua", "--host", host, "--port", str(port)]
+    cmd = [sys.executable, "-m", "server.cli", "opcua", "--host", host, "--port", str(port),
+           "--exit-with-parent"]
     if db_url:
         cmd += ["--db", db_url]
-    return subprocess.Popen(cmd, env={**os.environ, ENV_NO_AUTH: "0" if auth else "1"})
+    # a session of its own: a terminal's Ctrl-C reaches serve alone, which stops its children
+    return subprocess.Popen(cmd, env={**os.environ, ENV_NO_AUTH: "0" if auth else "1"},
+                            start_new_session=True)

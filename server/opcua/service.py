@@ -198,13 +198,17 @@ def _slot_key(table: object, number: object) -> tuple[str, int] | None:
 
 
 async def run(make_session: sessionmaker[Session], host: str, port: int, auth: bool = True,
-              pki_dir: Path | None = None) -> None:
-    """Serve until cancelled (``pendant opcua``)."""
+              pki_dir: Path | None = None, parent_pid: int | None = None) -> None:
+    """Serve until cancelled (``pendant opcua``), or until ``parent_pid`` (``pendant serve``,
+    which started this face) is gone."""
+    import os
+
     face = PendantOpcUa(make_session, f"opc.tcp://{host}:{port}/pendant/", auth=auth,
                         pki_dir=pki_dir)
     await face.start()
     log.warning("pendant OPC UA server at %s", face.endpoint)
     try:
-        await asyncio.Event().wait()
+        while parent_pid is None or os.getppid() == parent_pid:
+            await asyncio.sleep(1.0)
     finally:
         await face.stop()
