@@ -15,7 +15,8 @@ import time
 from concurrent.futures import ThreadPoolExecutor
 from pathlib import Path
 
-import httpx
+import admin_http as httpx  # httpx as the first Administrator
+from api_helpers import ADMIN_TOKEN
 
 from solvers.physics import Imperfections
 from solvers.simulate import simulate_recording
@@ -34,7 +35,8 @@ def free_port() -> int:
 
 
 def serve(db_url: str, port: int) -> subprocess.Popen:
-    env = {**os.environ, "PYTHONPATH": f"{ROOT}{os.pathsep}{os.environ.get('PYTHONPATH', '')}"}
+    env = {**os.environ, "PYTHONPATH": f"{ROOT}{os.pathsep}{os.environ.get('PYTHONPATH', '')}",
+           "PENDANT_ADMIN_TOKEN": ADMIN_TOKEN}
     return subprocess.Popen([sys.executable, "-m", "server.cli", "serve", "--db", db_url,
                              "--port", str(port)], env=env,
                             stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL)

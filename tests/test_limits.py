@@ -8,7 +8,7 @@ import socket
 import time
 from urllib.parse import urlsplit
 
-import httpx
+import admin_http as httpx  # httpx as the first Administrator
 import pytest
 from browser_helpers import serve
 

@@ -20,7 +20,7 @@ import random
 import signal
 import time
 
-import httpx
+import admin_http as httpx  # httpx as the first Administrator
 import pytest
 
 from db_backends import backends, fresh_url

@@ -19,7 +19,8 @@ from contextlib import contextmanager
 from dataclasses import dataclass
 from pathlib import Path
 
-import httpx
+import admin_http as httpx  # httpx as the first Administrator
+from api_helpers import ADMIN_TOKEN
 
 from browser_helpers import free_port
 
@@ -70,7 +71,7 @@ def wait_healthy(url: str, proc: subprocess.Popen, log: Path, timeout_s: float =
 def start(db_url: str, workers: int, log: Path, port: int | None = None) -> Service:
     port = port or free_port()
     env = {**os.environ, "PENDANT_DB_URL": db_url, "PYTHONPATH": str(ROOT),
-           "OPENBLAS_NUM_THREADS": "1"}
+           "OPENBLAS_NUM_THREADS": "1", "PENDANT_ADMIN_TOKEN": ADMIN_TOKEN}
     f = log.open("ab")
     proc = subprocess.Popen([sys.executable, "-m", "uvicorn", "server.app:app", "--host",
                              "127.0.0.1", "--port", str(port), "--workers", str(workers),

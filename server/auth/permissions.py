@@ -35,6 +35,9 @@ S = C + "/sessions/{session_id}"
 ROUTES: Final[dict[tuple[str, str], str]] = {
     ("GET", "/"): PUBLIC,
     ("GET", "/{name}"): PUBLIC,  # the page's files (web/), not in the OpenAPI
+    ("GET", "/docs"): PUBLIC,  # the API docs (Swagger UI, ReDoc), served offline
+    ("GET", "/docs/oauth2-redirect"): PUBLIC,
+    ("GET", "/redoc"): PUBLIC,
     ("POST", "/auth/login"): PUBLIC,
     ("POST", "/auth/logout"): SIGNED_IN,
     ("GET", "/auth/me"): SIGNED_IN,
