@@ -75,8 +75,18 @@ async function recordPlan() {
       body: { robot: $("#plan-robot").value, joints_deg: plan.joints_deg, physics, payload_kg: plan.payload_kg },
     });
     status(`Recording ${rec.id} stored (${rec.n_samples} poses); analysing …`);
-    const rep = await request("POST", `/recordings/${rec.id}/analyze`);
-    location.search = `?analysis=${rep.id}`;
+    let job = await request("POST", `/recordings/${rec.id}/analyze`);  // a job (202)
+    while (!["done", "failed", "cancelled"].includes(job.state)) {
+      status(`Recording ${rec.id}: analysing, ${Math.round(100 * job.progress)} % …`);
+      await new Promise((resolve) => setTimeout(resolve, 300));
+      job = await request("GET", job.links.self);
+    }
+    if (job.state !== "done") {
+      const detail = job.error ? job.error.detail.map((d) => d.msg).join("; ") : job.state;
+      status(`The analysis of recording ${rec.id} ended ${job.state}: ${detail}`, "err");
+      return;
+    }
+    location.search = `?analysis=${job.result.analysis_id}`;
   } catch (err) {
     status(`Recording from the plan was refused: ${refusal(err)}`, "err");
   }
