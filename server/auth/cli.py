@@ -28,7 +28,6 @@ from sqlalchemy.orm import Session
 from db.crud import StateConflict
 from server.auth import audit, tokens
 from server.auth.permissions import PERMISSIONS
-from server.opcua.access import certificate_secret
 
 
 @contextmanager
@@ -70,7 +69,7 @@ def run_users(args: Any) -> int:
             elif args.action == "cert":
                 der = certificate_der(args.file)
                 tokens.create_token(db, tokens.get_user(db, args.name), args.days,
-                                    "opcua certificate", secret=certificate_secret(der))
+                                    "opcua certificate", secret=tokens.certificate_secret(der))
                 print(f"certificate {args.file.name} logs {args.name} in over OPC UA "
                       f"(valid {args.days:g} days; pendant users revoke ends it)")
             else:

@@ -32,6 +32,12 @@ def sha256(secret: str) -> str:
     return hashlib.sha256(secret.encode("utf-8")).hexdigest()
 
 
+def certificate_secret(der: bytes) -> str:
+    """The token secret that stands for an X.509 certificate (its SHA-256 fingerprint): an OPC UA
+    certificate login is a token of the user (``pendant users cert``), revocable and expiring."""
+    return "x509:sha256:" + hashlib.sha256(der).hexdigest()
+
+
 @dataclass(frozen=True)
 class Actor:
     """Who is asking: the user, the role in effect (Operator after the idle timeout), its

@@ -20,7 +20,6 @@ for the audit record of what the method changes (source ``opcua``).
 from __future__ import annotations
 
 import contextvars
-import hashlib
 import time
 import uuid
 from dataclasses import dataclass, field
@@ -35,8 +34,7 @@ from sqlalchemy.orm import Session, sessionmaker
 
 from db.auth_models import User as DbUser
 from server.auth import tokens
-
-CERT_TOKEN_PREFIX = "x509:sha256:"
+from server.auth.tokens import certificate_secret
 
 # requests that need no permission: opening and closing sessions and channels, discovery
 SESSION_TYPES = {ua.NodeId(t) for t in (
@@ -62,11 +60,6 @@ CALL = ua.NodeId(ua.ObjectIds.CallRequest_Encoding_DefaultBinary)
 #: the permission each method needs, by its browse name
 METHOD_PERMISSIONS = {"ReadFrame": "frames:read", "ExportFile": "frames:read",
                       "CommitFrame": "frames:commit"}
-
-
-def certificate_secret(der: bytes) -> str:
-    """The token secret that stands for a certificate (its SHA-256 fingerprint)."""
-    return CERT_TOKEN_PREFIX + hashlib.sha256(der).hexdigest()
 
 
 @dataclass(frozen=True)
