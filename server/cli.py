@@ -561,6 +561,7 @@ def serve(args: argparse.Namespace) -> int:
             uvicorn.run("server.app:app", host=args.host, port=args.port, workers=args.workers,
                         timeout_worker_healthcheck=WORKER_HEALTHCHECK_S)
     finally:
+        signal.signal(signal.SIGINT, signal.SIG_IGN)  # stopping: one more Ctrl-C changes nothing
         for child in (workers, face):
             if child is not None:
                 child.terminate()
@@ -625,6 +626,7 @@ def main(argv: Sequence[str] | None = None) -> int:
               file=sys.stderr)
         return 2
     except KeyboardInterrupt:
+        signal.signal(signal.SIGINT, signal.SIG_IGN)  # leaving: one more Ctrl-C changes nothing
         print("pendant: interrupted", file=sys.stderr)
         return 130
 
