@@ -429,15 +429,21 @@ def _serve(app, host: str, port: int) -> None:  # noqa: ANN001
     import uvicorn
 
     class Server(uvicorn.Server):
+        interrupted = False
+
         def handle_exit(self, sig: int, frame: object) -> None:
             if self.should_exit and sig == signal.SIGINT:  # the second Ctrl-C
                 busy = len(self.server_state.tasks)
                 print(f"pendant: stopped at once; {busy} request(s) in progress abandoned "
                       "(they saved nothing)", file=sys.stderr, flush=True)
                 os._exit(130)
+            self.interrupted = self.interrupted or sig == signal.SIGINT
             super().handle_exit(sig, frame)
 
-    Server(uvicorn.Config(app, host=host, port=port)).run()
+    server = Server(uvicorn.Config(app, host=host, port=port))
+    server.run()
+    if server.interrupted:  # uvicorn before 0.29 returns after a Ctrl-C; later ones re-raise it
+        raise KeyboardInterrupt
 
 
 SPINNER = "|/-\\"
