@@ -49,6 +49,7 @@ from server.slot_cli import add_slot_command
 from server.methods import METHODS, MethodInputs, TaughtData
 from server.opcua.cli import add_opcua_commands, start_beside
 from server.schemas import ReportOut
+from server.settings import ENV_PARENT_PID, parent_pid
 from solvers.errors import CalibrationError
 from solvers.frames import Pose
 from solvers.report import CalibrationResult
@@ -342,7 +343,8 @@ def start_job_workers(db_url: str, args: argparse.Namespace) -> subprocess.Popen
            "--processes", str(args.job_workers), "--job-time-s", str(args.job_time_s),
            "--job-memory-mb", str(args.job_memory_mb)]
     # a session of its own: a terminal's Ctrl-C reaches serve alone, which stops its children
-    return subprocess.Popen(cmd, start_new_session=True)
+    return subprocess.Popen(cmd, start_new_session=True,
+                            env={**os.environ, ENV_PARENT_PID: str(os.getpid())})
 
 
 def run_worker(args: argparse.Namespace) -> int:
@@ -356,7 +358,7 @@ def run_worker(args: argparse.Namespace) -> int:
     logging.basicConfig(level=logging.INFO, format="%(asctime)s %(name)s %(message)s")
     pool = Pool(_settings(args.db).db_url, args.processes,
                 Limits(args.job_time_s, args.job_memory_mb),
-                parent_pid=os.getppid() if args.exit_with_parent else None)
+                parent_pid=parent_pid() if args.exit_with_parent else None)
     pool.run()
     return 0
 

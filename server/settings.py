@@ -15,8 +15,15 @@ ENV_ADMIN_TOKEN = "PENDANT_ADMIN_TOKEN"  # the first administrator's token (else
 ENV_NO_AUTH = "PENDANT_NO_AUTH"  # "1": the --no-auth demo (loopback only)
 ENV_ALLOWED_HOSTS = "PENDANT_ALLOWED_HOSTS"  # Host names besides loopback, comma-separated
 ENV_CORS_ORIGINS = "PENDANT_CORS_ORIGINS"  # origins whose pages may call the API
+ENV_PARENT_PID = "PENDANT_PARENT_PID"  # serve's pid, given to the children it starts
 ENV_TOKEN = "PENDANT_TOKEN"  # the CLI's bearer token when it talks to a service (--service/--url)
 LOOPBACK_HOSTS = ("127.0.0.1", "localhost", "::1")
+
+
+def parent_pid() -> int:
+    """The pid of the ``pendant serve`` that started this child (given in the environment, as
+    the child may start after its parent is already gone), else this process's parent."""
+    return int(os.environ.get(ENV_PARENT_PID) or os.getppid())
 
 
 def bearer_headers() -> dict[str, str]:

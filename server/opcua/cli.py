@@ -37,6 +37,7 @@ def add_opcua_arguments(o: argparse.ArgumentParser) -> None:
 def run_opcua(args: argparse.Namespace) -> int:
     from server.app import create_app
     from server.opcua.service import run
+    from server.settings import parent_pid
     from server.settings import Settings
 
     logging.basicConfig(level=logging.WARNING, format="%(levelname)s %(name)s: %(message)s")
@@ -44,7 +45,7 @@ def run_opcua(args: argparse.Namespace) -> int:
     try:
         asyncio.run(run(app.state.sessionmaker, args.host, args.port, app.state.settings.auth,
                         args.pki or default_pki_dir(),
-                        os.getppid() if args.exit_with_parent else None))
+                        parent_pid() if args.exit_with_parent else None))
     except KeyboardInterrupt:
         pass
     return 0
@@ -61,12 +62,13 @@ def start_beside(host: str, port: int, db_url: str | None, auth: bool = True) ->
     with ``serve --no-auth``, as open as the REST service)."""
     import os
 
-    from server.settings import ENV_NO_AUTH
+    from server.settings import ENV_NO_AUTH, ENV_PARENT_PID
 
     cmd = [sys.executable, "-m", "server.cli", "opcua", "--host", host, "--port", str(port),
            "--exit-with-parent"]
     if db_url:
         cmd += ["--db", db_url]
     # a session of its own: a terminal's Ctrl-C reaches serve alone, which stops its children
-    return subprocess.Popen(cmd, env={**os.environ, ENV_NO_AUTH: "0" if auth else "1"},
+    return subprocess.Popen(cmd, env={**os.environ, ENV_NO_AUTH: "0" if auth else "1",
+                                      ENV_PARENT_PID: str(os.getpid())},
                             start_new_session=True)
