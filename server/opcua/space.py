@@ -34,15 +34,6 @@ LOAD_TYPE = 1018
 MOTION_DEVICE_CATEGORY_ARTICULATED_ROBOT = 1  # MotionDeviceCategoryEnumeration
 AXIS_MOTION_PROFILE_ROTARY = 2  # AxisMotionProfileEnumeration: 1 other, 2 rotary, ...
 
-# the placeholders of the Robotics types and what stands in for them (None: one per joint)
-PLACEHOLDERS = {
-    "<MotionDeviceIdentifier>": "robot", "<ControllerIdentifier>": "controller",
-    "<SafetyStateIdentifier>": "SafetyState", "<AxisIdentifier>": "axes",
-    "<PowerTrainIdentifier>": "powertrains", "<MotorIdentifier>": "Motor",
-    "<GearIdentifier>": "Gear", "<SoftwareIdentifier>": "pendant",
-    "<TaskControlIdentifier>": "Calibration",
-}
-
 
 def opc_orientation(a_deg: float, b_deg: float, c_deg: float) -> tuple[float, float, float]:
     """OPC UA (A, B, C) of a KUKA (A, B, C): R = Rz(A_k) Ry(B_k) Rx(C_k) = Rz(C_o) Ry(B_o) Rx(A_o).
@@ -51,11 +42,6 @@ def opc_orientation(a_deg: float, b_deg: float, c_deg: float) -> tuple[float, fl
     (5.0, -10.0, 30.0)
     """
     return (c_deg, b_deg, a_deg)
-
-
-def kuka_orientation(a_opc: float, b_opc: float, c_opc: float) -> tuple[float, float, float]:
-    """KUKA (A, B, C) of an OPC UA 3DOrientation (the inverse of :func:`opc_orientation`)."""
-    return (c_opc, b_opc, a_opc)
 
 
 async def load_nodesets(server: Server) -> tuple[int, int, int]:
