@@ -269,7 +269,8 @@ def put_point(db: Session, s: CalibSession, step: int, source: str, pose_values:
               joints_deg: Sequence[float] | None = None, beam_id: str | None = None,
               edge: str | None = None, velocity_mm_s: Sequence[float] | None = None,
               t_s: float | None = None,
-              motion_sign: Sequence[float] | None = None) -> TaughtPoint:
+              motion_sign: Sequence[float] | None = None,
+              external_axes: dict[str, float] | None = None) -> TaughtPoint:
     """Fill (or re-teach) one step; a new touch-up makes an earlier result stale.
 
     ``t_s`` is the emulated clock at the touch-up and ``motion_sign`` the direction each
@@ -286,6 +287,8 @@ def put_point(db: Session, s: CalibSession, step: int, source: str, pose_values:
     p.beam_id, p.edge = beam_id, edge
     p.t_s = None if t_s is None else float(t_s)
     p.motion_sign = None if motion_sign is None else [float(v) for v in motion_sign]
+    p.external_axes = None if not external_axes else {k: float(v)
+                                                      for k, v in external_axes.items()}
     p.set_pose_values(pose_values)
     p.vx_mm_s, p.vy_mm_s, p.vz_mm_s = ((None, None, None) if velocity_mm_s is None
                                        else (float(v) for v in velocity_mm_s))

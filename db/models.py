@@ -97,6 +97,10 @@ class Controller(Base):
 
     # revision 0003: bumped by every UPDATE of the row (the ETag of controller and robot)
     version: Mapped[int] = mapped_column(default=1, server_default="1")
+    # revision 0008: the external axes' values {"E1": deg, ..., "E4": mm} (None = the cell has
+    # none) and their hidden errors (emulator.external.ERROR_FIELDS; None = seeded defaults)
+    external_axes: Mapped[dict[str, Any] | None]
+    external_errors: Mapped[dict[str, Any] | None]
 
     entries: Mapped[list[FrameEntry]] = relationship(back_populates="controller",
                                                      cascade="all, delete-orphan")
@@ -231,8 +235,54 @@ class TaughtPoint(PoseColumns, Base):
     # direction each joint last moved before it (a recording's start_joints_deg)
     t_s: Mapped[float | None]
     motion_sign: Mapped[list[float] | None]
+    # revision 0008: the external axes' values at the touch-up ({"E1": deg, "E4": mm})
+    external_axes: Mapped[dict[str, Any] | None]
 
     session: Mapped[CalibSession] = relationship(back_populates="points")
+
+
+EXT_KIN_SLOTS = 6  # KUKA EX_KIN 1..6 ($ET1_... .. $ET6_...)
+
+
+class ExternalKinematic(PoseColumns, Base):
+    """An external kinematic (KUKA EX_KIN[n], machine data ``$ETn_...``; ABB a mechanical unit):
+    a turntable, a two-axis positioner or a linear unit, revision 0008.
+
+    The pose columns are its root frame ``T_base_root`` (z the axis; a linear unit's
+    ``T_base_rail``, z the travel direction); ``flange_*`` the flange offset (a positioner: the
+    turn axis' root in the tilt flange, ``T_tiltflange_turnroot``; else identity). ``axes``
+    names its external axes ("E1" or "E2,E3"). History rows are ``entry_history`` rows with
+    ``entry_table = 'extkin'``.
+    """
+
+    __tablename__ = "external_kinematic"
+    __table_args__ = (UniqueConstraint("controller_id", "number"),)
+
+    id: Mapped[int] = mapped_column(primary_key=True)
+    controller_id: Mapped[int] = mapped_column(_controller_fk(), index=True)
+    number: Mapped[int]  # 1..6 as EX_KIN on the pendant
+    name: Mapped[str] = mapped_column(String(64), default="")
+    kind: Mapped[str] = mapped_column(String(16), default="none")  # none|turntable|positioner|linear_unit
+    axes: Mapped[str] = mapped_column(String(32), default="")  # "E1", "E2,E3"
+    flange_x_mm: Mapped[float] = mapped_column(default=0.0)
+    flange_y_mm: Mapped[float] = mapped_column(default=0.0)
+    flange_z_mm: Mapped[float] = mapped_column(default=0.0)
+    flange_a_deg: Mapped[float] = mapped_column(default=0.0)
+    flange_b_deg: Mapped[float] = mapped_column(default=0.0)
+    flange_c_deg: Mapped[float] = mapped_column(default=0.0)
+    scale: Mapped[float | None]  # the calibrated travel/turn per counted unit (None = 1)
+    method: Mapped[str | None] = mapped_column(String(32))  # provenance: which menu wrote it
+    session_id: Mapped[int | None] = mapped_column(_session_fk("SET NULL"))
+    error_max_mm: Mapped[float | None]
+    error_rms_mm: Mapped[float | None]
+    updated_at: Mapped[datetime | None]
+    updated_by: Mapped[str | None] = mapped_column(String(64))
+    version: Mapped[int] = mapped_column(default=1, server_default="1")
+    __mapper_args__ = {"version_id_col": version}
+
+    def flange_values(self) -> tuple[float, float, float, float, float, float]:
+        return (self.flange_x_mm, self.flange_y_mm, self.flange_z_mm, self.flange_a_deg,
+                self.flange_b_deg, self.flange_c_deg)
 
 
 class StoredDocument(Base):

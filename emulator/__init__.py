@@ -8,7 +8,7 @@ controller's row lock. ``from emulator import jog`` etc. work as before from
 """
 
 from emulator.controller import (APPROACH_S, CARTESIAN_AXES, DEMO_ROBOT, THERMAL_WARMUP_S,  # noqa: F401
-                                 TOUCH_UP_S, Cell, CycleRun, RobotPhysics, approach,
+                                 TOUCH_UP_S, Cell, CycleRun, Target, RobotPhysics, approach,
                                  build_cell, cell_for, home_joints, imperfections_document,
                                  imperfections_from_document, jog, motion_duration_s,
                                  robot_from_custom, rot, run_beam_cycle, solve_ik, tcp_pose,

@@ -391,7 +391,7 @@ def true_pose(robot: RobotModel, physics: RobotPhysics, q_from: object, q: objec
     return T
 
 
-def approach(robot: RobotModel, cell: Cell, q_now: FloatArray, target: str,
+def approach(robot: RobotModel, cell: Cell, q_now: FloatArray, target: str | Target,
              tilt_deg: float = 0.0, around_deg: float = 0.0, spin_deg: float = 0.0,
              tool_point_mm: FloatArray | None = None,
              miss_mm: FloatArray | None = None,
@@ -409,9 +409,10 @@ def approach(robot: RobotModel, cell: Cell, q_now: FloatArray, target: str,
     ``q_now``, the thermal drift at the clock when the approach ends (``physics.clock_s`` +
     the move + :data:`APPROACH_S`, as the route advances it). The operator stops
     ``noise_mm`` (per axis, seeded by ``physics.noise_seed``) off the mark. The joints
-    returned are the commanded ones, what the controller shows.
+    returned are the commanded ones, what the controller shows. ``target`` is a cell target's
+    name or a :class:`Target` (an external axis' mark: :func:`emulator.external.target`).
     """
-    t = cell.target(target)
+    t = target if isinstance(target, Target) else cell.target(target)
     if t.align:
         T_goal = rotation_matrix(t.R_world_target @ rot("Z", spin_deg), t.point_mm)
         q = solve_ik(robot, T_goal, q_now, tool=None)

@@ -23,7 +23,7 @@ from db import crud
 from db.session import (current_revision, make_engine, make_sessionmaker, migration_lock,
                         schema_status, upgrade, write_session)
 from emulator import DEMO_ROBOT, home_joints
-from server import __version__, deps, errors, idempotency
+from server import __version__, deps, errors, external, idempotency
 from server.auth import audit, guard, tokens
 from server.auth import routes as auth_routes
 from server.auth.web import SiteGuard
@@ -32,6 +32,7 @@ from server.events.mqtt import MqttSink
 from server.limits import BodyLimits
 from server.routers import (analysis, base, controllers, export, fixed_tool, jobs, robot, sessions,
                             tool, webhooks, workpiece)
+from server.routers import external as external_router
 from server.routers import plan as plan_router
 from server.settings import Settings
 from solvers.robots import ROBOTS
@@ -47,6 +48,9 @@ TAGS = [
     {"name": "Workpiece", "description": "Robot-held workpieces (tool slots of type workpiece)."},
     {"name": "Sessions", "description": "Calibration menus: open, touch up, compute, save, "
                                         "discard."},
+    {"name": "External kinematics", "description": "Turntables, positioners and rails "
+                                                   "(EX_KIN 1..6): machine data, history, "
+                                                   "the emulated external axes."},
     {"name": "Export", "description": "Controller files (KUKA, ABB, FANUC, UR) and JSON "
                                       "backup/restore."},
     {"name": "Jobs", "description": "Analyses and restores run by the worker processes: state, "
@@ -74,7 +78,8 @@ def ensure_demo(app: FastAPI) -> None:
     with migration_lock(app.state.engine), write_session(app.state.sessionmaker) as db:
         if not crud.list_controllers(db):
             joints = home_joints(ROBOTS[DEMO_ROBOT])
-            crud.create_controller(db, "cell-1", DEMO_ROBOT, None, 1, joints)
+            c = crud.create_controller(db, "cell-1", DEMO_ROBOT, None, 1, joints)
+            external.enable(db, c, ROBOTS[DEMO_ROBOT].reach_mm)  # E1..E4 (docs/emulator.md)
         db.commit()
 
 
@@ -148,6 +153,7 @@ def create_app(settings: Settings | None = None) -> FastAPI:
                    analysis, jobs, auth_routes, webhooks):
         app.include_router(module.router)
     app.include_router(plan_router.router)
+    app.include_router(external_router.router)
     bootstrap(app)
     if settings.cors_origins:
         from starlette.middleware.cors import CORSMiddleware

@@ -21,9 +21,10 @@ from solvers.frames import Pose
 from solvers.report import CalibrationResult
 from solvers.validate import FloatArray
 
-Menu = Literal["tool", "base", "fixed_tool", "workpiece"]
-Table = Literal["tool", "base"]
-Param = Literal["tool_no", "reference_tool_no", "fixed_tool_no", "known_points_mm", "pose"]
+Menu = Literal["tool", "base", "fixed_tool", "workpiece", "ext"]
+Table = Literal["tool", "base", "extkin"]  # extkin: the external kinematics (EX_KIN 1..6)
+Param = Literal["tool_no", "reference_tool_no", "fixed_tool_no", "known_points_mm", "pose",
+                "ext_no"]
 
 
 @dataclass(frozen=True)
@@ -36,16 +37,19 @@ class Step:
     around_deg: float = 0.0
     spin_deg: float = 0.0
     tool_point_mm: tuple[float, float, float] | None = None
+    external_axes: tuple[tuple[str, float], ...] | None = None  # ext menus: E axes to move first
 
 
 @dataclass(frozen=True)
 class TaughtData:
-    """A filled step as the solver needs it: the flange pose and, for beam triggers, the event."""
+    """A filled step as the solver needs it: the flange pose and, for beam triggers, the event;
+    the external axis values at the touch-up (``{"E1": deg}``) for the ext menus."""
 
     T_base_flange: FloatArray
     beam_id: str | None = None
     edge: str | None = None
     velocity_mm_s: tuple[float, float, float] | None = None
+    external_axes: dict[str, float] | None = None
 
 
 @dataclass(frozen=True)
@@ -59,6 +63,7 @@ class MethodInputs:
     pose: Pose | None = None  # numeric menus
     beams: dict[str, tuple[FloatArray, FloatArray]] = field(default_factory=dict)
     tool_diameter_mm: float | None = None
+    external: Any = None  # ext menus: server.methods_ext.ExtInputs
 
 
 Solve = Callable[[Sequence[TaughtData], MethodInputs], CalibrationResult]
@@ -78,6 +83,7 @@ class MethodSpec:
     extra_prompt: str = ""
     required: tuple[Param, ...] = ()
     steps_from_known_points: str | None = None  # indirect menus: one step per known point
+    extra_step_fn: Callable[[int], Step] | None = None  # optional step k, when not a tilt cone
 
     def step_prompts(self, params: dict) -> list[Step]:
         """The steps of a session with these params (indirect menus: one per known point)."""
@@ -90,6 +96,8 @@ class MethodSpec:
 
     def extra_step(self, k: int) -> Step:
         """Optional step k (0-based beyond the required ones)."""
+        if self.extra_step_fn is not None:
+            return self.extra_step_fn(k)
         first = self.steps[0] if self.steps else Step(self.extra_prompt)
         return Step(self.extra_prompt.format(k=k + len(self.steps) + 1), first.target,
                     tilt_deg=25.0, around_deg=(45.0 + 90.0 * k) % 360.0,
@@ -307,4 +315,9 @@ PARAM_HELP: dict[str, str] = {
     "fixed_tool_no": "the calibrated fixed tool (base table number, type fixed_tool)",
     "known_points_mm": "the points' coordinates in the frame being calibrated (mm), at least 4",
     "pose": "the frame as x, y, z (mm), a, b, c (deg)",
+    "ext_no": "the external kinematic (EX_KIN 1..6) the base rides on",
 }
+
+from server.methods_ext import EXTERNAL_METHODS  # noqa: E402  (they use the classes above)
+
+METHODS.update((m.name, m) for m in EXTERNAL_METHODS)

@@ -111,6 +111,8 @@ class ControllerIn(In):
     custom_robot: RobotIn | None = None
     cell_seed: int = Field(1, ge=0, le=2**32 - 1,
                            description="seed of the emulated cell's hidden truth")
+    external_axes: bool = Field(False, description="the cell gets a turntable (E1), a tilt and "
+                                "turn positioner (E2, E3) and a rail carrying the robot (E4)")
 
 
 class ControllerOut(Out):
@@ -134,6 +136,9 @@ class RobotStateOut(Out):
     active_base_no: int
     flange_pose: PoseOut  # T_world_flange
     tcp_pose: PoseOut  # active TCP in the active base
+    external_axes: dict[str, float] | None = Field(
+        None, description="E1..E4 (deg; the rail E4 in mm) of a cell with external axes")
+    external_limits: dict[str, list[float]] | None = None
 
 
 class JointsIn(In):
@@ -142,9 +147,20 @@ class JointsIn(In):
 
 class JogIn(In):
     mode: Literal["joint", "world", "base", "tool"]
-    axis: Literal["A1", "A2", "A3", "A4", "A5", "A6", "A7", "X", "Y", "Z", "A", "B", "C"]
-    increment: float = Field(description="mm for X, Y, Z; degrees for joints and A, B, C",
+    axis: Literal["A1", "A2", "A3", "A4", "A5", "A6", "A7", "X", "Y", "Z", "A", "B", "C",
+                  "E1", "E2", "E3", "E4", "E5", "E6"]
+    increment: float = Field(description="mm for X, Y, Z and a rail; degrees for joints, "
+                                         "rotary external axes and A, B, C",
                              ge=-100.0, le=100.0)
+
+
+ExtAxis = Literal["E1", "E2", "E3", "E4", "E5", "E6"]
+
+
+class ExternalAxesIn(In):
+    """Move external axes to these values (deg; a rail in mm); omitted axes stay."""
+
+    values: dict[ExtAxis, Annotated[float, Field(ge=-1e4, le=1e4)]] = Field(min_length=1)
 
 
 class ActiveIn(In):
@@ -292,6 +308,54 @@ class HistoryOut(Out):
     changed_by: str | None = None  # the user (revision 0003_auth); None before it or restored
 
 
+# ------------------------------------------------------------------- external kinematics
+
+ExtKind = Literal["none", "turntable", "positioner", "linear_unit"]
+
+
+class ExtSlotIn(In):
+    """Edit an external kinematic by hand (its machine data); omitted fields stay."""
+
+    name: SlotName | None = None
+    kind: ExtKind | None = None
+    axes: list[ExtAxis] | None = Field(None, max_length=2,
+                                       description="its external axes, e.g. [\"E2\", \"E3\"]")
+    root: PoseIn | None = Field(None, description="T_base_root: z the axis (a linear unit: z "
+                                "the travel direction)")
+    flange: PoseIn | None = Field(None, description="the flange offset (a positioner: its turn "
+                                  "axis' root in the tilt flange)")
+    scale: float | None = Field(None, gt=0.5, lt=2.0, description="turn or travel per counted "
+                                "unit")
+
+
+class ExtSlotOut(Out):
+    number: int
+    name: str
+    kind: ExtKind
+    axes: list[str]
+    root: PoseOut
+    flange: PoseOut
+    scale: float | None
+    provenance: ProvenanceOut
+
+
+class ExtHistoryOut(HistoryOut):
+    table: Literal["extkin"]  # type: ignore[assignment]
+
+
+class ExternalErrorsIn(In):
+    """The emulated external machines' hidden errors (emulator.external.ERROR_FIELDS); an
+    omitted machine or field has no such error."""
+
+    turntable: dict[str, float] = Field(default_factory=dict, description="tilt_deg, "
+                                        "root_offset_mm, sign, scale")
+    positioner: dict[str, float] = Field(default_factory=dict, description="tilt_deg, "
+                                         "root_offset_mm, sign, scale, turn_tilt_deg, "
+                                         "axis_offset_mm, turn_sign")
+    rail: dict[str, float] = Field(default_factory=dict, description="direction_tilt_deg, sign, "
+                                   "scale")
+
+
 # ---------------------------------------------------------------------------------- sessions
 
 class BeamIn(In):
@@ -311,6 +375,10 @@ class SessionParamsIn(In):
     nominal_tool: PoseIn | None = Field(None,
                                         description="light barrier: nominal TCP for the cycle")
     heights_mm: list[Mm] | None = Field(None, min_length=2, max_length=4)
+    ext_no: int | None = Field(None, ge=1, le=6, strict=True,
+                               description="ext.offset: the external kinematic the base rides on")
+    axis: ExtAxis | None = Field(None, description="ext.root_point / ext.linear_unit: the "
+                                 "kinematic's axis to read (default its first)")
 
 
 class SessionIn(In):
@@ -327,6 +395,9 @@ class TouchUpIn(In):
     step: int | None = Field(None, ge=0, strict=True)
     joints_deg: list[Deg] | None = Field(None, min_length=1, max_length=7)
     flange_pose: PoseIn | None = None
+    external_axes: dict[ExtAxis, Annotated[float, Field(ge=-1e4, le=1e4)]] | None = Field(
+        None, description="with joints_deg / flange_pose: the external axis values recorded "
+                          "with them (deg; a rail in mm)")
 
 
 class PointOut(Out):
@@ -338,6 +409,7 @@ class PointOut(Out):
     edge: str | None = None
     velocity_mm_s: list[float] | None = None
     created_at: datetime
+    external_axes: dict[str, float] | None = None
 
 
 class StepOut(Out):
@@ -351,6 +423,8 @@ class StepOut(Out):
     spin_deg: float
     tool_point_mm: list[float] | None
     point: PointOut | None
+    external_axes: dict[str, float] | None = Field(
+        None, description="ext menus: the external axis values to move to before the target")
 
 
 class FindingOut(Out):
@@ -436,7 +510,7 @@ class SessionOut(Out):
     method: str
     title: str
     state: Literal["open", "computed", "saved", "discarded"]
-    target_table: TableName
+    target_table: Literal["tool", "base", "extkin"]
     target_no: int
     params: dict[str, Any]
     steps: list[StepOut]

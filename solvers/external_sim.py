@@ -177,9 +177,11 @@ class Positioner:
 
 def make_positioner(*, tilt_deg: float = 0.0, root_offset_mm: float = 0.0, sign: int = 1,
                     scale: float = 1.0, turn_tilt_deg: float = 0.0, axis_offset_mm: float = 0.0,
-                    turn_sign: int = 1, table_height_mm: float = 200.0) -> Positioner:
-    """A tilt-and-turn positioner: nominal tilt axis along base +x through (1400, 0, 600) mm, the
-    turn axis vertical at tilt 0, its table ``table_height_mm`` above the tilt axis.
+                    turn_sign: int = 1, table_height_mm: float = 200.0,
+                    nominal_tilt_root: FloatArray | None = None) -> Positioner:
+    """A tilt-and-turn positioner: nominal tilt axis along base +x through (1400, 0, 600) mm
+    (or the frame ``nominal_tilt_root``, z the tilt axis, x pointing down at tilt 0), the turn
+    axis vertical at tilt 0, its table ``table_height_mm`` above the tilt axis.
 
     Hidden errors: the tilt axis' ``tilt_deg`` / ``root_offset_mm`` / ``sign`` / ``scale``, the
     turn axis tilted ``turn_tilt_deg`` in the tilt flange, shifted ``axis_offset_mm`` along the
@@ -191,8 +193,9 @@ def make_positioner(*, tilt_deg: float = 0.0, root_offset_mm: float = 0.0, sign:
     >>> [round(v, 6) for v in p.true_axes()]
     [3.0, 90.0]
     """
-    nominal_tilt = _frame(Rotation.from_euler("y", 90, degrees=True).as_matrix(),
-                          [1400.0, 0.0, 600.0])
+    nominal_tilt = (_frame(Rotation.from_euler("y", 90, degrees=True).as_matrix(),
+                           [1400.0, 0.0, 600.0]) if nominal_tilt_root is None
+                    else np.asarray(nominal_tilt_root, dtype=float))
     tilt = Turntable(rotary_root(nominal_tilt, tilt_deg=tilt_deg, root_offset_mm=root_offset_mm),
                      nominal_tilt, sign, scale)
     # in the tilt flange, base z is -x: the turn axis points along -x, its table above the axis

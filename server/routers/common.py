@@ -9,6 +9,7 @@ from sqlalchemy.orm import Session
 from db import crud
 from db.models import CalibSession, Controller, FrameEntry, TaughtPoint
 from emulator import Cell, ControllerState, cell_for, robot_from_custom
+from server.external import ext_inputs
 from server.methods import METHODS, MethodInputs, MethodSpec, Step, TaughtData
 from server.schemas import (EntryOut, LoadOut, PointOut, PoseOut, ProvenanceOut, ReportOut,
                             SessionOut, StepOut)
@@ -116,7 +117,7 @@ def point_out(p: TaughtPoint) -> PointOut:
     vel = None if p.vx_mm_s is None else [p.vx_mm_s, p.vy_mm_s, p.vz_mm_s]
     return PointOut(step=p.step, source=p.source, joints_deg=p.joints_deg,
                     flange_pose=PoseOut.of(p.pose_values()), beam_id=p.beam_id, edge=p.edge,
-                    velocity_mm_s=vel, created_at=p.created_at)
+                    velocity_mm_s=vel, created_at=p.created_at, external_axes=p.external_axes)
 
 
 def session_out(s: CalibSession) -> SessionOut:
@@ -144,7 +145,8 @@ def step_out(i: int, st: Step, required: bool, p: TaughtPoint | None) -> StepOut
                    target=st.target, tilt_deg=st.tilt_deg, around_deg=st.around_deg % 360.0,
                    spin_deg=st.spin_deg,
                    tool_point_mm=None if st.tool_point_mm is None else list(st.tool_point_mm),
-                   point=None if p is None else point_out(p))
+                   point=None if p is None else point_out(p),
+                   external_axes=None if st.external_axes is None else dict(st.external_axes))
 
 
 def next_step(s: CalibSession) -> int:
@@ -201,8 +203,10 @@ def resolve_inputs(db: Session, s: CalibSession) -> MethodInputs:
     pose = None if p.get("pose") is None else Pose(**p["pose"])
     beams = {b["id"]: (np.array(b["point_mm"], float), np.array(b["direction"], float))
              for b in p.get("beams") or []}
+    external = ext_inputs(db, s) if s.method.startswith("ext.") else None
     return MethodInputs(tcp_mm=tcp, reference_tcp_mm=ref, fixed_tcp_mm=fixed, known_mm=known,
-                        pose=pose, beams=beams, tool_diameter_mm=p.get("tool_diameter_mm"))
+                        pose=pose, beams=beams, tool_diameter_mm=p.get("tool_diameter_mm"),
+                        external=external)
 
 
 def taught_data(s: CalibSession) -> list[TaughtData | None]:
@@ -213,5 +217,6 @@ def taught_data(s: CalibSession) -> list[TaughtData | None]:
     for p in s.points:
         vel = None if p.vx_mm_s is None else (p.vx_mm_s, p.vy_mm_s, p.vz_mm_s)
         T = Pose(*p.pose_values()).as_matrix()
-        out[p.step] = TaughtData(T, p.beam_id, p.edge, vel)  # type: ignore[arg-type]
+        out[p.step] = TaughtData(T, p.beam_id, p.edge, vel,  # type: ignore[arg-type]
+                                 external_axes=p.external_axes)
     return out

@@ -6,6 +6,7 @@ from fastapi import APIRouter, Response
 
 from db import crud
 from db.models import Controller
+from server import external
 from server.deps import SessionDep
 from server.preconditions import IfMatch, check, set_etag
 from emulator import (THERMAL_WARMUP_S, home_joints, imperfections_document,
@@ -46,6 +47,8 @@ def create_controller(body: ControllerIn, db: SessionDep) -> ControllerOut:
         raise CalibrationError(("robot",), f"unknown robot {key!r}; the library has {library}")
     robot = robot_from_custom(custom) if custom else ROBOTS[key]  # type: ignore[index]
     c = crud.create_controller(db, body.name, key, custom, body.cell_seed, home_joints(robot))
+    if body.external_axes:
+        external.enable(db, c, robot.reach_mm)
     return controller_out(c)
 
 

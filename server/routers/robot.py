@@ -12,10 +12,13 @@ from scipy.spatial.transform import Rotation
 import emulator
 from db import crud
 from db.models import Controller
+from emulator import external as ext_emu
+from server import external as ext
 from server.deps import SessionDep
 from server.preconditions import IfMatch, check, set_etag
 from server.routers.common import active_frames, cell_of, robot_of, state_of, store_state
-from server.schemas import ActiveIn, ApproachIn, JogIn, JointsIn, PoseOut, RobotStateOut
+from server.schemas import (ActiveIn, ApproachIn, ExternalAxesIn, JogIn, JointsIn, PoseOut,
+                            RobotStateOut)
 from solvers.dh import check_joint_limits, forward_kinematics
 from solvers.errors import CalibrationError
 from solvers.physics import Imperfections
@@ -32,7 +35,10 @@ def state_out(db: SessionDep, c: Controller) -> RobotStateOut:
                          limits_deg=robot.limits_deg().tolist(),
                          active_tool_no=c.active_tool_no, active_base_no=c.active_base_no,
                          flange_pose=PoseOut.of_matrix(forward_kinematics(robot, c.joints_deg)),
-                         tcp_pose=PoseOut.of_matrix(T_base_tcp))
+                         tcp_pose=PoseOut.of_matrix(T_base_tcp),
+                         external_axes=c.external_axes or None,
+                         external_limits={k: list(v) for k, v in ext_emu.LIMITS.items()}
+                         if c.external_axes else None)
 
 
 def physics_of(db: SessionDep, c: Controller) -> emulator.RobotPhysics:
@@ -107,6 +113,11 @@ def jog(controller_id: int, body: JogIn, db: SessionDep, response: Response,
     """One increment in joint, world, base or tool coordinates (active tool and base)."""
     c = _controller(db, controller_id, if_match)
     robot = robot_of(c)
+    if body.axis.startswith("E"):  # an external axis (joint mode): E1..E4 of the cell
+        if body.mode != "joint":
+            raise CalibrationError(("mode",), f"external axes jog in joint mode, got {body.mode}")
+        move_external(c, ext_emu.jog(ext.values_of(c), body.axis, body.increment))
+        return _answer(db, c, response)
     if body.mode == "joint" and (not body.axis.startswith("A") or len(body.axis) != 2):
         raise CalibrationError(("axis",), f"joint mode jogs A1..A{robot.dof}, got {body.axis!r}")
     if body.mode == "joint" and int(body.axis[1]) > robot.dof:
@@ -116,6 +127,25 @@ def jog(controller_id: int, body: JogIn, db: SessionDep, response: Response,
                                f"{body.mode} mode jogs X, Y, Z, A, B, C, got {body.axis!r}")
     tool, base = active_frames(db, c)
     move_to(c, emulator.jog(robot, c.joints_deg, body.mode, body.axis, body.increment, tool, base))
+    return _answer(db, c, response)
+
+
+def move_external(c: Controller, values: dict[str, float]) -> None:
+    """Move the external axes: the clock advances by the slowest axis' travel."""
+    c.clock_s = float(c.clock_s or 0.0) + ext_emu.motion_s(ext.values_of(c), values)
+    c.external_axes = values
+    c.motion_count = int(c.motion_count or 0) + 1
+
+
+@router.put("/external")
+def set_external(controller_id: int, body: ExternalAxesIn, db: SessionDep, response: Response,
+                 if_match: IfMatch = None) -> RobotStateOut:
+    """Move external axes to values (E1..E3 deg, the rail E4 mm); omitted axes stay. Refused
+    naming the axis, its value and its limit outside the limits."""
+    c = _controller(db, controller_id, if_match)
+    values = ext.values_of(c, "values")
+    values.update(ext_emu.check_values(dict(body.values), ("values",)))
+    move_external(c, values)
     return _answer(db, c, response)
 
 
@@ -180,7 +210,11 @@ def approach(controller_id: int, body: ApproachIn, db: SessionDep, response: Res
     tilt, around, spin = body.tilt_deg, body.around_deg, body.spin_deg
     if body.flange_orientation is not None:
         tilt, around, spin = approach_angles(cell, body.target, body.flange_orientation)
-    q = emulator.approach(robot_of(c), cell, c.joints_deg, body.target, tilt, around, spin,
+    target: str | emulator.Target = body.target
+    if c.external_axes:  # the marks on the external axes; the cell seen from the rail
+        target = ext_emu.target(ext.cell_of(c, robot_of(c).reach_mm), cell, body.target,
+                                ext.values_of(c))
+    q = emulator.approach(robot_of(c), cell, c.joints_deg, target, tilt, around, spin,
                           body.tool_point_mm, miss, physics=physics)
     move_to(c, q, emulator.APPROACH_S)
     return _answer(db, c, response)

@@ -13,15 +13,18 @@ from fastapi import APIRouter, Body, Response
 
 import emulator
 from db import crud
+from db.models import EXT_KIN_SLOTS
 from db.outbox import emit
+from server import external as ext
 from server.deps import SessionDep
 from server.preconditions import IfMatch, check, set_etag
 from server.methods import METHODS, PARAM_HELP
+from server.routers.external import ext_slot_out
 from server.routers.common import (cell_of, check_step, entry_matrix, entry_out, flange_pose_of,
                                    next_step, resolve_inputs, robot_of, session_out, spec_of,
                                    state_of, step_out, store_state, taught_data)
 from server.routers.robot import physics_of
-from server.schemas import (EntryOut, ReportOut, RunCycleOut, SessionIn, SessionOut, TouchUpIn,
+from server.schemas import (EntryOut, ExtSlotOut, ReportOut, RunCycleOut, SessionIn, SessionOut, TouchUpIn,
                             jsonable)
 from solvers.dh import forward_kinematics
 from solvers.errors import CalibrationError
@@ -65,8 +68,12 @@ def open_session(controller_id: int, body: SessionIn, db: SessionDep,
     if spec.table == "tool" and body.target_no > crud.SLOTS["tool"]:
         raise CalibrationError(("target_no",),
                                f"{spec.name} writes a tool slot (1..16), got {body.target_no}")
+    if spec.table == "extkin" and body.target_no > EXT_KIN_SLOTS:
+        raise CalibrationError(("target_no",), f"{spec.name} writes an external kinematic "
+                               f"(EX_KIN 1..{EXT_KIN_SLOTS}), got {body.target_no}")
     s = crud.open_session(db, c, spec.name, spec.table, body.target_no, jsonable(params))
-    if any(k in params for k in ("tool_no", "reference_tool_no", "fixed_tool_no")):
+    if spec.menu == "ext" or any(k in params for k in ("tool_no", "reference_tool_no",
+                                                        "fixed_tool_no")):
         resolve_inputs(db, s)  # an empty touching tool is refused now, not at Compute
     set_etag(response, db, s)
     return session_out(s)
@@ -108,8 +115,9 @@ def touch_up(controller_id: int, session_id: int, db: SessionDep, response: Resp
         source = "touch_up" if body.joints_deg is None else "joints"
         pose = flange_pose_of(c, joints)
     sign = c.motion_sign if source == "touch_up" else None  # the emulated arm's flanks
+    ext_axes = c.external_axes if source == "touch_up" else body.external_axes
     crud.put_point(db, s, step, source, pose.as_array(), joints, t_s=float(c.clock_s or 0.0),
-                   motion_sign=sign)
+                   motion_sign=sign, external_axes=ext_axes)
     store_state(c, emulator.touched_up(state_of(c)))
     set_etag(response, db, s)
     return session_out(s)
@@ -138,7 +146,7 @@ def compute(controller_id: int, session_id: int, db: SessionDep, response: Respo
     report = ReportOut.from_result(result)
     frame = Pose.from_matrix(result.frame).as_array()
     crud.store_result(db, s, frame, report.model_dump(mode="json"))
-    s.target_version = crud.get_entry(db, controller_id, s.target_table, s.target_no).version
+    s.target_version = _target_slot(db, s).version
     set_etag(response, db, s)
     emit(db, "calibration-computed", crud.get_controller(db, controller_id), {
         "session_id": s.id, "method": s.method, "table": s.target_table, "number": s.target_no,
@@ -149,7 +157,7 @@ def compute(controller_id: int, session_id: int, db: SessionDep, response: Respo
 
 @router.post(PREFIX + "/{session_id}/save")
 def save(controller_id: int, session_id: int, db: SessionDep, response: Response,
-         if_match: IfMatch = None) -> EntryOut:
+         if_match: IfMatch = None) -> EntryOut | ExtSlotOut:
     """Write the computed frame into the target slot (XYZ menus keep A, B, C), with provenance
     and a history row. Refused (409, saying what changed) when the target slot changed after
     the compute: compute again on the slot as it is now. ``If-Match`` is the session's ETag."""
@@ -158,14 +166,22 @@ def save(controller_id: int, session_id: int, db: SessionDep, response: Response
         raise crud.StateConflict(("path", "session_id"),
                                  f"session {s.id} is {s.state}: compute it before saving")
     spec = spec_of(s)
-    e = crud.get_entry(db, controller_id, s.target_table, s.target_no)
+    e = _target_slot(db, s)
     _check_target_unchanged(db, s, e)
+    if s.target_table == ext.TABLE:
+        ext.change_slot(db, e, ext.save_values(s, s.result_values(), s.report or {}),
+                        reason="calibration", session_id=s.id)
+        crud.close_session(db, s, "saved")
+        set_etag(response, db, s)
+        return ext_slot_out(e)
     r = s.result_values()
     keys = POSE_KEYS[:3] if spec.writes == "xyz" else POSE_KEYS  # XYZ menus keep A, B, C
     values: dict[str, Any] = dict(zip(keys, r))  # type: ignore[arg-type]
     report = s.report or {}
     values.update(kind=spec.kind, method=spec.name, session_id=s.id,
                   error_max_mm=report.get("max_error_mm"), error_rms_mm=report.get("rms_error_mm"))
+    if spec.kind == "coordinated_base":  # ext.offset: the base rides on EX_KIN ext_no
+        values["mech_unit"] = ext.mech_unit(db, s.controller_id, s.params["ext_no"])
     if not e.name:
         values["name"] = f"{spec.kind}{s.target_no}"
     crud.change_entry(db, e, values, reason="calibration", session_id=s.id)
@@ -174,17 +190,25 @@ def save(controller_id: int, session_id: int, db: SessionDep, response: Response
     return entry_out(e)
 
 
+def _target_slot(db: SessionDep, s):  # noqa: ANN001, ANN202
+    """The slot session ``s`` writes: a tool or base slot, or an external kinematic."""
+    if s.target_table == ext.TABLE:
+        return ext.get_slot(db, s.controller_id, s.target_no)
+    return crud.get_entry(db, s.controller_id, s.target_table, s.target_no)
+
+
 def _check_target_unchanged(db: SessionDep, s, e) -> None:  # noqa: ANN001
     """409 naming the change when slot ``e`` is not the version session ``s`` computed on."""
     if s.target_version is None or e.version == s.target_version:
         return
-    changes = crud.history(db, s.controller_id, e.entry_table, e.number)
+    table = getattr(e, "entry_table", s.target_table)
+    changes = crud.history(db, s.controller_id, table, e.number)
     last = changes[-1] if changes else None
     what = "" if last is None else (
         f": last changed by {last.reason}"
         + (f" of session {last.session_id}" if last.session_id else "")
         + f" at {last.changed_at.isoformat(timespec='seconds')} (history {last.id})")
-    raise crud.StateConflict(("path", "session_id"), f"{e.entry_table} {e.number} changed after "
+    raise crud.StateConflict(("path", "session_id"), f"{table} {e.number} changed after "
                              f"session {s.id} was computed{what}; saving would overwrite it "
                              "blind: compute again (or discard)")
 

@@ -1,0 +1,205 @@
+"""External kinematics on the server: the EX_KIN slots (read, change with history, restore),
+the emulated external axes of a controller, and what the ``ext.*`` menus need from the tables.
+
+A slot change writes an ``entry_history`` row with ``entry_table = 'extkin'`` (so the audit
+hook records it as ``frame.<reason>`` like a tool or base change) and a ``frame-committed``
+event. No math here: the frames come from the solvers (``solvers.external``) and the emulator
+(``emulator.external``).
+"""
+
+from __future__ import annotations
+
+from typing import Any
+
+import numpy as np
+from sqlalchemy import select
+from sqlalchemy.orm import Session
+
+from db import crud
+from db.models import EXT_KIN_SLOTS, CalibSession, Controller, EntryHistory, ExternalKinematic, utcnow
+from db.outbox import emit
+from emulator import external as ext_emu
+from server.auth import audit
+from solvers.errors import CalibrationError
+from solvers.frames import Pose
+
+TABLE = "extkin"  # entry_history.entry_table and calib_session.target_table of these slots
+KINDS = ("none", "turntable", "positioner", "linear_unit")
+POSE_KEYS = ("x_mm", "y_mm", "z_mm", "a_deg", "b_deg", "c_deg")
+FLANGE_KEYS = tuple(f"flange_{k}" for k in POSE_KEYS)
+FIELDS = ("name", "kind", "axes", *POSE_KEYS, *FLANGE_KEYS, "scale", "method", "session_id",
+          "error_max_mm", "error_rms_mm", "updated_at")
+SLOT_NAMES = {1: "TURNTABLE", 2: "POSITIONER", 3: "TRACK"}
+
+
+# ----------------------------------------------------------------------------- slots
+
+def get_slot(db: Session, controller_id: int, number: int) -> ExternalKinematic:
+    """EX_KIN ``number`` (1..6); NotFound naming ``number``."""
+    if not 1 <= number <= EXT_KIN_SLOTS:
+        raise crud.NotFound(("number",), f"external kinematics are numbered 1..{EXT_KIN_SLOTS}, "
+                                         f"got {number}")
+    crud.get_controller(db, controller_id)
+    e = db.scalar(select(ExternalKinematic).where(ExternalKinematic.controller_id == controller_id,
+                                                  ExternalKinematic.number == number))
+    if e is None:  # never written: an empty slot, stored on its first change
+        e = ExternalKinematic(controller_id=controller_id, number=number, name="", kind="none",
+                              axes="", version=1)
+        e.set_pose_values((0.0,) * 6)
+        set_flange(e, (0.0,) * 6)
+    return e
+
+
+def list_slots(db: Session, controller_id: int) -> list[ExternalKinematic]:
+    return [get_slot(db, controller_id, n) for n in range(1, EXT_KIN_SLOTS + 1)]
+
+
+def set_flange(e: ExternalKinematic, values: object) -> None:
+    for k, v in zip(FLANGE_KEYS, values):  # type: ignore[call-overload]
+        setattr(e, k, float(v))
+
+
+def snapshot(e: ExternalKinematic) -> dict[str, Any]:
+    out = {f: getattr(e, f) for f in FIELDS}
+    out["updated_at"] = e.updated_at.isoformat() if e.updated_at else None
+    return out
+
+
+def change_slot(db: Session, e: ExternalKinematic, values: dict[str, Any], reason: str,
+                session_id: int | None = None) -> EntryHistory:
+    """Set ``values`` (:data:`FIELDS`) and record the change (history, audit, event)."""
+    before = snapshot(e)
+    if e not in db:
+        db.add(e)
+    for k, v in values.items():
+        setattr(e, k, v)
+    e.updated_at = utcnow()
+    e.updated_by = audit.current().user_name
+    h = EntryHistory(controller_id=e.controller_id, entry_table=TABLE, number=e.number,
+                     reason=reason, session_id=session_id, before=before, after=snapshot(e))
+    db.add(h)
+    db.flush()
+    controller = db.get(Controller, e.controller_id)
+    emit(db, "frame-committed", controller, {
+        "table": TABLE, "number": e.number, "reason": reason, "session_id": session_id,
+        **{k: v for k, v in h.after.items() if k != "session_id"}})
+    return h
+
+
+def restore_slot(db: Session, e: ExternalKinematic, history_id: int) -> EntryHistory:
+    """Put the slot back as it was before history row ``history_id`` (recorded as a change)."""
+    h = get_history(db, e, history_id)
+    values = {f: h.before[f] for f in FIELDS if f in h.before and f != "updated_at"}
+    return change_slot(db, e, values, reason="restore", session_id=h.session_id)
+
+
+def get_history(db: Session, e: ExternalKinematic, history_id: int) -> EntryHistory:
+    h = db.get(EntryHistory, history_id) if 0 < history_id < crud.max_id(db) else None
+    if h is None or (h.controller_id, h.entry_table, h.number) != (e.controller_id, TABLE,
+                                                                   e.number):
+        raise crud.NotFound(("history_id",),
+                            f"no history entry {history_id} for external kinematic {e.number}")
+    return h
+
+
+def root_matrix(e: ExternalKinematic) -> np.ndarray:
+    return Pose(*e.pose_values()).as_matrix()
+
+
+def flange_matrix(e: ExternalKinematic) -> np.ndarray:
+    return Pose(*e.flange_values()).as_matrix()
+
+
+def axes_of(e: ExternalKinematic) -> list[str]:
+    return [a for a in e.axes.split(",") if a]
+
+
+# -------------------------------------------------------------------- emulated external axes
+
+def cell_of(c: Controller, reach_mm: float) -> ext_emu.ExternalCell:
+    return ext_emu.external_cell(reach_mm, c.external_errors, int(c.cell_seed))
+
+
+def enable(db: Session, c: Controller, reach_mm: float) -> None:
+    """Give controller ``c`` the emulated external axes (at 0) and their nominal machine data
+    in EX_KIN 1..3 (created with the controller, so no history row)."""
+    c.external_axes = ext_emu.home()
+    db.flush()
+    for n, data in ext_emu.nominal_kinematics(cell_of(c, reach_mm)).items():
+        e = get_slot(db, c.id, n)
+        e.name, e.kind, e.axes = SLOT_NAMES[n], data["kind"], ",".join(data["axes"])
+        e.set_pose_values(Pose.from_matrix(data["root"]).as_array())
+        set_flange(e, Pose.from_matrix(data["flange"]).as_array())
+        e.method = "machine_data"
+        db.add(e)
+    db.flush()
+
+
+def values_of(c: Controller, loc: str = "axis") -> dict[str, float]:
+    """The controller's external axis values; CalibrationError naming ``loc`` if it has none."""
+    if not c.external_axes:
+        raise CalibrationError((loc,), f"controller {c.name!r} has no external axes (create it "
+                               "with external_axes: true; the demo cell-1 has E1..E4)")
+    return {k: float(v) for k, v in c.external_axes.items()}
+
+
+# ----------------------------------------------------------------------- sessions
+
+def require_slot_kind(db: Session, controller_id: int, number: int, loc: tuple,
+                      kinds: tuple[str, ...]) -> ExternalKinematic:
+    e = get_slot(db, controller_id, number)
+    if e.kind not in kinds:
+        raise CalibrationError(loc, f"external kinematic {number} is {e.kind!r}; this menu "
+                               f"needs a {' or '.join(kinds)}")
+    return e
+
+
+def save_values(s: CalibSession, result_values: tuple[float, ...], report: dict[str, Any]) -> dict:
+    """The slot values a computed ``ext.*`` session writes (provenance included)."""
+    values: dict[str, Any] = dict(zip(POSE_KEYS, result_values))
+    extras = report.get("extras") or {}
+    if s.method == "ext.positioner_2axis":  # the tilt root is the slot's root, the turn the flange
+        values = dict(zip(POSE_KEYS, extras["tilt_root"]))  # x, y, z, a, b, c of T_base_tiltroot
+        values.update(zip(FLANGE_KEYS, result_values))
+    if extras.get("scale") is not None and s.method in ("ext.root_point", "ext.linear_unit"):
+        values["scale"] = abs(float(extras["scale"]))
+    values.update(method=s.method, session_id=s.id, error_max_mm=report.get("max_error_mm"),
+                  error_rms_mm=report.get("rms_error_mm"))
+    return values
+
+
+def ext_inputs(db: Session, s: CalibSession) -> Any:
+    """The :class:`server.methods_ext.ExtInputs` of an ``ext.*`` session: the kinematic of
+    ``params.ext_no`` (the Offset menus) or of the target slot, and, when a root-point session
+    wrote that slot, its covariance and dof (the Offset's bounds carry the root's uncertainty)."""
+    from server.methods_ext import ExtInputs
+
+    p = s.params
+    number = p.get("ext_no") if s.target_table != TABLE else s.target_no
+    if number is None:
+        return None
+    loc = ("params", "ext_no") if s.target_table != TABLE else ("target_no",)
+    e = get_slot(db, s.controller_id, int(number))
+    if e.kind == "none" and not s.method.endswith("_numeric"):
+        raise CalibrationError(loc, f"external kinematic {number} is not configured (kind "
+                               "none): set its kind, axes and machine data first (PUT "
+                               f".../external-kinematics/{number})")
+    cov, dof = None, 0
+    if e.session_id is not None and e.method == "ext.root_point":
+        root_session = db.get(CalibSession, e.session_id)
+        report = root_session.report if root_session is not None else None
+        if report and report.get("covariance"):
+            cov = np.array(report["covariance"], dtype=float)
+            dof = int((report.get("extras") or {}).get("dof") or 0)
+    axis = p.get("axis")
+    if axis is not None and axis not in axes_of(e):
+        raise CalibrationError(("params", "axis"), f"external kinematic {number} moves "
+                               f"{', '.join(axes_of(e)) or 'no axis'}, not {axis}")
+    return ExtInputs(number=e.number, kind=e.kind, axes=tuple(axes_of(e)), root=root_matrix(e),
+                     flange=flange_matrix(e), axis=axis, root_covariance=cov, root_dof=dof)
+
+
+def mech_unit(db: Session, controller_id: int, number: int) -> str:
+    """The mechanical unit a base on EX_KIN ``number`` names (KUKA MACHINE_FRAME_DAT PARENT,
+    ABB ufmec): the kinematic's name, else ``EX_KIN<n>``."""
+    return get_slot(db, controller_id, number).name or f"EX_KIN{number}"
