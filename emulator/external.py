@@ -69,7 +69,7 @@ TABLE_PLATE_AXIS_DEG = 30.0  # the axis value at which the Offset menu touches t
 POSITIONER_ROOT_MM = (420.0, -420.0, 220.0)  # tilt axis along base +x through here
 POSITIONER_TABLE_MM = 100.0  # turn table above the tilt axis
 POSITIONER_MARK_MM = (110.0, 0.0, 0.0)
-RAIL_MARK_MM = (480.0, 150.0, 150.0)  # a mark fixed in the cell (world = base at rail 0)
+RAIL_MARK_MM = (560.0, 100.0, 250.0)  # a mark fixed in the cell (world = base at rail 0)
 
 
 def _check_errors(doc: dict) -> dict[str, dict[str, float]]:

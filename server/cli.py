@@ -112,6 +112,9 @@ def read_points_file(path: Path) -> tuple[list[dict[str, Any]], dict[str, Any], 
         except (KeyError, ValueError):
             raise CalibrationError(("file", f"line {k + 2}"),
                                    "needs columns x,y,z,a,b,c or j1..jn with numbers") from None
+        ext = {f"E{i}": float(row[f"e{i}"]) for i in range(1, 7) if row.get(f"e{i}")}
+        if ext:  # the external axis values of the touch-up (ext.* menus)
+            p["external_axes"] = ext
         if row.get("beam"):
             p.update(beam=row["beam"], edge=row.get("edge"))
             if row.get("vx"):
@@ -130,15 +133,20 @@ def calibrate_file(method: str, path: Path, robot: str | None = None,
     inputs.update(overrides or {})
     robot = robot or file_robot
     data = [TaughtData(_flange(p, k, robot), p.get("beam"), p.get("edge"),
-                       None if p.get("velocity_mm_s") is None else tuple(p["velocity_mm_s"]))
+                       None if p.get("velocity_mm_s") is None else tuple(p["velocity_mm_s"]),
+                       external_axes=p.get("external_axes"))
             for k, p in enumerate(points)]
     arr = {k: None if inputs.get(k) is None else np.asarray(inputs[k], dtype=float)
            for k in ("tcp_mm", "reference_tcp_mm", "fixed_tcp_mm", "known_mm")}
     beams = {b["id"]: (np.asarray(b["point_mm"], float), np.asarray(b["direction"], float))
              for b in inputs.get("beams", [])}
     pose = Pose(**inputs["pose"]) if inputs.get("pose") else None
+    external = None
+    if method.startswith("ext."):
+        from server.methods_ext import inputs_from_document
+        external = inputs_from_document(inputs.get("kinematic"), data)
     mi = MethodInputs(pose=pose, beams=beams, tool_diameter_mm=inputs.get("tool_diameter_mm"),
-                      **arr)  # type: ignore[arg-type]
+                      external=external, **arr)  # type: ignore[arg-type]
     known = inputs.get("known_mm")
     params = {} if known is None else {"known_points_mm": known}
     return METHODS[method].solve(data, mi, params)

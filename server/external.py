@@ -184,6 +184,9 @@ def ext_inputs(db: Session, s: CalibSession) -> Any:
         raise CalibrationError(loc, f"external kinematic {number} is not configured (kind "
                                "none): set its kind, axes and machine data first (PUT "
                                f".../external-kinematics/{number})")
+    if s.target_table != TABLE and e.kind not in ("turntable", "positioner"):
+        raise CalibrationError(loc, f"external kinematic {number} is a {e.kind}: a base rides "
+                               "on a turntable or a positioner")
     cov, dof = None, 0
     if e.session_id is not None and e.method == "ext.root_point":
         root_session = db.get(CalibSession, e.session_id)
@@ -195,7 +198,8 @@ def ext_inputs(db: Session, s: CalibSession) -> Any:
     if axis is not None and axis not in axes_of(e):
         raise CalibrationError(("params", "axis"), f"external kinematic {number} moves "
                                f"{', '.join(axes_of(e)) or 'no axis'}, not {axis}")
-    return ExtInputs(number=e.number, kind=e.kind, axes=tuple(axes_of(e)), root=root_matrix(e),
+    root = None if not any(e.pose_values()) else root_matrix(e)  # no machine data: no nominal
+    return ExtInputs(number=e.number, kind=e.kind, axes=tuple(axes_of(e)), root=root,
                      flange=flange_matrix(e), axis=axis, root_covariance=cov, root_dof=dof)
 
 

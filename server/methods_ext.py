@@ -8,7 +8,7 @@ method                      writes       steps (demo cell: the wizard's Move to)
 ``ext.root_point_numeric``  EX_KIN n     none: ``params.pose`` is T_base_root
 ``ext.offset``              BASE n       origin, +X, XY of the plate on the table at E1 = 30
 ``ext.offset_numeric``      BASE n       none: ``params.pose`` is T_flange_base
-``ext.linear_unit``         EX_KIN n     the cell's mark at E4 = -300, 0, 300 mm (+ up to 9)
+``ext.linear_unit``         EX_KIN n     the cell's mark at E4 = -250, 0, 250 mm (+ up to 9)
 ``ext.positioner_2axis``    EX_KIN n     the table's mark at E2 = -60, -20, 20, 60, then at
                                          E3 = -135, -45, 45, 135
 ==========================  ===========  ==============================================
@@ -50,7 +50,7 @@ class ExtInputs:
     number: int
     kind: str
     axes: tuple[str, ...]
-    root: FloatArray
+    root: FloatArray | None  # None: no machine data to compare with (an empty root frame)
     flange: FloatArray = field(default_factory=lambda: np.eye(4))
     axis: str | None = None
     root_covariance: FloatArray | None = None
@@ -93,10 +93,17 @@ def _touched(points: Sequence[TaughtData], inp: MethodInputs) -> FloatArray:
 
 
 def _nominal_root(ex: ExtInputs, axis: str, values: dict[str, float]) -> FloatArray:
-    """The machine data's frame of ``axis``: a positioner's turn axis rides on its tilt."""
+    """The machine data's frame of ``axis``: a positioner's turn axis rides on its tilt
+    (identity when there is no machine data)."""
+    root = np.eye(4) if ex.root is None else ex.root
     if ex.kind == "positioner" and len(ex.axes) == 2 and axis == ex.axes[1]:
-        return ex.root @ rz(values.get(ex.axes[0], 0.0)) @ ex.flange
-    return ex.root
+        return root @ rz([values.get(ex.axes[0], 0.0)])[0] @ ex.flange
+    return root
+
+
+def _nominal_point(ex: ExtInputs, nominal: FloatArray) -> FloatArray | None:
+    """A point on the nominal axis, or None without machine data (no root offset to name)."""
+    return None if ex.root is None else nominal[:3, 3]
 
 
 def _top_view(res: CalibrationResult, P: FloatArray) -> CalibrationResult:
@@ -116,8 +123,8 @@ def _root_point(points: Sequence[TaughtData], inp: MethodInputs) -> CalibrationR
     theta = _values(points, axis)
     nominal = _nominal_root(ex, axis, points[0].external_axes or {})
     try:
-        res = root_point(P, theta, nominal_axis=nominal[:3, 2], nominal_root_mm=nominal[:3, 3],
-                         axis_limits_deg=ROTARY_LIMITS)
+        res = root_point(P, theta, nominal_axis=nominal[:3, 2],
+                         nominal_root_mm=_nominal_point(ex, nominal), axis_limits_deg=ROTARY_LIMITS)
     except CalibrationError as err:
         raise _renamed(err, axis) from None
     return _top_view(res, P)
@@ -140,10 +147,7 @@ def _values_dict(p: TaughtData, axes: Sequence[str]) -> dict[str, float]:
 
 
 def _offset(points: Sequence[TaughtData], inp: MethodInputs) -> CalibrationResult:
-    ex = _ext(inp)
-    if ex.kind not in ("turntable", "positioner"):
-        raise CalibrationError(("params", "ext_no"), f"external kinematic {ex.number} is "
-                               f"{ex.kind!r}: the Offset menu needs a turntable or a positioner")
+    ex = _ext(inp)  # a turntable or a positioner (server.external.ext_inputs checks)
     values = _same_position(points, ex.axes)
     origin, x_point, xy_point = _touched(points, inp)
     turning = ex.axes[-1]
@@ -157,7 +161,7 @@ def _linear_unit(points: Sequence[TaughtData], inp: MethodInputs) -> Calibration
     axis = ex.axis or ex.axes[0]
     try:
         return linear_unit(_touched(points, inp), _values(points, axis),
-                           nominal_direction=ex.root[:3, 2])
+                           nominal_direction=_nominal_root(ex, axis, {})[:3, 2])
     except CalibrationError as err:
         raise _renamed(err, axis) from None
 
@@ -188,13 +192,14 @@ def _positioner(points: Sequence[TaughtData], inp: MethodInputs) -> CalibrationR
             raise CalibrationError(("points", N_TILT + k, "external_axes", tilt_axis),
                                    f"the turn axis is taught at one tilt: {tilt_axis} was "
                                    f"{tau:g} at point {N_TILT + 1} and {v:g} here")
-    turn_nominal = ex.root @ ex.flange
+    tilt_nominal = _nominal_root(ex, tilt_axis, {})
+    turn_nominal = _nominal_root(ex, turn_axis, {})
     try:
         res = positioner_2axis(P[:N_TILT], _values(tilt_pts, tilt_axis), P[N_TILT:],
                                _values(turn_pts, turn_axis), tau,
-                               nominal_tilt_axis=ex.root[:3, 2],
+                               nominal_tilt_axis=tilt_nominal[:3, 2],
                                nominal_turn_axis=turn_nominal[:3, 2],
-                               nominal_root_mm=ex.root[:3, 3])
+                               nominal_root_mm=_nominal_point(ex, tilt_nominal))
     except CalibrationError as err:
         is_turn = str(err.loc[0]).startswith("turn") if err.loc else False
         raise _renamed(err, turn_axis if is_turn else tilt_axis,
@@ -204,6 +209,24 @@ def _positioner(points: Sequence[TaughtData], inp: MethodInputs) -> CalibrationR
     extras["turn"] = _result_summary(extras["turn"])
     extras["tilt_root"] = Pose.from_matrix(extras["tilt_root"]).as_array()
     return replace(res, report=replace(res.report, extras=extras))
+
+
+def inputs_from_document(doc: dict[str, Any] | None,
+                         points: Sequence[TaughtData]) -> ExtInputs:
+    """:class:`ExtInputs` of a file (``pendant calibrate``): ``inputs.kinematic`` =
+    ``{"kind", "axes", "root": {x..c}, "flange": {x..c}}``, every field optional (default: a
+    turntable moving the first point's first external axis, no machine data)."""
+    doc = dict(doc or {})
+    first = sorted((points[0].external_axes or {}) if points else {})
+    axes = tuple(doc.get("axes") or first[:1] or ("E1",))
+    try:
+        root = None if doc.get("root") is None else Pose(**doc["root"]).as_matrix()
+        flange = np.eye(4) if doc.get("flange") is None else Pose(**doc["flange"]).as_matrix()
+    except TypeError as err:
+        raise CalibrationError(("inputs", "kinematic"), f"root and flange are poses "
+                               f"{{x, y, z, a, b, c}}: {err}") from None
+    return ExtInputs(number=int(doc.get("number", 1)), kind=str(doc.get("kind", "turntable")),
+                     axes=axes, root=root, flange=flange, axis=doc.get("axis"))
 
 
 def _pose(inp: MethodInputs, what: str) -> Pose:
@@ -223,8 +246,8 @@ def _offset_numeric(points: Sequence[TaughtData], inp: MethodInputs) -> Calibrat
 _MARK = "Touch the mark on the table with {axis} at {value:g} {unit}"
 _ROOT_VALUES = (-135.0, -45.0, 45.0)
 _ROOT_EXTRA = (135.0, 0.0, 90.0, -90.0, 170.0, -170.0, 20.0, -20.0, 65.0)
-_RAIL_VALUES = (-300.0, 0.0, 300.0)
-_RAIL_EXTRA = (-150.0, 150.0, -225.0, 225.0, -75.0, 75.0, 350.0, -350.0, 110.0)
+_RAIL_VALUES = (-250.0, 0.0, 250.0)
+_RAIL_EXTRA = (-125.0, 125.0, -190.0, 190.0, -60.0, 60.0, 220.0, -220.0, 90.0)
 _AROUND = (0.0, 90.0, 180.0, 270.0, 45.0, 135.0, 225.0, 315.0, 20.0, 200.0, 110.0, 290.0)
 
 

@@ -1,7 +1,9 @@
-"""``pendant slot``: read or edit one tool/base slot of a running service, with If-Match.
+"""``pendant slot``: read or edit one tool/base slot or external kinematic of a running
+service, with If-Match.
 
     pendant slot tool 3 [--url http://127.0.0.1:8000] [--controller 1]
     pendant slot tool 3 --name pointer --pose 1.5,-2,180,0,0,0 [--etag '"4"']
+    pendant slot ext 1 --pose 520,380,80,0,0,0     # EX_KIN 1: --pose is its root frame
 
 It reads the slot (and its ``ETag``), then writes it with ``If-Match`` so an edit never
 overwrites a change someone else made in between: the service answers 412, and this command
@@ -46,16 +48,22 @@ def _pose(text: str) -> dict[str, float]:
     return dict(zip("xyzabc", v))
 
 
+PATHS = {"tool": "tools", "base": "bases", "ext": "external-kinematics"}
+
+
 def _show(slot: dict, etag: str | None) -> str:
-    p = slot["pose"]
-    return (f"{slot['table']} {slot['number']} {slot['name']!r} ({slot['kind']})  "
+    if "root" in slot:  # an external kinematic: its root frame and axes
+        p = slot["root"]
+        label = f"ext {slot['number']} {slot['name']!r} ({slot['kind']}: {','.join(slot['axes'])})"
+    else:
+        p, label = slot["pose"], f"{slot['table']} {slot['number']} {slot['name']!r} ({slot['kind']})"
+    return (f"{label}  "
             f"x {p['x']:.3f} y {p['y']:.3f} z {p['z']:.3f} mm  a {p['a']:.3f} b {p['b']:.3f} "
             f"c {p['c']:.3f} deg  ETag {etag}")
 
 
 def run_slot(args: argparse.Namespace) -> int:
-    path = "tools" if args.table == "tool" else "bases"
-    url = f"{args.url.rstrip('/')}/controllers/{args.controller}/{path}/{args.number}"
+    url = f"{args.url.rstrip('/')}/controllers/{args.controller}/{PATHS[args.table]}/{args.number}"
     try:
         status, headers, slot = _call("GET", url)
     except (urllib.error.URLError, OSError) as err:
@@ -70,7 +78,7 @@ def run_slot(args: argparse.Namespace) -> int:
     if args.kind is not None:
         body["kind"] = args.kind
     if args.pose is not None:
-        body["pose"] = _pose(args.pose)
+        body["root" if args.table == "ext" else "pose"] = _pose(args.pose)
     if not body:
         print(_show(slot, headers.get("ETag")))
         return 0
@@ -92,16 +100,18 @@ def run_slot(args: argparse.Namespace) -> int:
 
 def add_slot_command(subparsers: Any) -> None:
     """Register ``slot`` on the ``pendant`` command's subparsers."""
-    s = subparsers.add_parser("slot", help="read or edit a tool/base slot of a running service "
+    s = subparsers.add_parser("slot", help="read or edit a tool/base slot or an external "
+                                           "kinematic of a running service "
                                            "(sends If-Match: never a blind overwrite)")
-    s.add_argument("table", choices=["tool", "base"])
+    s.add_argument("table", choices=list(PATHS), help="tool, base or ext (EX_KIN 1..6)")
     s.add_argument("number", type=int)
     s.add_argument("--url", default="http://127.0.0.1:8000",
                    help="the service (its token in $PENDANT_TOKEN: pendant tokens create NAME)")
     s.add_argument("--controller", default="1", help="controller id (1 = cell-1)")
     s.add_argument("--name")
-    s.add_argument("--kind", choices=["tool", "workpiece", "base", "fixed_tool"])
-    s.add_argument("--pose", help="x,y,z,a,b,c (mm, deg)")
+    s.add_argument("--kind", choices=["tool", "workpiece", "base", "fixed_tool", "turntable",
+                                      "positioner", "linear_unit", "none"])
+    s.add_argument("--pose", help="x,y,z,a,b,c (mm, deg); ext: its root frame")
     s.add_argument("--etag", help='If-Match to send (an ETag you read earlier, e.g. \'"4"\'); '
                                   "default: the one read just now")
     s.set_defaults(func=run_slot)
