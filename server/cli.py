@@ -265,9 +265,12 @@ def build_parser() -> argparse.ArgumentParser:
 
     e = sub.add_parser("export", help="print a controller's tables as a controller file")
     e.add_argument("controller", help="controller name (or id), e.g. cell-1")
-    e.add_argument("--format", choices=["kuka", "abb", "fanuc", "ur", "json"], default="kuka",
+    e.add_argument("--format", choices=["kuka", "abb", "fanuc", "ur", "json", "kuka_machine",
+                                        "abb_moc"], default="kuka",
                    help="kuka: $config.dat; abb: a RAPID module; fanuc: frames; ur: a URScript; "
-                        "json: the whole controller as a backup (default: %(default)s)")
+                        "json: the whole controller as a backup; kuka_machine: the external "
+                        "kinematics ($machine.dat $ETn_..., $config.dat MACHINE_DEF); abb_moc: "
+                        "their MOC.cfg base frames (default: %(default)s)")
     e.add_argument("--db", metavar="URL", help=DB_HELP)
 
     i = sub.add_parser("import", help="read a controller file into a controller's tables "

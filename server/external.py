@@ -207,3 +207,45 @@ def mech_unit(db: Session, controller_id: int, number: int) -> str:
     """The mechanical unit a base on EX_KIN ``number`` names (KUKA MACHINE_FRAME_DAT PARENT,
     ABB ufmec): the kinematic's name, else ``EX_KIN<n>``."""
     return get_slot(db, controller_id, number).name or f"EX_KIN{number}"
+
+
+# ------------------------------------------------------------------------------ exports
+
+EXPORT_FORMATS = ("kuka_machine", "abb_moc")
+
+
+def _formats_kinematic(e: ExternalKinematic) -> Any:
+    """Slot ``e`` as :class:`server.formats.external.ExternalKinematic` (None when unused)."""
+    from server.formats import external as fx
+
+    axes = axes_of(e)
+    name = e.name or f"EX_KIN{e.number}"
+    if e.kind == "turntable" and len(axes) == 1:
+        return fx.turntable(e.number, name, root_matrix(e), axes[0], Pose(*e.flange_values()))
+    if e.kind == "positioner" and len(axes) == 2:
+        return fx.positioner_2axis(e.number, name, root_matrix(e), flange_matrix(e),
+                                   (axes[0], axes[1]))
+    if e.kind == "linear_unit" and len(axes) == 1:
+        return fx.linear_unit(e.number, name, root_matrix(e), axes[0])
+    return None
+
+
+def export_external(db: Session, controller_id: int, fmt: str) -> str:
+    """The external kinematics (and the bases on them) as controller text:
+    ``kuka_machine`` = the ``$machine.dat`` lines then the ``$config.dat`` lines (MACHINE_DEF,
+    the bases with MACHINE_FRAME_DAT), each under a KRL comment naming its file;
+    ``abb_moc`` = the ``MOC.cfg`` fragment (the units' base frames; the coordinated work
+    objects are in the ``abb`` export). Writers: :mod:`server.formats.external`."""
+    from server.controller_files import to_frame_entry
+    from server.formats import external as fx
+
+    kins = [k for k in map(_formats_kinematic, list_slots(db, controller_id)) if k is not None]
+    names = {k.name for k in kins if not k.linear}
+    bases = [to_frame_entry(b) for b in crud.list_entries(db, controller_id, "base",
+                                                           "coordinated_base")
+             if b.mech_unit in names]
+    if fmt == "abb_moc":
+        return fx.abb_mechanical_units(kins, bases).moc_cfg
+    text = fx.kuka_external_kinematics(kins, bases)
+    return (f"; ---- KRC:\\R1\\Mada\\$machine.dat ----\n{text.machine_dat}\n\n"
+            f"; ---- KRC:\\R1\\System\\$config.dat ----\n{text.config_dat}\n")

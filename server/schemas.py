@@ -27,7 +27,7 @@ SlotName = Annotated[str, Field(max_length=NAME_CHARS),
                      AfterValidator(lambda v: check_name(v, ("name",)))]
 TableName = Literal["tool", "base"]
 Vec3 = Annotated[list[Mm], Field(min_length=3, max_length=3)]
-ExportFormat = Literal["kuka", "abb", "fanuc", "ur", "json"]
+ExportFormat = Literal["kuka", "abb", "fanuc", "ur", "json", "kuka_machine", "abb_moc"]
 ImportFormat = Literal["kuka", "abb", "fanuc", "ur", "json"]
 
 

@@ -483,3 +483,38 @@ def test_cli_slot_edits_an_external_kinematic_with_if_match(tmp_path, capsys, mo
         assert main(["slot", "ext", "1", "--url", url, "--name", "late", "--etag", first]) == 3
         assert "changed since it was read" in capsys.readouterr().err
         assert httpx.get(f"{url}{EXT}/1", headers=auth).json()["root"]["x"] == 521.0
+
+
+# ------------------------------------------------------------------------------ export
+
+def test_root_point_and_offset_are_exported_for_kuka_and_abb(client, pointer):
+    """After Root point -> EX_KIN 1 and Offset -> BASE 5: the KUKA machine data carry the
+    calibrated root as $ET1_TA1KR's chain (read back to 1e-6 mm) and the base on it with its
+    MACHINE_FRAME_DAT; the ABB MOC.cfg carries the unit's base frame."""
+    from server.formats.external import read_abb_external, read_kuka_external
+
+    url = open_session(client, "ext.root_point", 1, tool_no=1)
+    teach(client, url, extra=1)
+    ok(client.post(f"{url}/compute"))
+    root = pose_matrix(ok(client.post(f"{url}/save"))["root"])
+    url = open_session(client, "ext.offset", 5, tool_no=1, ext_no=1)
+    teach(client, url)
+    ok(client.post(f"{url}/compute"))
+    base = ok(client.post(f"{url}/save"))
+    r = client.get(f"{C}/export", params={"format": "kuka_machine"})
+    assert r.status_code == 200 and "external-kinematics.dat" in r.headers["content-disposition"]
+    machine, config = r.text.split("; ---- KRC:\\R1\\System\\$config.dat ----")
+    setup = read_kuka_external(machine, config)
+    table = next(k for k in setup.kinematics if k.name == "TURNTABLE")
+    assert table.kind == "turntable" and table.axes == ("E1",)
+    assert table.root.as_matrix()[:3, 3] == pytest.approx(root[:3, 3], abs=1e-6)
+    (b,) = [b for b in setup.bases if b.number == 5]
+    assert b.mech_unit == "TURNTABLE"
+    assert b.pose.as_array()[:3] == pytest.approx([base["pose"][k] for k in "xyz"], abs=1e-6)
+    assert "POSITIONER" in r.text and "#ERSYS" in r.text  # EX_KIN 2 and the rail, machine data
+    moc = client.get(f"{C}/export", params={"format": "abb_moc"}).text
+    units = read_abb_external(moc).kinematics
+    assert any(k.root.as_matrix()[:3, 3] == pytest.approx(root[:3, 3], abs=1e-3) for k in units)
+    from server.cli import main  # the CLI exports the same text
+    assert main(["export", "cell-1", "--format", "kuka_machine", "--db",
+                 str(client.app.state.settings.db_url)]) == 0

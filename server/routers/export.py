@@ -13,6 +13,7 @@ from fastapi import APIRouter, Request, Response
 from db import crud, jobs
 from server.auth.audit import actor, mark_operation
 from server.auth.guard import require
+from server import external
 from server.controller_files import ImportResult, apply_import, export_file, parse_file
 from server.deps import SessionDep
 from server.preconditions import IfMatch
@@ -24,7 +25,9 @@ router = APIRouter(prefix="/controllers/{controller_id}", tags=["Export"])
 
 MEDIA = {"kuka": ("text/plain", "$config.dat"), "abb": ("text/plain", "CalibData.mod"),
          "fanuc": ("text/plain", "frames.ls"), "ur": ("text/plain", "frames.script"),
-         "json": ("application/json", "backup.json")}
+         "json": ("application/json", "backup.json"),
+         "kuka_machine": ("text/plain", "external-kinematics.dat"),
+         "abb_moc": ("text/plain", "MOC-external.cfg")}
 
 
 def export_text(db: SessionDep, controller_id: int, fmt: str) -> str:
@@ -33,6 +36,8 @@ def export_text(db: SessionDep, controller_id: int, fmt: str) -> str:
     c = crud.get_controller(db, controller_id)
     if fmt == "json":
         return json.dumps(crud.backup(db, c), indent=1)
+    if fmt in external.EXPORT_FORMATS:  # the external kinematics (docs/formats.md)
+        return external.export_external(db, controller_id, fmt)
     return export_file(db, controller_id, fmt)
 
 
@@ -48,7 +53,9 @@ def import_out(result: ImportResult) -> ImportOut:
             responses={200: {"content": {"text/plain": {}, "application/json": {}}}})
 def export(controller_id: int, db: SessionDep, request: Request,
            format: ExportFormat = "kuka") -> Response:
-    """Download the tables as a controller file (``format=kuka|abb|fanuc|ur``) or the whole
+    """Download the tables as a controller file (``format=kuka|abb|fanuc|ur``), the external
+    kinematics (``kuka_machine``: ``$machine.dat`` ``$ETn_...`` and ``$config.dat``
+    ``MACHINE_DEF`` and the bases on them; ``abb_moc``: ``MOC.cfg`` base frames) or the whole
     controller as a JSON backup (``format=json``, incl. history and sessions; needs
     ``backup:write``)."""
     if format == "json":
