@@ -16,7 +16,9 @@ const PARAM_FIELDS = {
   fixed_tool_no: { label: "Fixed tool (base number)", type: "int", min: 1, max: 32 },
   known_points_mm: { label: "Known points in the new frame (mm): x y z per line", type: "points" },
   pose: { label: "Frame (x, y, z mm; a, b, c deg)", type: "pose" },
+  ext_no: { label: "External kinematic (EX_KIN number)", type: "int", min: 1, max: 6 },
 };
+const TABLE_LABEL = { tool: "TOOL", base: "BASE", extkin: "EX_KIN" };
 
 const state = {
   cid: null, // controller id
@@ -28,6 +30,7 @@ const state = {
   step: null, // the step the person is on (index)
   tools: [],
   bases: [],
+  exts: [], // external kinematics (EX_KIN 1..6)
 };
 
 // Tests wait for `window.pendant.pending === 0` (no request in flight).
@@ -233,6 +236,9 @@ function renderRobot() {
   for (const out of $$("#jog-rows output[data-axis]")) {
     out.textContent = num(r.tcp_pose[POSE_KEYS[AXES_XYZABC.indexOf(out.dataset.axis)]], 3);
   }
+  for (const out of $$("#jog-rows output[data-ext]")) {
+    out.textContent = num((r.external_axes || {})[out.dataset.ext], 3);
+  }
 }
 
 function jogMode() {
@@ -258,6 +264,11 @@ function renderJogRows() {
                                 "aria-label": `A${i + 1} (deg)` });
       list.push(make(`A${i + 1}`, inp, `joints_deg.${i}`));
     }
+    const ext = state.robot && state.robot.external_axes;
+    for (const axis of Object.keys(ext || {})) { // the cell's external axes: E1..E4
+      const unit = axis === "E4" ? "mm" : "deg";
+      list.push(make(axis, el("output", { "data-ext": axis, "aria-label": `${axis} (${unit})` }), `axis.${axis}`));
+    }
     $("#move-joints").hidden = false;
   } else {
     for (const axis of AXES_XYZABC) {
@@ -270,6 +281,12 @@ function renderJogRows() {
 }
 
 async function jog(axis, sign) {
+  if (axis.startsWith("E")) { // an external axis: jogged like a joint (deg; the rail mm)
+    const raw = Number($("#increment").value.trim());
+    if (!Number.isFinite(raw)) throw new ApiError(422, [{ loc: ["body", "increment"], msg: "give the increment as a number" }]);
+    await loadRobot(await api("POST", ctl("/robot/jog"), { mode: "joint", axis, increment: sign * raw }));
+    return;
+  }
   const raw = $("#increment").value.trim();
   const increment = raw === "" ? NaN : sign * Number(raw);
   if (!Number.isFinite(increment)) {
@@ -294,11 +311,16 @@ async function setActive(which, value) {
 // ------------------------------------------------------------------------------ tables
 
 async function loadTables() {
-  const [tools, bases] = await Promise.all([api("GET", ctl("/tools")), api("GET", ctl("/bases"))]);
+  const [tools, bases, exts] = await Promise.all([api("GET", ctl("/tools")), api("GET", ctl("/bases")),
+                                                  api("GET", ctl("/external-kinematics"))]);
   state.tools = tools;
   state.bases = bases;
+  state.exts = exts;
   renderTable($("#tool-table tbody"), tools, "tool");
   renderTable($("#base-table tbody"), bases, "base");
+  // an external kinematic as a table row: its root frame, its kind and axes
+  renderTable($("#ext-table tbody"), exts.map((e) => ({ ...e, pose: e.root,
+    kind: e.kind === "none" ? "none" : `${e.kind} ${e.axes.join(",")}` })), "extkin");
   const opts = (rows, table) => [el("option", { value: 0, text: `0 ${table === "tool" ? "flange" : "world"}` }),
     ...rows.map((e) => el("option", { value: e.number, text: `${e.number} ${e.name || ""}`.trim() }))];
   const at = $("#active-tool");
@@ -311,7 +333,7 @@ async function loadTables() {
 function renderTable(tbody, rows, table) {
   tbody.replaceChildren(...rows.map((e) => {
     const p = e.pose;
-    const used = e.name || POSE_KEYS.some((k) => p[k] !== 0);
+    const used = e.name || POSE_KEYS.some((k) => p[k] !== 0) || (e.kind !== "none" && table === "extkin");
     const pv = e.provenance;
     const prov = [];
     if (used && pv && pv.method) {
@@ -335,7 +357,7 @@ function renderTable(tbody, rows, table) {
 }
 
 function showTab(which) {
-  for (const t of ["tool", "base"]) {
+  for (const t of ["tool", "base", "ext"]) {
     $(`#tab-${t}`).setAttribute("aria-selected", String(t === which));
     $(`#${t}-wrap`).hidden = t !== which;
   }
@@ -363,8 +385,9 @@ function renderParams() {
   const m = methodOf($("#method").value);
   if (!m) return;
   const t = $("#target_no");
-  t.max = m.table === "tool" ? 16 : 32;
-  $("#target-label").textContent = m.table === "tool" ? "Tool number" : "Base number";
+  t.max = { tool: 16, base: 32, extkin: 6 }[m.table];
+  $("#target-label").textContent = { tool: "Tool number", base: "Base number",
+                                     extkin: "External kinematic (EX_KIN)" }[m.table];
   const box = $("#params");
   const fields = [];
   for (const [name, help] of Object.entries(m.required_params)) {
@@ -442,6 +465,17 @@ function currentStep() {
 function suggestedStep() {
   const s = state.session;
   const r = state.report || (s && s.report);
+  if (s && r && s.extra_steps_allowed && r.extras && Number.isFinite(r.extras.next_axis_value_deg)) {
+    // ext menus: the axis value the report suggests for the next touch-up of the mark
+    const first = s.steps.find((st) => st.required && st.target && st.external_axes);
+    if (!first) return null;
+    const axis = Object.keys(first.external_axes)[0];
+    const v = r.extras.next_axis_value_deg;
+    return { index: Math.max(...s.steps.map((st) => st.index)) + 1, required: false, filled: false,
+             suggested: true, target: first.target, tilt_deg: first.tilt_deg, around_deg: first.around_deg,
+             spin_deg: 0, tool_point_mm: null, external_axes: { [axis]: v },
+             prompt: `Optional: touch the mark with ${axis} at ${fmt(v, 0)} deg, as the report suggests (Move to goes there), then Compute again` };
+  }
   if (!s || !r || !r.next_orientation || !s.extra_steps_allowed) return null;
   const first = s.steps.find((st) => st.required && st.target);
   if (!first) return null;
@@ -458,7 +492,7 @@ function renderSession() {
   $("#session").hidden = !s;
   renderReport();
   if (!s) return;
-  $("#session-title").textContent = `${s.title} → ${s.target_table.toUpperCase()} ${s.target_no}`;
+  $("#session-title").textContent = `${s.title} → ${TABLE_LABEL[s.target_table]} ${s.target_no}`;
   $("#session-state").textContent = s.state;
   $("#session-params").replaceChildren(...Object.entries(s.params || {}).map(([k, v]) =>
     el("span", { class: "field param", "data-loc": `params.${k}` },
@@ -513,6 +547,9 @@ async function refreshSession(s) {
 async function moveTo() {
   const st = currentStep();
   if (!st || !st.target) return;
+  if (st.external_axes) { // ext menus: the external axes go to the step's values first
+    await loadRobot(await api("PUT", ctl("/robot/external"), { values: st.external_axes }));
+  }
   const body = st.flange_orientation
     ? { target: st.target, flange_orientation: st.flange_orientation }
     : { target: st.target, tilt_deg: st.tilt_deg, around_deg: st.around_deg, spin_deg: st.spin_deg };
@@ -559,21 +596,23 @@ async function save() {
   state.report = null;
   renderSession();
   await loadTables();
-  showTab(entry.table);
+  const table = entry.root ? "extkin" : entry.table; // an external kinematic has a root frame
+  const pose = entry.root || entry.pose;
+  showTab(table === "extkin" ? "ext" : table);
   await loadRobot();
   const note = $("#wizard .panel-err");
   note.textContent = "";
   $("#saved-note")?.remove();
   $("#open-form").append(el("p", { id: "saved-note", class: "saved", role: "status",
-    text: `Saved into ${entry.table.toUpperCase()} ${entry.number} (${entry.name}): ` +
-          `${num(entry.pose.x)} ${num(entry.pose.y)} ${num(entry.pose.z)} / ${num(entry.pose.a)} ${num(entry.pose.b)} ${num(entry.pose.c)}` }));
+    text: `Saved into ${TABLE_LABEL[table]} ${entry.number} (${entry.name}): ` +
+          `${num(pose.x)} ${num(pose.y)} ${num(pose.z)} / ${num(pose.a)} ${num(pose.b)} ${num(pose.c)}` }));
 }
 
 async function discard() {
   const s = state.session;
   const taught = s.steps.filter((st) => st.filled).length;
   const what = state.report ? "the computed result and " : "";
-  if (!window.confirm(`Discard ${s.title} → ${s.target_table.toUpperCase()} ${s.target_no}? ` +
+  if (!window.confirm(`Discard ${s.title} → ${TABLE_LABEL[s.target_table]} ${s.target_no}? ` +
                       `This drops ${what}${taught} touch-up${taught === 1 ? "" : "s"}; nothing is written.`)) return;
   await api("POST", ctl(`/sessions/${state.session.id}/discard`));
   state.session = null;
@@ -645,6 +684,38 @@ function residualChart(r) {
   return svg;
 }
 
+/** Root point: the marks and the fitted circle seen along the axis (the root frame's XY plane,
+ * its centre at the origin, x towards the mark at axis value 0), as inline SVG. */
+function topView(r) {
+  const NS = "http://www.w3.org/2000/svg";
+  const tv = r.extras.top_view;
+  const pts = tv.points_mm || [];
+  const radius = tv.radius_mm || Math.max(...pts.map(([x, y]) => Math.hypot(x, y)), 1);
+  const S = 240, pad = 28, k = (S / 2 - pad) / radius;
+  const s = (tag, attrs, text) => {
+    const e = document.createElementNS(NS, tag);
+    for (const [a, v] of Object.entries(attrs)) e.setAttribute(a, v);
+    if (text !== undefined) e.textContent = text;
+    return e;
+  };
+  const X = (x) => S / 2 + k * x, Y = (y) => S / 2 - k * y;
+  const svg = s("svg", { viewBox: `0 0 ${S} ${S}`, class: "chart top-view", role: "img", id: "top-view",
+                         "aria-label": `Top view along the axis: ${pts.length} marks on the fitted circle of radius ${fmt(radius, 2)} mm` });
+  svg.append(s("circle", { cx: X(0), cy: Y(0), r: k * radius, class: "fit-circle" }));
+  svg.append(s("line", { x1: X(-radius * 0.08), y1: Y(0), x2: X(radius * 0.08), y2: Y(0), class: "axis" }));
+  svg.append(s("line", { x1: X(0), y1: Y(-radius * 0.08), x2: X(0), y2: Y(radius * 0.08), class: "axis" }));
+  svg.append(s("line", { x1: X(0), y1: Y(0), x2: X(radius), y2: Y(0), class: "grid" }));
+  pts.forEach(([x, y], i) => {
+    const bad = r.bad_point && r.bad_point.index === i;
+    const dot = s("circle", { cx: X(x), cy: Y(y), r: 4, class: bad ? "mark bad" : "mark" });
+    dot.append(s("title", {}, `touch-up ${i + 1}: ${fmt(r.residuals_mm[i])} mm off the circle`));
+    svg.append(dot);
+    svg.append(s("text", { x: X(x * 1.12), y: Y(y * 1.12) + 4, "text-anchor": "middle", class: "tick-label" }, String(i + 1)));
+  });
+  svg.append(s("text", { x: 4, y: 12, class: "tick-label" }, `centre, r ${fmt(radius, 1)} mm; x: the mark at axis 0`));
+  return svg;
+}
+
 function renderReport() {
   const r = state.report;
   const sec = $("#report");
@@ -655,7 +726,7 @@ function renderReport() {
   const f = r.frame;
   const body = $("#report-body");
   const frameRow = el("table", { class: "pose-table", "aria-label": "Result frame" },
-    el("caption", { text: s ? `Result for ${s.target_table.toUpperCase()} ${s.target_no}` : "Result" }),
+    el("caption", { text: s ? `Result for ${TABLE_LABEL[s.target_table]} ${s.target_no}` : "Result" }),
     el("thead", {}, el("tr", {}, ...AXES_XYZABC.map((a) => el("th", { text: a })))),
     el("tbody", {}, el("tr", {}, ...POSE_KEYS.map((k) => el("td", { text: num(f[k]) })))));
   const stats = el("div", { class: "stats" },
@@ -674,8 +745,9 @@ function renderReport() {
   if (!r.bad_point && !r.warnings.length) notes.append(el("li", { class: "ok", text: "No warnings." }));
   const offer = suggestedStep() ? ". Or press Move to in Calibration: it goes to that orientation." : "";
   const guidance = r.guidance ? el("p", { class: "guidance" }, el("strong", { text: "Guidance: " }), r.guidance + offer) : null;
-  body.replaceChildren(frameRow, stats, residualChart(r), notes, ...(guidance ? [guidance] : []));
-  if (s) $("#save").textContent = `Save into ${s.target_table.toUpperCase()} ${s.target_no}`;
+  const top = r.extras && r.extras.top_view ? [topView(r)] : [];
+  body.replaceChildren(frameRow, stats, residualChart(r), ...top, notes, ...(guidance ? [guidance] : []));
+  if (s) $("#save").textContent = `Save into ${TABLE_LABEL[s.target_table]} ${s.target_no}`;
 }
 
 // ------------------------------------------------------------------------------ wiring
@@ -712,6 +784,7 @@ function wire() {
 
   $("#tab-tool").addEventListener("click", () => showTab("tool"));
   $("#tab-base").addEventListener("click", () => showTab("base"));
+  $("#tab-ext").addEventListener("click", () => showTab("ext"));
 }
 
 async function main() {
