@@ -15,7 +15,8 @@ from sqlalchemy.exc import IntegrityError
 from sqlalchemy.orm import Session
 
 from db.models import (BASE_SLOTS, TOOL_SLOTS, CalibSession, Controller, ControllerFile,
-                       EntryHistory, FrameEntry, StoredDocument, TaughtPoint, utcnow)
+                       EntryHistory, ExternalKinematic, FrameEntry, StoredDocument, TaughtPoint,
+                       utcnow)
 from db.outbox import emit
 
 SLOTS = {"tool": TOOL_SLOTS, "base": BASE_SLOTS}
@@ -153,6 +154,24 @@ def snapshot(e: FrameEntry) -> dict[str, Any]:
     out = {f: getattr(e, f) for f in ENTRY_FIELDS}
     out["updated_at"] = e.updated_at.isoformat() if e.updated_at else None
     return out
+
+
+EXT_POSE = ("x_mm", "y_mm", "z_mm", "a_deg", "b_deg", "c_deg")
+EXT_FIELDS = ("name", "kind", "axes", *EXT_POSE, *(f"flange_{k}" for k in EXT_POSE), "scale",
+              "method", "session_id", "error_max_mm", "error_rms_mm", "updated_at")
+
+
+def ext_snapshot(e: ExternalKinematic) -> dict[str, Any]:
+    """An external kinematic's values as a plain dict (its history's before/after, backups)."""
+    out = {f: getattr(e, f) for f in EXT_FIELDS}
+    out["updated_at"] = e.updated_at.isoformat() if e.updated_at else None
+    return out
+
+
+def list_external(db: Session, controller_id: int) -> list[ExternalKinematic]:
+    """The external kinematics stored for a controller (slots never written are not rows)."""
+    return list(db.scalars(select(ExternalKinematic).where(
+        ExternalKinematic.controller_id == controller_id).order_by(ExternalKinematic.number)))
 
 
 def apply_snapshot(e: FrameEntry, snap: dict[str, Any]) -> None:
@@ -358,15 +377,19 @@ def backup(db: Session, c: Controller) -> dict[str, Any]:
         vel = None if p.vx_mm_s is None else [p.vx_mm_s, p.vy_mm_s, p.vz_mm_s]
         return {"step": p.step, "source": p.source, "pose": list(p.pose_values()),
                 "joints_deg": p.joints_deg, "beam_id": p.beam_id, "edge": p.edge,
-                "velocity_mm_s": vel, "t_s": p.t_s, "motion_sign": p.motion_sign}
+                "velocity_mm_s": vel, "t_s": p.t_s, "motion_sign": p.motion_sign,
+                "external_axes": p.external_axes}
 
     return {
         "format": "pendant-backup/1",
         "controller": {"name": c.name, "robot": c.robot_key, "custom_robot": c.custom_robot,
                        "cell_seed": c.cell_seed, "joints_deg": c.joints_deg,
-                       "active_tool_no": c.active_tool_no, "active_base_no": c.active_base_no},
+                       "active_tool_no": c.active_tool_no, "active_base_no": c.active_base_no,
+                       "external_axes": c.external_axes, "external_errors": c.external_errors},
         "entries": [{"table": e.entry_table, "number": e.number, **snapshot(e)}
                     for e in list_entries(db, c.id)],
+        "external_kinematics": [{"number": e.number, **ext_snapshot(e)}
+                                for e in list_external(db, c.id)],
         "history": [{"id": h.id, "table": h.entry_table, "number": h.number, "reason": h.reason,
                      "session_id": h.session_id, "changed_at": _iso(h.changed_at),
                      "before": h.before, "after": h.after} for h in history(db, c.id)],
@@ -407,7 +430,8 @@ def restore_backup(db: Session, c: Controller, doc: dict[str, Any]) -> tuple[int
             p = TaughtPoint(step=int(pd["step"]), source=pd["source"],
                             joints_deg=pd.get("joints_deg"), beam_id=pd.get("beam_id"),
                             edge=pd.get("edge"), t_s=pd.get("t_s"),
-                            motion_sign=pd.get("motion_sign"))
+                            motion_sign=pd.get("motion_sign"),
+                            external_axes=pd.get("external_axes"))
             p.set_pose_values(pd["pose"])
             if pd.get("velocity_mm_s"):
                 p.vx_mm_s, p.vy_mm_s, p.vz_mm_s = (float(v) for v in pd["velocity_mm_s"])
@@ -423,6 +447,17 @@ def restore_backup(db: Session, c: Controller, doc: dict[str, Any]) -> tuple[int
         apply_snapshot(e, snap)
         e.updated_at = _dt(ed.get("updated_at"))
         n_entries += 1
+    for e in list_external(db, c.id):
+        db.delete(e)
+    db.flush()
+    for xd in doc.get("external_kinematics", []):
+        x = ExternalKinematic(controller_id=c.id, number=int(xd["number"]))
+        for f in EXT_FIELDS:
+            if f not in ("updated_at", "session_id") and f in xd:
+                setattr(x, f, xd[f])
+        x.session_id = session_ids.get(xd.get("session_id")) if xd.get("session_id") else None
+        x.updated_at = _dt(xd.get("updated_at"))
+        db.add(x)  # (the count stays the tool and base slots')
     n_hist = 0
     for hd in doc.get("history", []):
         db.add(EntryHistory(controller_id=c.id, entry_table=hd["table"], number=int(hd["number"]),
@@ -440,6 +475,8 @@ def restore_backup(db: Session, c: Controller, doc: dict[str, Any]) -> tuple[int
         c.joints_deg = [float(q) for q in ctl["joints_deg"]]
     c.active_tool_no = int(ctl.get("active_tool_no", c.active_tool_no))
     c.active_base_no = int(ctl.get("active_base_no", c.active_base_no))
+    if "external_axes" in ctl:
+        c.external_axes, c.external_errors = ctl["external_axes"], ctl.get("external_errors")
     db.flush()
     return n_entries, n_hist
 

@@ -18,6 +18,7 @@ from typing import Annotated, Any, Literal
 from pydantic import BaseModel, ConfigDict, Field, ValidationError, field_validator, model_validator
 
 from db.crud import MAX_ID, SLOTS, KINDS_OF_TABLE
+from db.models import EXT_KIN_SLOTS
 from server.methods import METHODS
 from server.bounds import MECH_UNIT_CHARS, Deg, Kg, Kgm2, Mm
 from server.schemas import (EntryKind, MethodName, ReportOut, SessionParamsIn, SlotName,
@@ -83,15 +84,50 @@ class SnapshotIn(_Doc):
     _check_time = field_validator("updated_at")(_iso)
 
 
+class ExtSnapshotIn(_Doc):
+    """An external kinematic's values (EX_KIN n; its history's before/after)."""
+
+    name: SlotName
+    kind: Literal["none", "turntable", "positioner", "linear_unit"]
+    axes: str = Field(max_length=32, pattern=r"^(E[1-6](,E[1-6])?)?$")
+    x_mm: Mm
+    y_mm: Mm
+    z_mm: Mm
+    a_deg: Deg
+    b_deg: Deg
+    c_deg: Deg
+    flange_x_mm: Mm = 0.0
+    flange_y_mm: Mm = 0.0
+    flange_z_mm: Mm = 0.0
+    flange_a_deg: Deg = 0.0
+    flange_b_deg: Deg = 0.0
+    flange_c_deg: Deg = 0.0
+    scale: float | None = Field(None, gt=0.5, lt=2.0)
+    method: str | None = Field(None, max_length=32)
+    session_id: RowId | None = None
+    error_max_mm: Amount | None = None
+    error_rms_mm: Amount | None = None
+    updated_at: str | None = None
+
+    _check_time = field_validator("updated_at")(_iso)
+
+
+class ExtEntryIn(ExtSnapshotIn):
+    number: int = Field(ge=1, le=EXT_KIN_SLOTS)
+
+
 def _kind_fits(table: str, kind: str) -> None:
+    if table == "extkin":
+        return
     if kind not in KINDS_OF_TABLE[table]:
         raise ValueError(f"a {table} slot holds {' or '.join(KINDS_OF_TABLE[table])}, "
                          f"not {kind!r}")
 
 
 def _number_fits(table: str, number: int) -> None:
-    if not 1 <= number <= SLOTS[table]:
-        raise ValueError(f"{table} slots are numbered 1..{SLOTS[table]}, got {number}")
+    slots = EXT_KIN_SLOTS if table == "extkin" else SLOTS[table]
+    if not 1 <= number <= slots:
+        raise ValueError(f"{table} slots are numbered 1..{slots}, got {number}")
 
 
 class EntryIn(SnapshotIn):
@@ -107,19 +143,22 @@ class EntryIn(SnapshotIn):
 
 class HistoryIn(_Doc):
     id: int | None = None
-    table: TableName
+    table: Literal["tool", "base", "extkin"]
     number: int
     reason: str = Field(max_length=16)
     session_id: RowId | None = None
     changed_at: str | None = None
-    before: SnapshotIn
-    after: SnapshotIn
+    before: SnapshotIn | ExtSnapshotIn
+    after: SnapshotIn | ExtSnapshotIn
 
     _check_time = field_validator("changed_at")(_iso)
 
     @model_validator(mode="after")
     def _fits(self) -> "HistoryIn":
         _number_fits(self.table, self.number)
+        if (self.table == "extkin") != isinstance(self.before, ExtSnapshotIn) or \
+                isinstance(self.before, ExtSnapshotIn) != isinstance(self.after, ExtSnapshotIn):
+            raise ValueError(f"a {self.table} history row holds that table's values")
         _kind_fits(self.table, self.before.kind)
         _kind_fits(self.table, self.after.kind)
         return self
@@ -137,12 +176,14 @@ class PointIn(_Doc):
     t_s: float | None = Field(None, ge=0.0, le=1e12)
     motion_sign: list[Annotated[float, Field(ge=-1.0, le=1.0)]] | None = Field(
         None, min_length=1, max_length=7)
+    external_axes: dict[Literal["E1", "E2", "E3", "E4", "E5", "E6"],
+                        Annotated[float, Field(ge=-1e4, le=1e4)]] | None = None
 
 
 class SessionIn(_Doc):
     id: RowId
     method: MethodName
-    target_table: TableName
+    target_table: Literal["tool", "base", "extkin"]
     target_no: int
     params: dict[str, Any] = Field(default_factory=dict)
     state: Literal["open", "computed", "saved", "discarded"]
@@ -189,6 +230,21 @@ class ControllerIn(_Doc):
     joints_deg: list[Deg] | None = Field(None, min_length=1, max_length=7)
     active_tool_no: int = Field(0, ge=0, le=SLOTS["tool"])
     active_base_no: int = Field(0, ge=0, le=SLOTS["base"])
+    external_axes: dict[Literal["E1", "E2", "E3", "E4", "E5", "E6"],
+                        Annotated[float, Field(ge=-1e4, le=1e4)]] | None = None
+    external_errors: dict[str, dict[str, float]] | None = None
+
+    @field_validator("external_errors")
+    @classmethod
+    def _errors(cls, v: dict[str, dict[str, float]] | None) -> dict | None:
+        from emulator.external import check_errors
+
+        if v is not None:
+            try:
+                check_errors(v)
+            except CalibrationError as err:
+                raise ValueError(f"{'.'.join(map(str, err.loc))}: {err.reason}") from None
+        return v
 
 
 class FileIn(_Doc):
@@ -213,6 +269,7 @@ class BackupIn(_Doc):
     format: Literal["pendant-backup/1"]
     controller: ControllerIn | None = None
     entries: list[EntryIn]
+    external_kinematics: list[ExtEntryIn] = Field(default_factory=list)
     history: list[HistoryIn] = Field(default_factory=list)
     sessions: list[SessionIn] = Field(default_factory=list)
     files: list[FileIn] = Field(default_factory=list)

@@ -27,8 +27,7 @@ TABLE = "extkin"  # entry_history.entry_table and calib_session.target_table of 
 KINDS = ("none", "turntable", "positioner", "linear_unit")
 POSE_KEYS = ("x_mm", "y_mm", "z_mm", "a_deg", "b_deg", "c_deg")
 FLANGE_KEYS = tuple(f"flange_{k}" for k in POSE_KEYS)
-FIELDS = ("name", "kind", "axes", *POSE_KEYS, *FLANGE_KEYS, "scale", "method", "session_id",
-          "error_max_mm", "error_rms_mm", "updated_at")
+FIELDS = crud.EXT_FIELDS
 SLOT_NAMES = {1: "TURNTABLE", 2: "POSITIONER", 3: "TRACK"}
 
 
@@ -59,16 +58,10 @@ def set_flange(e: ExternalKinematic, values: object) -> None:
         setattr(e, k, float(v))
 
 
-def snapshot(e: ExternalKinematic) -> dict[str, Any]:
-    out = {f: getattr(e, f) for f in FIELDS}
-    out["updated_at"] = e.updated_at.isoformat() if e.updated_at else None
-    return out
-
-
 def change_slot(db: Session, e: ExternalKinematic, values: dict[str, Any], reason: str,
                 session_id: int | None = None) -> EntryHistory:
     """Set ``values`` (:data:`FIELDS`) and record the change (history, audit, event)."""
-    before = snapshot(e)
+    before = crud.ext_snapshot(e)
     if e not in db:
         db.add(e)
     for k, v in values.items():
@@ -76,7 +69,7 @@ def change_slot(db: Session, e: ExternalKinematic, values: dict[str, Any], reaso
     e.updated_at = utcnow()
     e.updated_by = audit.current().user_name
     h = EntryHistory(controller_id=e.controller_id, entry_table=TABLE, number=e.number,
-                     reason=reason, session_id=session_id, before=before, after=snapshot(e))
+                     reason=reason, session_id=session_id, before=before, after=crud.ext_snapshot(e))
     db.add(h)
     db.flush()
     controller = db.get(Controller, e.controller_id)

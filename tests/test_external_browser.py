@@ -14,23 +14,11 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from browser_helpers import (browser_page, compute, idle, open_menu, open_pendant, save, walk_steps,
-                             wizard)
+from browser_helpers import compute, idle, open_menu, open_pendant, save, walk_steps, wizard
+from test_pendant_browser import api, page  # noqa: F401  (the page fixture: downloads allowed)
 from emulator import external as ext_emu
 from server.formats.external import read_abb_external, read_kuka_external
 from solvers.robots import ROBOTS
-
-
-@pytest.fixture
-def page(chromium, site: str):  # noqa: ANN001, ANN201
-    with browser_page(chromium, site, accept_downloads=True) as p:
-        yield p
-
-
-def api(page, site: str, path: str) -> dict:  # noqa: ANN001
-    r = page.request.get(site + path)
-    assert r.ok, f"GET {path} -> {r.status}: {r.text()}"
-    return r.json()
 
 
 def download(page, name: str) -> str:  # noqa: ANN001

@@ -518,3 +518,25 @@ def test_root_point_and_offset_are_exported_for_kuka_and_abb(client, pointer):
     from server.cli import main  # the CLI exports the same text
     assert main(["export", "cell-1", "--format", "kuka_machine", "--db",
                  str(client.app.state.settings.db_url)]) == 0
+
+
+def test_a_json_backup_keeps_the_external_kinematics_and_restores_them(client, pointer):
+    """Root point saved into EX_KIN 1 (its history, the touch-ups' E1 values), then a backup,
+    a change, and the restore: everything comes back."""
+    from api_helpers import finish_job
+
+    url = open_session(client, "ext.root_point", 1, tool_no=1)
+    teach(client, url)
+    ok(client.post(f"{url}/compute"))
+    saved = ok(client.post(f"{url}/save"))
+    backup = client.get(f"{C}/export", params={"format": "json"}).text
+    assert '"external_kinematics"' in backup
+    ok(edit_slot(client, f"{EXT}/1", {"root": {"x": 1}}))
+    job = finish_job(client, client.post(f"{C}/import", json={"format": "json", "text": backup}))
+    assert job["state"] == "done", job
+    slot = ok(client.get(f"{EXT}/1"))
+    assert slot["root"] == saved["root"] and slot["provenance"]["method"] == "ext.root_point"
+    assert [h["reason"] for h in ok(client.get(f"{EXT}/1/history"))] == ["calibration"]
+    session = ok(client.get(f"{C}/sessions"))[-1]
+    assert session["method"] == "ext.root_point"
+    assert session["steps"][0]["point"]["external_axes"]["E1"] == -135.0
