@@ -84,18 +84,12 @@ class SnapshotIn(_Doc):
     _check_time = field_validator("updated_at")(_iso)
 
 
-class ExtSnapshotIn(_Doc):
-    """An external kinematic's values (EX_KIN n; its history's before/after)."""
+class ExtSnapshotIn(SnapshotIn):
+    """An external kinematic's values (EX_KIN n; its history's before/after): a slot's
+    fields (no load, no unit) plus its axes, flange offset and scale."""
 
-    name: SlotName
-    kind: Literal["none", "turntable", "positioner", "linear_unit"]
+    kind: Literal["none", "turntable", "positioner", "linear_unit"]  # type: ignore[assignment]
     axes: str = Field(max_length=32, pattern=r"^(E[1-6](,E[1-6])?)?$")
-    x_mm: Mm
-    y_mm: Mm
-    z_mm: Mm
-    a_deg: Deg
-    b_deg: Deg
-    c_deg: Deg
     flange_x_mm: Mm = 0.0
     flange_y_mm: Mm = 0.0
     flange_z_mm: Mm = 0.0
@@ -103,13 +97,12 @@ class ExtSnapshotIn(_Doc):
     flange_b_deg: Deg = 0.0
     flange_c_deg: Deg = 0.0
     scale: float | None = Field(None, gt=0.5, lt=2.0)
-    method: str | None = Field(None, max_length=32)
-    session_id: RowId | None = None
-    error_max_mm: Amount | None = None
-    error_rms_mm: Amount | None = None
-    updated_at: str | None = None
 
-    _check_time = field_validator("updated_at")(_iso)
+    @model_validator(mode="after")
+    def _no_load(self) -> "ExtSnapshotIn":
+        if self.mass_kg is not None or self.mech_unit is not None:
+            raise ValueError("an external kinematic has no load and no mechanical unit")
+        return self
 
 
 class ExtEntryIn(ExtSnapshotIn):
