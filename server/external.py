@@ -95,6 +95,22 @@ def get_history(db: Session, e: ExternalKinematic, history_id: int) -> EntryHist
     return h
 
 
+AXIS_COUNT = {"none": 0, "turntable": 1, "positioner": 2, "linear_unit": 1}
+
+
+def check_axes(db: Session, e: ExternalKinematic, kind: str, axes: list[str]) -> None:
+    """CalibrationError naming ``axes`` unless the kinematic of ``kind`` has that many axes,
+    none twice and none that another kinematic of the controller moves."""
+    if len(axes) != AXIS_COUNT[kind] or len(set(axes)) != len(axes):
+        raise CalibrationError(("axes",), f"a {kind} moves {AXIS_COUNT[kind]} distinct external "
+                               f"axes, got {', '.join(axes) or 'none'}")
+    for other in list_slots(db, e.controller_id):
+        taken = set(axes_of(other)) & set(axes)
+        if other.number != e.number and taken:
+            raise CalibrationError(("axes",), f"{', '.join(sorted(taken))} already moves "
+                                   f"external kinematic {other.number} ({other.name or other.kind})")
+
+
 def root_matrix(e: ExternalKinematic) -> np.ndarray:
     return Pose(*e.pose_values()).as_matrix()
 

@@ -9,7 +9,7 @@ method                      writes       steps (demo cell: the wizard's Move to)
 ``ext.offset``              BASE n       origin, +X, XY of the plate on the table at E1 = 30
 ``ext.offset_numeric``      BASE n       none: ``params.pose`` is T_flange_base
 ``ext.linear_unit``         EX_KIN n     the cell's mark at E4 = -250, 0, 250 mm (+ up to 9)
-``ext.positioner_2axis``    EX_KIN n     the table's mark at E2 = -60, -20, 20, 60, then at
+``ext.positioner_2axis``    EX_KIN n     the table's mark at E2 = -75, -25, 25, 75, then at
                                          E3 = -135, -45, 45, 135
 ==========================  ===========  ==============================================
 
@@ -294,7 +294,7 @@ EXTERNAL_METHODS: tuple[MethodSpec, ...] = (
                "extkin", "extkin", "frame",
                tuple(_touch(f"Tilt axis: touch the mark on the table with E2 at {v:g} deg "
                             "(E3 at 0)", "positioner_mark", k, E2=v, E3=0.0)
-                     for k, v in enumerate((-60.0, -20.0, 20.0, 60.0)))
+                     for k, v in enumerate((-75.0, -25.0, 25.0, 75.0)))
                + tuple(_touch(f"Turn axis: touch the mark with E3 at {v:g} deg (E2 at 0)",
                               "positioner_mark", k, E2=0.0, E3=v)
                        for k, v in enumerate((-135.0, -45.0, 45.0, 135.0))),

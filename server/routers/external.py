@@ -78,6 +78,9 @@ def edit_slot(controller_id: int, number: int, body: ExtSlotIn, db: SessionDep,
         values.update(zip(ext.FLANGE_KEYS, body.flange.to_pose().as_array().tolist()))
     if body.scale is not None:
         values["scale"] = body.scale
+    if body.kind is not None or body.axes is not None:
+        ext.check_axes(db, e, values.get("kind", e.kind),
+                       values.get("axes", e.axes).split(",") if values.get("axes", e.axes) else [])
     if body.root is not None or body.flange is not None:
         values.update(method="numeric", session_id=None, error_max_mm=None, error_rms_mm=None)
     _precondition(e, if_match)
