@@ -262,7 +262,8 @@ class ExternalKinematic(PoseColumns, Base):
     controller_id: Mapped[int] = mapped_column(_controller_fk(), index=True)
     number: Mapped[int]  # 1..6 as EX_KIN on the pendant
     name: Mapped[str] = mapped_column(String(64), default="")
-    kind: Mapped[str] = mapped_column(String(16), default="none")  # none|turntable|positioner|linear_unit
+    # none | turntable | positioner | linear_unit
+    kind: Mapped[str] = mapped_column(String(16), default="none")
     axes: Mapped[str] = mapped_column(String(32), default="")  # "E1", "E2,E3"
     flange_x_mm: Mapped[float] = mapped_column(default=0.0)
     flange_y_mm: Mapped[float] = mapped_column(default=0.0)

@@ -205,7 +205,8 @@ def nominal_kinematics(ext: ExternalCell) -> dict[int, dict]:
     rail_root[:3, :3] = np.column_stack([x, np.cross(d, x), d])
     return {1: {"kind": "turntable", "axes": ["E1"], "root": ext.turntable.nominal_root,
                 "flange": np.eye(4)},
-            2: {"kind": "positioner", "axes": ["E2", "E3"], "root": ext.positioner.tilt.nominal_root,
+            2: {"kind": "positioner", "axes": ["E2", "E3"],
+                "root": ext.positioner.tilt.nominal_root,
                 "flange": ext.positioner.nominal_turn_in_tilt},
             3: {"kind": "linear_unit", "axes": ["E4"], "root": rail_root, "flange": np.eye(4)}}
 

@@ -16,7 +16,8 @@ from sqlalchemy import select
 from sqlalchemy.orm import Session
 
 from db import crud
-from db.models import EXT_KIN_SLOTS, CalibSession, Controller, EntryHistory, ExternalKinematic, utcnow
+from db.models import (EXT_KIN_SLOTS, CalibSession, Controller, EntryHistory, ExternalKinematic,
+                       utcnow)
 from db.outbox import emit
 from emulator import external as ext_emu
 from server.auth import audit
@@ -69,7 +70,8 @@ def change_slot(db: Session, e: ExternalKinematic, values: dict[str, Any], reaso
     e.updated_at = utcnow()
     e.updated_by = audit.current().user_name
     h = EntryHistory(controller_id=e.controller_id, entry_table=TABLE, number=e.number,
-                     reason=reason, session_id=session_id, before=before, after=crud.ext_snapshot(e))
+                     reason=reason, session_id=session_id, before=before,
+                     after=crud.ext_snapshot(e))
     db.add(h)
     db.flush()
     controller = db.get(Controller, e.controller_id)
@@ -108,7 +110,8 @@ def check_axes(db: Session, e: ExternalKinematic, kind: str, axes: list[str]) ->
         taken = set(axes_of(other)) & set(axes)
         if other.number != e.number and taken:
             raise CalibrationError(("axes",), f"{', '.join(sorted(taken))} already moves "
-                                   f"external kinematic {other.number} ({other.name or other.kind})")
+                                   f"external kinematic {other.number} "
+                                   f"({other.name or other.kind})")
 
 
 def root_matrix(e: ExternalKinematic) -> np.ndarray:

@@ -56,7 +56,8 @@ def _show(slot: dict, etag: str | None) -> str:
         p = slot["root"]
         label = f"ext {slot['number']} {slot['name']!r} ({slot['kind']}: {','.join(slot['axes'])})"
     else:
-        p, label = slot["pose"], f"{slot['table']} {slot['number']} {slot['name']!r} ({slot['kind']})"
+        p = slot["pose"]
+        label = f"{slot['table']} {slot['number']} {slot['name']!r} ({slot['kind']})"
     return (f"{label}  "
             f"x {p['x']:.3f} y {p['y']:.3f} z {p['z']:.3f} mm  a {p['a']:.3f} b {p['b']:.3f} "
             f"c {p['c']:.3f} deg  ETag {etag}")

@@ -24,8 +24,8 @@ from server.routers.common import (cell_of, check_step, entry_matrix, entry_out,
                                    next_step, resolve_inputs, robot_of, session_out, spec_of,
                                    state_of, step_out, store_state, taught_data)
 from server.routers.robot import physics_of
-from server.schemas import (EntryOut, ExtSlotOut, ReportOut, RunCycleOut, SessionIn, SessionOut, TouchUpIn,
-                            jsonable)
+from server.schemas import (EntryOut, ExtSlotOut, ReportOut, RunCycleOut, SessionIn, SessionOut,
+                            TouchUpIn, jsonable)
 from solvers.dh import forward_kinematics
 from solvers.errors import CalibrationError
 from solvers.frames import Pose
