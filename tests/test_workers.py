@@ -79,6 +79,29 @@ def test_200_concurrent_touch_ups_lose_no_clock_tick(svc):  # noqa: ANN001
     assert [st["filled"] for st in steps[:4]] == [True] * 4
 
 
+def test_concurrent_light_barrier_cycles_each_start_where_the_last_stopped(svc):  # noqa: ANN001
+    """The emulated controller's state (joints, clock, flanks) is loaded and saved under the
+    row lock in the run-cycle route too: once the robot rests at the tip, every cycle adds the
+    same time, and 8 cycles at once on 4 workers add exactly 8 of them."""
+    s = httpx.post(f"{svc.url}{C}/sessions",
+                   json={"method": "tool.light_barrier", "target_no": 7,
+                         "params": {"nominal_tool": {"x": 0.0, "y": 0.0, "z": 180.0}}}).json()
+    path = f"{C}/sessions/{s['id']}/run-cycle"
+
+    def clock() -> float:
+        return httpx.get(f"{svc.url}{C}/cell/clock").json()["clock_s"]
+
+    assert httpx.post(f"{svc.url}{path}").status_code == 200  # from wherever: ends at the tip
+    clock0 = clock()
+    assert httpx.post(f"{svc.url}{path}").status_code == 200
+    one = clock() - clock0
+    assert one > 10.0  # 9 passes at 20 mm/s and 2 s between them
+    clock1 = clock()
+    answers = concurrently(svc.url, [("POST", path, None, {})] * 8)
+    assert [getattr(r, "status_code", r) for r in answers] == [200] * 8
+    assert clock() - clock1 == pytest.approx(8 * one, abs=1e-6)
+
+
 async def _increment(url: str, path: str, n: int) -> int:
     """One person: ``n`` times read the slot, add 0.1 mm to x, write with If-Match; a 412
     brings the current slot and ETag, and the edit is made again on that. Returns the 412s."""
