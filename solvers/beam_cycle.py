@@ -331,6 +331,17 @@ def trigger_condition_mm(c: FloatArray, w: FloatArray, v: FloatArray, beam: Beam
 
     with ``n_v = (v - (v.u) u) / |v - (v.u) u|``. NaN when the axis is parallel to the beam.
 
+    Parameters
+    ----------
+    c, w : array (3,)
+        The TCP (mm) and the unit tool axis (flange towards tip) in base, at the trigger.
+    v : array (3,)
+        The commanded TCP velocity (mm/s, base).
+    beam : Beam
+    edge : {'enter', 'leave', 'tip'}
+    radius_mm : float
+        Half the shaft diameter.
+
     Examples
     --------
     >>> b = as_beams({"by": ([600, 0, 200], [0, 1, 0])})["by"]
