@@ -4,7 +4,8 @@ on a real PostgreSQL server when one is reachable (``tests/run``'s pg_virtualenv
 - 4 workers starting on an empty database migrate it once and create the demo cell once;
 - 200 concurrent +0.1 deg jogs of A1 move it exactly +20.0 deg; 200 concurrent touch-ups
   advance the emulated clock by exactly 200 x 2 s; 200 read-modify-write slot edits by 8
-  clients (If-Match, retry on 412) add up exactly;
+  clients (If-Match, retry on 412) add up exactly; 8 concurrent light-barrier cycles add
+  exactly 8 cycles' emulated time (the controller's state loaded and saved under the lock);
 - the lost-update trials: two writers with one ETag, one gets 412 (with the current slot);
   no If-Match gets 428; never a silent overwrite;
 - Idempotency-Key: one jog however often it is retried, on whichever worker;
