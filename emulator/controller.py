@@ -521,7 +521,7 @@ class _CycleRobot:
 
     def run(self, p) -> list:  # noqa: ANN001  (a solvers.beam_cycle.PlannedPass)
         """Move to the pass start, run the pass; the triggers as the controller records them."""
-        from solvers.beam_cycle import BeamTrigger, trigger_events
+        from solvers.beam_cycle import BeamTrigger, jittered_s, refine_trigger, trigger_events
 
         robot, imp = self.robot, self.physics.imperfections
         q_start = solve_ik(robot, p.start_flange, self.q, tool=None)
@@ -530,18 +530,23 @@ class _CycleRobot:
         q_end = solve_ik(robot, p.end_flange, q_start, tool=None)
         pass_signs = updated_signs(self.signs, q_start, q_end)
         t0, duration = self.clock_s, p.duration_s
-        flange_at = None if imp.is_rigid() else self._true_flange_along(p, q_start, pass_signs, t0)
-        events = trigger_events(flange_at, p, self.cell.T_flange_tool[:3, 3],
-                                self.cell.T_flange_tool[:3, 2], self.beams, self.tool_diameter_mm)
+        # the one trigger simulator (solvers.beam_cycle): bracketed on the true flange path
+        # interpolated, each trigger then moved onto the exact true arm; latency and jitter there
+        exact = guide = None
+        if not replace(imp, trigger_latency_ms=0.0).is_rigid():
+            exact, guide = self._true_flange_along(p, q_start, pass_signs, t0)
+        tool = self.cell.T_flange_tool
+        truth = (tool[:3, 3], tool[:3, 2], self.beams, self.tool_diameter_mm)
+        events = trigger_events(guide, p, *truth, latency_ms=imp.trigger_latency_ms)
         if p.kind == "tip":
             events = events[:1]
         out = []
         q_rec = q_start
         for ev in events:
-            s_rec = ev.s + imp.trigger_latency_ms / 1000.0 / duration  # the pose L later
-            if imp.noise_mm > 0:  # the trigger position jitters along the motion
-                s_rec += self.rng.normal(0.0, imp.noise_mm) / p.length_mm
-            T_rec = ev.T_base_flange if s_rec == ev.s and flange_at is None else p.pose_at(s_rec)
+            if exact is not None:
+                ev = refine_trigger(ev, exact, p, *truth, latency_ms=imp.trigger_latency_ms)
+            s_rec = jittered_s(ev.s, p, imp.noise_mm, self.rng)
+            T_rec = p.pose_at(s_rec)  # the controller records its commanded pose
             q_rec = solve_ik(robot, T_rec, q_rec, tool=None)
             rec = BeamTrigger(s_rec, ev.beam_id, ev.edge, T_rec, ev.tcp_velocity_mm_s)
             self.records.append((rec, q_rec, t0 + s_rec * duration,
@@ -556,29 +561,34 @@ class _CycleRobot:
 
     def _true_flange_along(self, p, q_start: FloatArray, signs: FloatArray,  # noqa: ANN001
                            t0: float):  # noqa: ANN202
-        """s -> TRUE T_base_flange (the tip's bending folded in) while the controller moves
-        the flange along ``p``: exact at CYCLE_NODES points, the small error transform
+        """Two functions s -> TRUE T_base_flange (the tip's bending folded in) while the
+        controller moves the flange along ``p``: the exact one (an IK and the physics per
+        call) and a cheap guide, exact at CYCLE_NODES points with the small error transform
         between them interpolated linearly."""
         robot, phys = self.robot, replace(self.physics, motion_sign=signs)
         tool = self.cell.T_flange_tool
-        nodes = np.linspace(0.0, 1.0, CYCLE_NODES)
-        q, err = q_start, []
-        for s in nodes:
-            T_cmd = p.pose_at(float(s))
-            q = solve_ik(robot, T_cmd, q, tool=None)
-            T = true_pose(robot, phys, q, q, t_s=t0 + float(s) * p.duration_s)
+        seed = [q_start]
+
+        def exact(s: float) -> FloatArray:
+            seed[0] = solve_ik(robot, p.pose_at(float(s)), seed[0], tool=None)
+            T = true_pose(robot, phys, seed[0], seed[0], t_s=t0 + float(s) * p.duration_s)
             T[:3, 3] += tool_deflection_mm((T @ tool)[None], phys.imperfections,
                                            phys.payload_mass_kg)[0]
-            E = T @ invert(T_cmd)
+            return T
+
+        nodes = np.linspace(0.0, 1.0, CYCLE_NODES)
+        err = []
+        for s in nodes:
+            E = exact(float(s)) @ invert(p.pose_at(float(s)))
             err.append(np.concatenate([Rotation.from_matrix(E[:3, :3]).as_rotvec(), E[:3, 3]]))
         table = np.array(err)
 
-        def flange_at(s: float) -> FloatArray:
+        def guide(s: float) -> FloatArray:
             e = np.array([np.interp(s, nodes, table[:, i]) for i in range(6)])
             E = rotation_matrix(Rotation.from_rotvec(e[:3]), e[3:])
             return E @ p.pose_at(s)
 
-        return flange_at
+        return exact, guide
 
 
 def run_beam_cycle(robot: RobotModel, cell: Cell, q_now: FloatArray, nominal_tool: FloatArray,
@@ -593,9 +603,11 @@ def run_beam_cycle(robot: RobotModel, cell: Cell, q_now: FloatArray, nominal_too
     Every pass start is checked reachable inside the joint limits.
 
     With ``physics`` the flange follows the TRUE arm (trigger_events on the true flange path
-    while the controller moves the nominal one), the controller records the pose
-    ``trigger_latency_ms`` after the trigger, jittered along the motion by ``noise_mm``, and
-    the clock advances by each pass's duration (plan speed) plus :data:`CYCLE_PASS_GAP_S`.
+    interpolated, refine_trigger on the exact one, while the controller moves the nominal
+    one), the controller records the pose ``trigger_latency_ms`` after the trigger (the
+    format's latency: the true pose of the recorded joints, moved back by ``v L``, meets the
+    trigger condition), jittered along the motion by ``noise_mm``, and the clock advances by
+    each pass's duration (plan speed) plus :data:`CYCLE_PASS_GAP_S`.
     """
     from solvers.beam_cycle import plan_cycle
     from solvers.light_barrier import shaft_axis_from_sweeps

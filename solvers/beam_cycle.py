@@ -6,11 +6,17 @@ The robot sweeps the tool's cylindrical shaft across the beams at two or three h
 tip by moving along the tool axis towards one beam. This module
 
 - plans that cycle for a *nominal* tool (:func:`plan_cycle`), and
-- computes, for the *true* tool, exactly where each beam switches along a planned (or any
-  other) flange motion (:func:`trigger_events`),
+- is the one beam-trigger simulator of the project: for the *true* tool, exactly where each
+  beam switches, and where the controller records it, along a planned move while the flange
+  follows any motion (:func:`trigger_events`; :func:`refine_trigger` moves a trigger onto
+  an exact but costly motion; :func:`jittered_s` the trigger's jitter),
 
-so the emulator and the simulator produce ``beam`` recordings (``robot-recording/1``) whose
-poses satisfy the trigger conditions of the format exactly.
+so the emulated controller (:func:`emulator.controller.run_beam_cycle`) and the recording
+simulator (:func:`solvers.simulate.simulate_recording`) produce ``beam`` recordings
+(``robot-recording/1``) whose poses satisfy the trigger conditions of the format exactly.
+Each gives its own flange motion, the hidden physics built in: the emulator the arm as it
+moves through the pass, the simulator the arm as the format's model sees the recorded
+joints. The trigger latency is the format's (its item 7 in :mod:`solvers.physics`).
 
 Trigger conditions (recording format ``robot-recording/1``, kind ``beam``)
 --------------------------------------------------------------------------
@@ -35,9 +41,14 @@ on the far side). This is the sign the solvers in :mod:`solvers.light_barrier` u
   is within ``d/2`` of the beam line sideways (``|(c - p) . (u x n_v)| <= d/2``). The search
   stops at the first such trigger.
 
-Roots are bracketed on a grid along the path parameter ``s`` in [0, 1] and refined with
-Brent's method to ``1e-14``, so any flange motion (joint-interpolated, with rotation) is
-handled; for a straight translation the result is exact to rounding.
+- latency ``L``: the recorded pose is ``L`` after the trigger, so the conditions above hold
+  for the TCP ``c - v L`` (``v`` the commanded TCP velocity; the tool keeps its
+  orientation), and the recorded pose lies ``L |v|`` further along the motion.
+
+Roots are bracketed on a grid along the path parameter ``s`` in [0, 1] (the time along the
+pass over its duration) and refined with Brent's method to ``1e-14``, so any flange motion
+(joint-interpolated, with rotation) is handled; for a straight translation the result is
+exact to rounding.
 """
 
 from __future__ import annotations
@@ -50,7 +61,7 @@ import numpy as np
 from scipy.optimize import brentq
 from scipy.spatial.transform import Rotation, Slerp
 
-from solvers.errors import CalibrationError
+from solvers.errors import CalibrationError, KinematicsError
 from solvers.validate import FloatArray, as_array
 
 Edge = Literal["enter", "leave", "tip"]
@@ -127,6 +138,13 @@ class PlannedPass:
     @property
     def duration_s(self) -> float:
         return self.length_mm / self.speed_mm_s
+
+    @property
+    def tcp_velocity_mm_s(self) -> FloatArray:
+        """The commanded TCP velocity (base, mm/s): constant along the straight move."""
+        a = self.start_flange[:3, :3] @ self.nominal_tcp_mm + self.start_flange[:3, 3]
+        b = self.end_flange[:3, :3] @ self.nominal_tcp_mm + self.end_flange[:3, 3]
+        return (b - a) / self.duration_s
 
     def pose_at(self, s: float) -> FloatArray:
         """T_base_flange at path parameter ``s`` in [0, 1]: the commanded TCP moves on a
@@ -302,35 +320,119 @@ def axis_beam_geometry(c: FloatArray, w: FloatArray, beam: Beam) -> tuple[float,
     return float(dvec @ n), lam, n
 
 
+def trigger_condition_mm(c: FloatArray, w: FloatArray, v: FloatArray, beam: Beam, edge: str,
+                         radius_mm: float) -> float:
+    """The format's trigger condition for one beam and edge, 0 at the trigger (mm).
+
+    With the TCP ``c`` and the unit axis ``w`` (base) at the trigger, the commanded TCP
+    velocity ``v`` and ``m = n sign(n . v)`` (``n`` of (B1), oriented along the motion)::
+
+        enter: (c - p) . m + r        leave: (c - p) . m - r        tip: (c - p) . n_v
+
+    with ``n_v = (v - (v.u) u) / |v - (v.u) u|``. NaN when the axis is parallel to the beam.
+
+    Parameters
+    ----------
+    c, w : array (3,)
+        The TCP (mm) and the unit tool axis (flange towards tip) in base, at the trigger.
+    v : array (3,)
+        The commanded TCP velocity (mm/s, base).
+    beam : Beam
+    edge : {'enter', 'leave', 'tip'}
+    radius_mm : float
+        Half the shaft diameter.
+
+    Examples
+    --------
+    >>> b = as_beams({"by": ([600, 0, 200], [0, 1, 0])})["by"]
+    >>> trigger_condition_mm(np.array([597.0, 0, 200]), np.array([0, 0, -1.0]),
+    ...                      np.array([20.0, 0, 0]), b, "enter", 3.0)
+    0.0
+    """
+    d = c - beam.point_mm
+    if edge == "tip":
+        nv = v - (v @ beam.direction) * beam.direction
+        return float(d @ _unit(nv))
+    sigma, _, n = axis_beam_geometry(c, w, beam)
+    m_sign = 1.0 if float(n @ v) >= 0 else -1.0
+    return float(m_sign * sigma + (radius_mm if edge == "enter" else -radius_mm))
+
+
+def _shaft_mm(t: FloatArray, a: FloatArray, shaft_length_mm: float | None) -> float:
+    """Length of the shaft behind the TCP: given, else from the TCP back to the flange plane
+    (flange z = 0: ``t_z / a_z``); unbounded when the axis does not meet that plane."""
+    if shaft_length_mm is not None:
+        return float(shaft_length_mm)
+    return float(t[2]) / float(a[2]) if a[2] > 1e-9 and t[2] > 0 else np.inf
+
+
+def _lag_mm(path: PlannedPass, latency_ms: float) -> FloatArray:
+    """``v L``: the tool at the trigger is where the recorded pose is, moved back by this."""
+    if latency_ms < 0 or not np.isfinite(latency_ms):
+        raise CalibrationError(("trigger_latency_ms",), f"must be >= 0, got {latency_ms}")
+    return path.tcp_velocity_mm_s * float(latency_ms) / 1000.0
+
+
 def trigger_events(flange_pose_at: Callable[[float], FloatArray] | None, path: PlannedPass,
                    true_tcp_mm: object, true_axis_flange: object, beams: object,
-                   tool_diameter_mm: float, *, shaft_length_mm: float | None = None,
+                   tool_diameter_mm: float, *, latency_ms: float = 0.0,
+                   shaft_length_mm: float | None = None,
                    samples: int | None = None) -> list[BeamTrigger]:
-    """Where each beam switches while the flange follows ``flange_pose_at(s)``, s in [0, 1].
+    """Where each beam switches, and where the controller records it, while the controller
+    commands ``path`` and the flange really is at ``flange_pose_at(s)``, s in [0, 1].
 
-    Sweeps give ``enter``/``leave`` events (|sigma| of (B1) through ``d/2`` with the closest
-    axis point on the shaft); tip searches give the first ``tip`` event on
+    This is the one beam-trigger simulator: the emulated controller's cycle
+    (:func:`emulator.controller.run_beam_cycle`) and the recording simulator
+    (:func:`solvers.simulate.simulate_recording`, kind ``beam``) both call it, each with its
+    own flange motion (a rigid arm follows the commanded path; an imperfect one carries its
+    hidden physics in ``flange_pose_at``). ``s`` is the time along the pass over its
+    duration (the commanded speed is constant).
+
+    The trigger latency ``L`` is the format's: the controller records the pose ``L`` after
+    the trigger, so the tool at the trigger is the recorded one moved back by ``v L`` (``v``
+    the commanded TCP velocity). The conditions (:func:`trigger_condition_mm`) hold for that
+    tool, and ``s`` is the recorded position: ``L v`` further along the motion than without
+    latency. Sweeps give ``enter``/``leave`` events (|sigma| of (B1) through ``d/2`` with the
+    closest axis point on the shaft); tip searches give the first ``tip`` event on
     ``path.target_beam``. Roots are bracketed on a grid and refined with Brent's method.
+    :func:`refine_trigger` moves one of them onto another (exact) flange motion.
 
     Parameters
     ----------
     flange_pose_at : callable s -> (4, 4), or None
-        T_base_flange along the move (None: ``path.pose_at``, the straight move).
+        TRUE T_base_flange when the controller is at ``s`` of the move (None:
+        ``path.pose_at``, the commanded move of a rigid arm).
     path : PlannedPass
-        The move (kind, duration for the velocity, commanded TCP).
+        The commanded move (kind, duration, the commanded TCP and its velocity).
     true_tcp_mm : array (3,)
         The TRUE TCP in the flange frame (mm).
     true_axis_flange : array (3,)
         The TRUE tool axis in flange, pointing from the flange towards the tip.
     beams : mapping id -> (point_mm, direction)
     tool_diameter_mm : float
+    latency_ms : float
+        Trigger latency (ms, >= 0).
     shaft_length_mm : float, optional
         Length of the shaft behind the TCP (default: up to the flange plane).
 
     Returns
     -------
     list of BeamTrigger
-        Sorted by ``s``; ``tcp_velocity_mm_s`` is the commanded TCP velocity (base, mm/s).
+        Sorted by ``s`` (the recorded position); ``T_base_flange`` is ``flange_pose_at(s)``,
+        ``tcp_velocity_mm_s`` the commanded TCP velocity (base, mm/s).
+
+    Raises
+    ------
+    CalibrationError
+        A bad beam, tool axis or TCP (named), a negative latency, a tip search on an
+        unknown beam.
+
+    References
+    ----------
+    .. [1] S.-D. Lin et al., laser-sensor TCP calibration of runout and offset (Techman
+       TM5-900), as in :mod:`solvers.light_barrier` (the cycle and its triggers).
+    .. [2] R. P. Brent, "Algorithms for Minimization without Derivatives", Prentice-Hall,
+       1973, ch. 4 (the bracketed root finding, ``scipy.optimize.brentq``).
 
     Examples
     --------
@@ -339,39 +441,27 @@ def trigger_events(flange_pose_at: Callable[[float], FloatArray] | None, path: P
     >>> ev = trigger_events(None, sweep, [0, 0, 100], [0, 0, 1], beams, 6.0)
     >>> [(e.beam_id, e.edge, round(float(e.T_base_flange[0, 3]), 6)) for e in ev]
     [('by', 'enter', 597.0), ('by', 'leave', 603.0)]
+    >>> late = trigger_events(None, sweep, [0, 0, 100], [0, 0, 1], beams, 6.0, latency_ms=50.0)
+    >>> [round(float(e.T_base_flange[0, 3]), 6) for e in late]  # 20 mm/s x 50 ms = 1 mm later
+    [598.0, 604.0]
     """
     pose_at = path.pose_at if flange_pose_at is None else flange_pose_at
     B = as_beams(beams)
     t = as_array(true_tcp_mm, "true_tcp_mm", (3,))
     a = _unit(as_array(true_axis_flange, "true_axis_flange", (3,)))
     r0 = 0.5 * float(tool_diameter_mm)
-    if shaft_length_mm is None:
-        shaft = -float(t[2]) / float(a[2]) if a[2] > 1e-9 else np.inf
-        shaft = np.inf if shaft <= 0 else shaft
-    else:
-        shaft = float(shaft_length_mm)
+    shaft = _shaft_mm(t, a, shaft_length_mm)
+    v = path.tcp_velocity_mm_s
+    lag = _lag_mm(path, latency_ms)
     n_grid = samples or max(400, int(np.ceil(path.length_mm / max(r0 / 4.0, 1e-3))) + 1)
     grid = np.linspace(0.0, 1.0, n_grid)
     poses = np.array([pose_at(float(s)) for s in grid])
-    c_grid = np.einsum("kij,j->ki", poses[:, :3, :3], t) + poses[:, :3, 3]
+    c_grid = np.einsum("kij,j->ki", poses[:, :3, :3], t) + poses[:, :3, 3] - lag
     w_grid = np.einsum("kij,j->ki", poses[:, :3, :3], a)
-    duration = path.duration_s
 
     def tcp_axis(T: FloatArray) -> tuple[FloatArray, FloatArray]:
-        return T[:3, :3] @ t + T[:3, 3], T[:3, :3] @ a
-
-    straight = flange_pose_at is None and np.array_equal(path.start_flange[:3, :3],
-                                                         path.end_flange[:3, :3])
-
-    def velocity(s: float) -> FloatArray:
-        if straight:  # constant orientation: every point moves with the flange
-            return (path.end_flange[:3, 3] - path.start_flange[:3, 3]) / duration
-        h = 1e-6
-        s0, s1 = max(s - h, 0.0), min(s + h, 1.0)
-        T0, T1 = pose_at(s0), pose_at(s1)
-        c0 = T0[:3, :3] @ path.nominal_tcp_mm + T0[:3, 3]
-        c1 = T1[:3, :3] @ path.nominal_tcp_mm + T1[:3, 3]
-        return (c1 - c0) / ((s1 - s0) * duration)
+        """The tool at the trigger (latency undone) when the flange is at T."""
+        return T[:3, :3] @ t + T[:3, 3] - lag, T[:3, :3] @ a
 
     def roots(f: Callable[[float], float], values: FloatArray) -> list[tuple[float, float]]:
         """(s, slope sign) of every sign change of f on the grid, refined."""
@@ -392,8 +482,7 @@ def trigger_events(flange_pose_at: Callable[[float], FloatArray] | None, path: P
     if path.kind == "sweep":
         for beam in B.values():
             def sigma(s: float, beam: Beam = beam) -> float:
-                c, w = tcp_axis(pose_at(s))
-                return axis_beam_geometry(c, w, beam)[0]
+                return axis_beam_geometry(*tcp_axis(pose_at(s)), beam)[0]
 
             values = _sigma_many(c_grid, w_grid, beam)
             for target in (+r0, -r0):
@@ -404,27 +493,100 @@ def trigger_events(flange_pose_at: Callable[[float], FloatArray] | None, path: P
                         continue  # the beam passes beyond the tip or above the shaft
                     falling = slope * np.sign(target) < 0  # |sigma| decreasing
                     edge: Edge = "enter" if falling else "leave"
-                    events.append(BeamTrigger(s, beam.id, edge, T, velocity(s)))
+                    events.append(BeamTrigger(s, beam.id, edge, T, v))
     else:
         beam = B[path.target_beam] if path.target_beam in B else None
         if beam is None:
             raise CalibrationError(("path", "target_beam"), f"unknown beam '{path.target_beam}'")
 
         def plane(s: float) -> float:
-            T = pose_at(s)
-            v = velocity(s)
-            nv = v - (v @ beam.direction) * beam.direction
-            return float((T[:3, :3] @ t + T[:3, 3] - beam.point_mm) @ _unit(nv))
+            return trigger_condition_mm(*tcp_axis(pose_at(s)), v, beam, "tip", r0)
 
-        values = np.array([plane(float(s)) for s in grid])
-        for s, slope in roots(plane, values):
+        nv = _unit(v - (v @ beam.direction) * beam.direction)
+        for s, slope in roots(plane, (c_grid - beam.point_mm) @ nv):
             if slope <= 0:
                 continue
             T = pose_at(s)
-            v = velocity(s)
-            nv = _unit(v - (v @ beam.direction) * beam.direction)
-            side = float((T[:3, :3] @ t + T[:3, 3] - beam.point_mm) @ cross3(beam.direction, nv))
+            side = float((tcp_axis(T)[0] - beam.point_mm) @ cross3(beam.direction, nv))
             if abs(side) <= r0:
                 events.append(BeamTrigger(s, beam.id, "tip", T, v))
                 break
     return sorted(events, key=lambda e: e.s)
+
+
+def refine_trigger(event: BeamTrigger, flange_pose_at: Callable[[float], FloatArray],
+                   path: PlannedPass, true_tcp_mm: object, true_axis_flange: object,
+                   beams: object, tool_diameter_mm: float, *, latency_ms: float = 0.0,
+                   tol_mm: float = 1e-10, max_iter: int = 40, miss_mm: float = 0.05,
+                   loc: tuple[str | int, ...] = ("beams",)) -> BeamTrigger:
+    """The same switching (beam, edge) as ``event`` where the flange follows another motion.
+
+    :func:`trigger_events` brackets every trigger on a motion that is cheap to evaluate (the
+    commanded path, or the true one interpolated); this moves one of them onto the exact
+    motion (e.g. the true arm at the joints the controller would record at ``s``, an IK and
+    a physics model per call): secant steps on ``f(s) = trigger_condition_mm(...)`` from
+    ``event.s`` and ``event.s + 0.2 mm / length`` until ``|f| < tol_mm``. The latency is
+    undone as in :func:`trigger_events` (give the same ``latency_ms``).
+
+    Returns
+    -------
+    BeamTrigger
+        ``s`` the recorded position, ``T_base_flange = flange_pose_at(s)``.
+
+    Raises
+    ------
+    KinematicsError
+        ``loc``: still more than ``miss_mm`` off after ``max_iter`` steps (a joint that hardly
+        moves can flip its backlash flank at the trigger, and the tool jumps across it).
+
+    References
+    ----------
+    .. [1] W. H. Press et al., "Numerical Recipes", 3rd ed., Cambridge University Press,
+       2007, sec. 9.2 (the secant method).
+
+    Examples
+    --------
+    >>> beams = {"by": ([600, 0, 200], [0, 1, 0])}
+    >>> sweep = plan_cycle(beams, 6.0, [600, 0, 200], [10.0])[0]
+    >>> ev = trigger_events(None, sweep, [0, 0, 100], [0, 0, 1], beams, 6.0, latency_ms=50.0)
+    >>> def ahead(s):  # the true flange stands 0.5 mm further along x than commanded
+    ...     T = sweep.pose_at(s)
+    ...     T[0, 3] += 0.5
+    ...     return T
+    >>> e = refine_trigger(ev[0], ahead, sweep, [0, 0, 100], [0, 0, 1], beams, 6.0, latency_ms=50.0)
+    >>> e.edge, round(float(sweep.pose_at(e.s)[0, 3]), 6)  # commanded: 597 - 0.5 + 1 mm latency
+    ('enter', 597.5)
+    """
+    beam = as_beams(beams)[event.beam_id]
+    t = as_array(true_tcp_mm, "true_tcp_mm", (3,))
+    a = _unit(as_array(true_axis_flange, "true_axis_flange", (3,)))
+    r0, v, lag = 0.5 * float(tool_diameter_mm), path.tcp_velocity_mm_s, _lag_mm(path, latency_ms)
+    cache: list = [None, None]  # the last (s, pose): the exact motion is costly
+
+    def pose(s: float) -> FloatArray:
+        if cache[0] != s:
+            cache[:] = [s, flange_pose_at(s)]
+        return cache[1]
+
+    def f(s: float) -> float:
+        T = pose(s)
+        return trigger_condition_mm(T[:3, :3] @ t + T[:3, 3] - lag, T[:3, :3] @ a, v, beam,
+                                    event.edge, r0)
+
+    s_a, s_b = event.s, event.s + 0.2 / path.length_mm
+    f_a, f_b = f(s_a), f(s_b)
+    for _ in range(max_iter):
+        if abs(f_b) < tol_mm or f_b == f_a:
+            break
+        s_a, s_b, f_a = s_b, s_b - f_b * (s_b - s_a) / (f_b - f_a), f_b
+        f_b = f(s_b)
+    if not abs(f_b) <= miss_mm:
+        raise KinematicsError(loc, f"no {event.edge} trigger of beam {event.beam_id!r} found "
+                              f"(misses by {abs(f_b):.3g} mm)")
+    return BeamTrigger(float(s_b), event.beam_id, event.edge, pose(s_b), v)
+
+
+def jittered_s(s: float, path: PlannedPass, noise_mm: float, rng: np.random.Generator) -> float:
+    """Where the controller records a trigger at ``s`` whose position jitters along the
+    motion by ``noise_mm`` (sigma, mm); ``s`` itself without noise (no draw from ``rng``)."""
+    return s + rng.normal(0.0, noise_mm) / path.length_mm if noise_mm > 0 else s

@@ -18,19 +18,22 @@ controller shows. Coupled arms (FANUC J2/J3) are written decoupled, as the forma
   constant orientation (both directions unless ``both_directions=False``), the beams cutting
   the shaft at 2 or 3 heights above the TCP, at 4 turns about the tool axis, plus a tip
   descent onto the crossing. The controller moves the nominal TCP along the commanded line;
-  the recorded joints are found by a secant search along it such that the real robot
-  (:func:`solvers.physics.true_tcp_poses` of the recorded joints, i.e. with the backlash
-  sign of the recorded sequence and the latency undone along the commanded velocity)
-  meets the trigger condition exactly: the recorded pose lies ``latency * speed`` later
-  along the motion. The trigger position then jitters along the motion by ``noise_mm``;
-  ``tcp_velocity_mm_s`` is the commanded velocity. Trigger conditions (as the format
-  defines them): ``enter`` / ``leave`` when the signed distance between the tool axis
-  and the beam line along their common normal (pointed along the motion) is ``-r`` / ``+r``
-  (r = half the shaft diameter); ``tip`` when the TCP is on the plane through the beam
-  line perpendicular to the motion (normal ``v - (v.u) u``). These are the conditions of
-  :mod:`solvers.beam_cycle`; its ``trigger_events`` is not used because it follows a rigid
-  flange path, while here the recorded joints must satisfy the physics model (backlash
-  flank from the recorded sequence, latency along the commanded velocity).
+  the beams are switched by the one trigger simulator, :mod:`solvers.beam_cycle` (the
+  emulated controller's cycle uses it too): :func:`~solvers.beam_cycle.trigger_events`
+  finds each trigger on the commanded line, :func:`~solvers.beam_cycle.refine_trigger`
+  moves it onto the real robot. The flange pose it is given is that of the real robot
+  (:func:`solvers.physics.true_tcp_poses`) if the joints at ``s`` were the next recorded
+  sample: the backlash flank from the recorded sequence, the thermal drift at the
+  scheduled time, so the recording meets the trigger conditions exactly under the
+  analysis's own model. With ``trigger_latency_ms`` the conditions hold for the recorded
+  pose moved back by ``latency * v`` (the format's definition): the recorded pose lies
+  ``latency * speed`` later along the motion. The trigger position then jitters along the
+  motion by ``noise_mm``; ``tcp_velocity_mm_s`` is the commanded velocity. Trigger
+  conditions (as the format defines them, :func:`solvers.beam_cycle.trigger_condition_mm`):
+  ``enter`` / ``leave`` when the signed distance between the tool axis and the beam line
+  along their common normal (pointed along the motion) is ``-r`` / ``+r`` (r = half the
+  shaft diameter); ``tip`` when the TCP is on the plane through the beam line perpendicular
+  to the motion (normal ``v - (v.u) u``).
 
 Sample times: tracker 10 s apart, touch 20 s apart, beam the scheduled trigger times of
 passes at ``speed_mm_s`` (nominal geometry, so the thermal drift's time base is known in
@@ -46,9 +49,11 @@ from functools import cached_property
 import numpy as np
 from scipy.spatial.transform import Rotation
 
+from solvers.beam_cycle import (BeamTrigger, PlannedPass, jittered_s, refine_trigger,
+                                trigger_events)
 from solvers.dh import RobotModel, forward_kinematics, geometric_jacobian, link_matrices, pose_error
 from solvers.errors import CalibrationError, KinematicsError
-from solvers.frames import Pose, apply
+from solvers.frames import Pose, apply, invert
 from solvers.physics import Imperfections, true_tcp_poses
 from solvers.recording import RecordingData, motion_signs, recording_document
 from solvers.robots import ROBOTS
@@ -184,13 +189,11 @@ class _History:
         return (np.stack([self.q_prev, q]), np.array([self.t_prev, t]),
                 self.q_prev - self.sign_prev)
 
-    def true_T(self, q: FloatArray, t: float, velocity: FloatArray | None = None) -> FloatArray:
-        """True T_base_tcp (4, 4) if the next recorded sample is ``q`` at ``t`` (with the
-        commanded ``velocity``: at the trigger, the latency undone)."""
+    def true_T(self, q: FloatArray, t: float) -> FloatArray:
+        """True T_base_tcp (4, 4) if the next recorded sample is ``q`` at ``t``."""
         joints, times, start = self._args(q, t)
-        v = None if velocity is None else np.broadcast_to(velocity, (len(joints), 3))
         return true_tcp_poses(self.arm.model, joints, times, self.imp, self.arm.tool, start,
-                              self.payload[0], self.payload[1], v, time_span_s=self.span)[-1]
+                              self.payload[0], self.payload[1], time_span_s=self.span)[-1]
 
     def commit(self, q: FloatArray, t: float) -> None:
         joints, _, start = self._args(q, t)
@@ -305,37 +308,49 @@ def _touch(arm: _Arm, imp: Imperfections, n: int, rng: np.random.Generator,
 
 @dataclass(frozen=True)
 class _Event:
-    beam: str
-    edge: str
-    start_mm: FloatArray      # commanded TCP at the pass start
-    direction: FloatArray     # unit commanded motion
-    s0_mm: float              # nominal trigger distance along the pass
-    t_s: float                # scheduled trigger time
-    rotation: FloatArray      # commanded tool orientation (3, 3)
+    """One scheduled trigger: its pass, where the commanded path of the (true) tool switches
+    the beam, latency included (:func:`solvers.beam_cycle.trigger_events`), and when."""
+
+    pass_no: int              # the pass (a descent triggers every beam at its point at once)
+    path: PlannedPass         # commanded: the nominal TCP on a straight line, orientation held
+    trigger: BeamTrigger      # on the commanded path; refined later on the true robot
+    t_s: float                # scheduled time of the nominal trigger
 
 
-def _beam_value(T: FloatArray, edge: str, point: FloatArray, u: FloatArray, v: FloatArray,
-                r: float) -> float:
-    """Trigger condition (0 at the trigger) of the TCP pose ``T`` for one beam."""
-    p, w = T[:3, 3], T[:3, 2]
-    if edge == "tip":  # plane through the beam line, normal = the motion across the beam
-        nv = v - (v @ u) * u
-        return float((p - point) @ nv / np.linalg.norm(nv))
-    nrm = np.cross(w, u)
-    nrm = nrm / np.linalg.norm(nrm)
-    if nrm @ v < 0:
-        nrm = -nrm
-    return float((p - point) @ nrm + (r if edge == "enter" else -r))
+def _tcp_pass(kind: str, rot: FloatArray, start_mm: FloatArray, end_mm: FloatArray,
+              tool: FloatArray, speed: float, target: str | None = None) -> PlannedPass:
+    """The move of the commanded TCP from ``start_mm`` to ``end_mm`` with the tool
+    orientation ``rot`` (R_base_tcp) held, as the flange path of the tool ``tool``."""
+    R = rot @ tool[:3, :3].T
+    ends = []
+    for p in (start_mm, end_mm):
+        F = np.eye(4)
+        F[:3, :3], F[:3, 3] = R, p - R @ tool[:3, 3]
+        ends.append(F)
+    return PlannedPass(kind, ends[0], ends[1], speed, tool[:3, 3],  # type: ignore[arg-type]
+                       target_beam=target)
 
 
 def _beam_schedule(beams: dict[str, tuple[FloatArray, FloatArray]], r: float, R0: FloatArray,
-                   heights: Sequence[float], both: bool, speed: float, n: int) -> list[_Event]:
+                   heights: Sequence[float], both: bool, speed: float, n: int,
+                   tool: FloatArray, latency_ms: float) -> list[_Event]:
+    """The passes (4 turns about the tool axis; at each height both ways; a descent onto each
+    beam point) and their nominal triggers, cut at ``n``."""
     events: list[_Event] = []
     t = 0.0
     ids = list(beams)
     centre = np.mean([beams[b][0] for b in ids], axis=0)
     spins = (0.0, 90.0, 180.0, 270.0)
-    cycle = 0
+    cycle = passes = 0
+
+    def schedule(pass_no: int, path: PlannedPass, t0: float, crossed: dict) -> None:
+        """Append the triggers of ``path`` (started at ``t0``, crossing ``crossed``), stamped
+        at the nominal trigger (the recorded pose comes the latency later)."""
+        for e in trigger_events(None, path, tool[:3, 3], tool[:3, 2], crossed, 2.0 * r,
+                                latency_ms=latency_ms):
+            t_s = t0 + e.s * path.duration_s - latency_ms / 1000.0
+            events.append(_Event(pass_no, path, e, t_s))
+
     while len(events) < n:
         spin = Rotation.from_euler("z", spins[cycle % 4], degrees=True)
         rot = (Rotation.from_matrix(R0) * spin).as_matrix()
@@ -346,32 +361,28 @@ def _beam_schedule(beams: dict[str, tuple[FloatArray, FloatArray]], r: float, R0
         v = (u1 - 0.6 * beams[ids[1]][1]) if len(ids) > 1 else np.cross(w, u1)
         v = v - (v @ w) * w
         v = v / np.linalg.norm(v)
+        crossed = {}  # beams a pass cuts cleanly: not along the tool, crossed at >= 11.5 deg
+        for b in ids:
+            nrm = np.cross(w, beams[b][1])
+            if np.linalg.norm(nrm) >= 0.3 and abs(nrm @ v) / np.linalg.norm(nrm) >= 0.2:
+                crossed[b] = beams[b]
+        half = r + 25.0
         for h in heights:
             for vd in ((v, -v) if both else (v,)):
-                length = 2.0 * (r + 25.0)
-                start = centre + h * w - 0.5 * length * vd
-                found = []
-                for b in ids:
-                    point, u = beams[b]
-                    nrm = np.cross(w, u)
-                    if np.linalg.norm(nrm) < 0.3:
-                        continue
-                    nrm = nrm / np.linalg.norm(nrm)
-                    nrm = nrm if nrm @ vd > 0 else -nrm
-                    if nrm @ vd < 0.2:
-                        continue
-                    for edge, target in (("enter", -r), ("leave", r)):
-                        s0 = (target - (start - point) @ nrm) / (vd @ nrm)
-                        found.append(_Event(b, edge, start, vd, float(s0), t + s0 / speed, rot))
-                events.extend(sorted(found, key=lambda e: e.s0_mm))
-                t += length / speed + PASS_GAP_S
+                path = _tcp_pass("sweep", rot, centre + h * w - half * vd,
+                                 centre + h * w + half * vd, tool, speed)
+                if crossed:
+                    schedule(passes, path, t, crossed)
+                t += path.duration_s + PASS_GAP_S
+                passes += 1
         # tip descent along the tool axis onto each distinct beam point
         for point in np.unique(np.array([beams[b][0] for b in ids]), axis=0):
-            start = point - 20.0 * w
+            path = _tcp_pass("tip", rot, point - 20.0 * w, point + 10.0 * w, tool, speed)
             for b in ids:
                 if np.allclose(beams[b][0], point) and abs(beams[b][1] @ w) < 0.2:
-                    events.append(_Event(b, "tip", start, w, 20.0, t + 20.0 / speed, rot))
-            t += 30.0 / speed + PASS_GAP_S
+                    schedule(passes, replace(path, target_beam=b), t, beams)
+            t += path.duration_s + PASS_GAP_S
+            passes += 1
         cycle += 1
         if cycle > 4 * n:
             raise CalibrationError(("sensor",), "no pass of the tool triggers these beams")
@@ -423,62 +434,55 @@ def _beam(arm: _Arm, imp: Imperfections, n: int, rng: np.random.Generator,
             raise CalibrationError(("heights",), f"must be 2 or 3 heights (or a list in mm), "
                                    f"got {heights}")
         heights = (5.0, 15.0, 25.0)[:heights]
-    events = _beam_schedule(beams, r, T0[:3, :3], [float(h) for h in heights], both, speed, n)
+    latency_ms = imp.trigger_latency_ms
+    events = _beam_schedule(beams, r, T0[:3, :3], [float(h) for h in heights], both, speed, n,
+                            arm.tool, latency_ms)
     hist = _History(arm, imp, q_ready, payload, (events[0].t_s, events[-1].t_s))
-    latency_mm = speed * imp.trigger_latency_ms / 1000.0
+    t_tool, a_tool, tool_flange = arm.tool[:3, 3], arm.tool[:3, 2], invert(arm.tool)
     cache: dict = {}
 
-    def q_cmd(e: _Event, s: float) -> FloatArray:
-        goal = np.eye(4)
-        goal[:3, :3] = e.rotation
-        goal[:3, 3] = e.start_mm + s * e.direction
-        if cache.get("rotation") is not e.rotation:  # a new turn about the tool axis: reseed
-            cache["rotation"] = e.rotation
+    def q_cmd(path: PlannedPass, s: float) -> FloatArray:
+        goal = path.pose_at(s) @ arm.tool
+        if cache.get("rotation") is None or not np.array_equal(cache["rotation"], goal[:3, :3]):
+            cache["rotation"] = goal[:3, :3]  # a new turn about the tool axis: reseed
             cache["q"] = _seed_turn(arm, goal, q_ready)
         q = solve_pose_newton(arm.fk, arm.jac, goal, cache["q"])
         cache["q"] = q
         return q
 
-    rows = []
+    rows: list[BeamTrigger] = []
     previous: _Event | None = None
     for e in events:
-        point, u = beams[e.beam]
-        velocity = speed * e.direction
-        if (previous is not None and imp.noise_mm == 0 and e.edge == previous.edge == "tip"
-                and previous.start_mm is e.start_mm):
+        if (previous is not None and imp.noise_mm == 0 and e.trigger.edge == previous.trigger.edge
+                == "tip" and previous.pass_no == e.pass_no):
             # the same descent triggers a second beam at the same instant: the same joints
             hist.commit(hist.q_prev, e.t_s)
-            rows.append((e.beam, e.edge, velocity))
+            rows.append(e.trigger)
             continue
         previous = e
 
-        def f(s: float) -> float:  # the trigger condition if the joints at s were recorded
-            return _beam_value(hist.true_T(q_cmd(e, s), e.t_s, velocity), e.edge, point, u,
-                               e.direction, r)
+        def true_flange(s: float, e: _Event = e) -> FloatArray:
+            """The true flange if the joints at s were recorded next (backlash flank from
+            the recorded sequence, thermal drift at the scheduled time)."""
+            return hist.true_T(q_cmd(e.path, s), e.t_s) @ tool_flange
 
-        s_a, s_b = e.s0_mm + latency_mm, e.s0_mm + latency_mm + 0.2
-        f_a, f_b = f(s_a), f(s_b)
-        for _ in range(40):
-            if abs(f_b) < 1e-10 or f_b == f_a:
-                break
-            s_a, s_b, f_a = s_b, s_b - f_b * (s_b - s_a) / (f_b - f_a), f_b
-            f_b = f(s_b)
-        # a joint that hardly moves along the pass can flip its backlash flank at the trigger;
-        # the real tool then jumps across the condition by a fraction of the lost motion
-        if abs(f_b) > 0.05:
-            raise KinematicsError(("sensor", "beams"), f"no {e.edge} trigger of beam {e.beam!r} "
-                                  f"found (misses by {abs(f_b):.3g} mm)")
-        q = q_cmd(e, s_b + (rng.normal(0.0, imp.noise_mm) if imp.noise_mm > 0 else 0.0))
+        # the one trigger simulator: the nominal trigger moved onto the true robot, where
+        # the conditions hold with the latency undone along the commanded velocity; a joint
+        # that hardly moves along the pass can flip its backlash flank at the trigger, and the
+        # real tool then jumps across the condition by a fraction of the lost motion
+        trig = refine_trigger(e.trigger, true_flange, e.path, t_tool, a_tool, beams, diameter,
+                              latency_ms=latency_ms, loc=("sensor", "beams"))
+        q = q_cmd(e.path, jittered_s(trig.s, e.path, imp.noise_mm, rng))
         if not arm.within_limits(q, 0.0):
-            raise KinematicsError(("sensor",), f"a pass through beam {e.beam!r} leaves the "
-                                  "joint limits")
+            raise KinematicsError(("sensor",), f"a pass through beam {e.trigger.beam_id!r} "
+                                  "leaves the joint limits")
         hist.commit(q, e.t_s)
-        rows.append((e.beam, e.edge, velocity))
+        rows.append(trig)
     return dict(t_s=np.array([e.t_s for e in events]), joints_deg=np.array(hist.recorded),
                 start_joints_deg=q_ready, beams=beams, tool_diameter_mm=diameter,
-                beam_ids=np.array([b for b, _, _ in rows], dtype=str),
-                edges=np.array([g for _, g, _ in rows], dtype=str),
-                tcp_velocity_mm_s=np.array([v for _, _, v in rows]))
+                beam_ids=np.array([e.beam_id for e in rows], dtype=str),
+                edges=np.array([e.edge for e in rows], dtype=str),
+                tcp_velocity_mm_s=np.array([e.tcp_velocity_mm_s for e in rows]))
 
 
 # ---------------------------------------------------------------- public

@@ -4,7 +4,8 @@ on a real PostgreSQL server when one is reachable (``tests/run``'s pg_virtualenv
 - 4 workers starting on an empty database migrate it once and create the demo cell once;
 - 200 concurrent +0.1 deg jogs of A1 move it exactly +20.0 deg; 200 concurrent touch-ups
   advance the emulated clock by exactly 200 x 2 s; 200 read-modify-write slot edits by 8
-  clients (If-Match, retry on 412) add up exactly;
+  clients (If-Match, retry on 412) add up exactly; 8 concurrent light-barrier cycles add
+  exactly 8 cycles' emulated time (the controller's state loaded and saved under the lock);
 - the lost-update trials: two writers with one ETag, one gets 412 (with the current slot);
   no If-Match gets 428; never a silent overwrite;
 - Idempotency-Key: one jog however often it is retried, on whichever worker;
@@ -77,6 +78,29 @@ def test_200_concurrent_touch_ups_lose_no_clock_tick(svc):  # noqa: ANN001
     assert clock1 - clock0 == pytest.approx(200 * 2.0, abs=1e-9)  # TOUCH_UP_S each
     steps = httpx.get(f"{svc.url}{path[:-len('/touch-up')]}").json()["steps"]
     assert [st["filled"] for st in steps[:4]] == [True] * 4
+
+
+def test_concurrent_light_barrier_cycles_each_start_where_the_last_stopped(svc):  # noqa: ANN001
+    """The emulated controller's state (joints, clock, flanks) is loaded and saved under the
+    row lock in the run-cycle route too: once the robot rests at the tip, every cycle adds the
+    same time, and 8 cycles at once on 4 workers add exactly 8 of them."""
+    s = httpx.post(f"{svc.url}{C}/sessions",
+                   json={"method": "tool.light_barrier", "target_no": 7,
+                         "params": {"nominal_tool": {"x": 0.0, "y": 0.0, "z": 180.0}}}).json()
+    path = f"{C}/sessions/{s['id']}/run-cycle"
+
+    def clock() -> float:
+        return httpx.get(f"{svc.url}{C}/cell/clock").json()["clock_s"]
+
+    assert httpx.post(f"{svc.url}{path}").status_code == 200  # from wherever: ends at the tip
+    clock0 = clock()
+    assert httpx.post(f"{svc.url}{path}").status_code == 200
+    one = clock() - clock0
+    assert one > 10.0  # 9 passes at 20 mm/s and 2 s between them
+    clock1 = clock()
+    answers = concurrently(svc.url, [("POST", path, None, {})] * 8)
+    assert [getattr(r, "status_code", r) for r in answers] == [200] * 8
+    assert clock() - clock1 == pytest.approx(8 * one, abs=1e-6)
 
 
 async def _increment(url: str, path: str, n: int) -> int:
