@@ -147,6 +147,11 @@ def enable(db: Session, c: Controller, reach_mm: float) -> None:
     db.flush()
 
 
+def target_names() -> list[str]:
+    """The approach targets that ride on the external axes (``turntable_mark``, ...)."""
+    return ext_emu.target_names()
+
+
 def values_of(c: Controller, loc: str = "axis") -> dict[str, float]:
     """The controller's external axis values; CalibrationError naming ``loc`` if it has none."""
     if not c.external_axes:

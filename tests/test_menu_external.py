@@ -90,6 +90,8 @@ def test_the_demo_cell_has_four_external_axes_jogged_in_joint_mode(client):
     assert "E2" in r.json()["detail"][0]["msg"] and "limit" in r.json()["detail"][0]["msg"]
     r = client.post(f"{C}/robot/jog", json={"mode": "joint", "axis": "E5", "increment": 1.0})
     assert r.status_code == 422 and "E5" in r.json()["detail"][0]["msg"]
+    targets = set(ok(client.get(f"{C}/cell"))["targets"])
+    assert {"turntable_mark", "positioner_mark", "rail_mark"} <= targets
     slots = ok(client.get(EXT))
     assert [(s["kind"], s["axes"]) for s in slots[:4]] == [
         ("turntable", ["E1"]), ("positioner", ["E2", "E3"]), ("linear_unit", ["E4"]), ("none", [])]

@@ -78,8 +78,13 @@ def delete_controller(controller_id: int, db: SessionDep, if_match: IfMatch = No
 @router.get("/{controller_id}/cell")
 def get_cell(controller_id: int, db: SessionDep) -> CellOut:
     """What the person at the cell knows: approach targets, marked points from the drawings,
-    the light barrier's beams. The true tool, plate and fixed-tool poses stay hidden."""
-    return CellOut(**cell_of(crud.get_controller(db, controller_id)).public())
+    the light barrier's beams, and the marks on the external axes (a cell that has them). The
+    true tool, plate and fixed-tool poses stay hidden."""
+    c = crud.get_controller(db, controller_id)
+    public = cell_of(c).public()
+    if c.external_axes:
+        public["targets"] = public["targets"] + external.target_names()
+    return CellOut(**public)
 
 
 def physics_out(c: Controller) -> PhysicsOut:
