@@ -185,6 +185,12 @@ def save_values(s: CalibSession, result_values: tuple[float, ...], report: dict[
     return values
 
 
+#: the kinds of kinematic each menu calibrates (the numeric root point: any)
+METHOD_KINDS = {"ext.root_point": ("turntable", "positioner"), "ext.offset": ("turntable",
+                "positioner"), "ext.offset_numeric": ("turntable", "positioner"),
+                "ext.linear_unit": ("linear_unit",), "ext.positioner_2axis": ("positioner",)}
+
+
 def ext_inputs(db: Session, s: CalibSession) -> Any:
     """The :class:`server.methods_ext.ExtInputs` of an ``ext.*`` session: the kinematic of
     ``params.ext_no`` (the Offset menus) or of the target slot, and, when a root-point session
@@ -201,9 +207,11 @@ def ext_inputs(db: Session, s: CalibSession) -> Any:
         raise CalibrationError(loc, f"external kinematic {number} is not configured (kind "
                                "none): set its kind, axes and machine data first (PUT "
                                f".../external-kinematics/{number})")
-    if s.target_table != TABLE and e.kind not in ("turntable", "positioner"):
-        raise CalibrationError(loc, f"external kinematic {number} is a {e.kind}: a base rides "
-                               "on a turntable or a positioner")
+    kinds = METHOD_KINDS.get(s.method)
+    if kinds is not None and e.kind not in kinds and e.kind != "none":
+        what = ("a base rides on a turntable or a positioner" if s.target_table != TABLE
+                else f"{s.method} calibrates a {' or a '.join(kinds)}")
+        raise CalibrationError(loc, f"external kinematic {number} is a {e.kind}: {what}")
     cov, dof = None, 0
     if e.session_id is not None and e.method == "ext.root_point":
         root_session = db.get(CalibSession, e.session_id)

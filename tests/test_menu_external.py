@@ -293,6 +293,35 @@ def test_offset_on_a_rail_or_an_empty_slot_is_refused_at_open(client, pointer):
         assert d["loc"] == ["body", "params", "ext_no"] and words in d["msg"]
 
 
+@pytest.mark.parametrize("method, target_no, words", [
+    ("ext.root_point", 3, "ext.root_point calibrates a turntable or a positioner"),
+    ("ext.linear_unit", 1, "ext.linear_unit calibrates a linear_unit"),
+    ("ext.positioner_2axis", 1, "ext.positioner_2axis calibrates a positioner")])
+def test_a_menu_on_the_wrong_kind_of_kinematic_is_refused_at_open(client, pointer, method,
+                                                                  target_no, words):
+    r = client.post(f"{C}/sessions", json={"method": method, "target_no": target_no,
+                                           "params": {"tool_no": 1}})
+    assert r.status_code == 422
+    d = r.json()["detail"][0]
+    assert d["loc"] == ["body", "target_no"] and words in d["msg"]
+
+
+def test_root_point_of_the_positioner_turn_axis_rides_on_its_tilt(client, pointer):
+    """Root point on EX_KIN 2 with ``axis: E3``, taught at tilt E2 = 30: the nominal turn axis
+    it compares with is the machine data's turned by the tilt, so only the hidden turn-axis
+    tilt is named."""
+    set_errors(client, {"positioner": {"turn_tilt_deg": 1.0}})
+    url = open_session(client, "ext.root_point", 2, tool_no=1, axis="E3")
+    for k, e3 in enumerate((-135.0, -45.0, 45.0, 135.0)):
+        move_external(client, {"E2": 30.0, "E3": e3})
+        approach(client, "positioner_mark", tilt_deg=10.0)
+        ok(client.post(f"{url}/touch-up", json={"step": k}))
+    report = ok(client.post(f"{url}/compute"))
+    codes = [w["code"] for w in report["warnings"]]
+    assert "axis_tilted" in codes and "sign_reversed" not in codes, report["warnings"]
+    assert report["extras"]["axis_tilt_deg"] == pytest.approx(1.0, abs=0.1)
+
+
 def test_numeric_root_point_and_offset(client):
     url = open_session(client, "ext.root_point_numeric", 1,
                        pose={"x": 520, "y": 380, "z": 80, "a": 0, "b": 0, "c": 0})
