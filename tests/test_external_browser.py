@@ -77,7 +77,25 @@ def test_root_point_then_offset_by_clicking_then_both_exports(page, site):
     open_menu(page, "ext.offset", 5, tool_no=1, ext_no=1)
     assert w.locator("#prompt").inner_text() == \
         "With E1 at 30 deg, bring the TCP to the origin of the base on the table"
-    walk_steps(page, 3)
+    # a touch-up written down on a real controller: its joints and its E1 value, pasted
+    w.get_by_role("button", name="Move to", exact=True).click()
+    idle(page)
+    joints = ", ".join(f"{q:.9f}" for q in api(page, site, "/controllers/1/robot")["joints_deg"])
+    w.locator("summary", has_text="Paste recorded joints").click()
+    w.get_by_label("Recorded joints").fill(joints)
+    w.get_by_label("Recorded external axes").fill("30")
+    w.get_by_role("button", name="Touch up with these joints").click()
+    idle(page)
+    step = api(page, site, f"/controllers/1/sessions/{page.evaluate('window.pendant.state.session.id')}")
+    assert step["steps"][0]["point"]["source"] == "joints"
+    assert step["steps"][0]["point"]["external_axes"] == {"E1": 30.0}
+    w.get_by_role("button", name=re.compile(r"^Step 2: ")).click()
+    idle(page)
+    for k in (1, 2):
+        w.get_by_role("button", name="Move to", exact=True).click()
+        idle(page)
+        w.get_by_role("button", name="Touch up", exact=True).click()
+        idle(page)
     report = compute(page)
     assert "95% angle" in report.locator(".stats").inner_text()
     save(page)

@@ -512,6 +512,7 @@ function renderSession() {
   const n = s.steps.filter((st) => st.required).length;
   const done = s.steps.filter((st) => st.required && st.filled).length;
   const lb = s.method === "tool.light_barrier";
+  $("#paste-ext-field").hidden = !s.method.startsWith("ext.");
   $("#run-cycle").hidden = !lb;
   $("#touch-up").hidden = lb;
   $("#move-to").closest(".field").hidden = !(cur && cur.target);
@@ -574,7 +575,16 @@ async function touchUpJoints() {
   if (!joints.length || joints.some((q) => !Number.isFinite(q))) {
     throw new ApiError(422, [{ loc: ["body", "joints_deg"], msg: "paste the joint values in degrees, e.g. 0, -90, 90, 0, 90, 0" }]);
   }
-  await touchUp({ joints_deg: joints });
+  const body = { joints_deg: joints };
+  const ext = $("#paste-ext").value.trim();
+  if (!$("#paste-ext-field").hidden && ext) { // ext menus: the external axis values recorded with them
+    const values = parseNumbers(ext);
+    if (values.some((v) => !Number.isFinite(v)) || values.length > 6) {
+      throw new ApiError(422, [{ loc: ["body", "external_axes"], msg: "give E1, E2, ... as numbers, e.g. 45, 0, 0, 0" }]);
+    }
+    body.external_axes = Object.fromEntries(values.map((v, i) => [`E${i + 1}`, v]));
+  }
+  await touchUp(body);
 }
 
 async function runCycle() {
