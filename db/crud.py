@@ -390,9 +390,8 @@ def backup(db: Session, c: Controller) -> dict[str, Any]:
                     for e in list_entries(db, c.id)],
         "external_kinematics": [{"number": e.number, **ext_snapshot(e)}
                                 for e in list_external(db, c.id)],
-        "history": [{"id": h.id, "table": h.entry_table, "number": h.number, "reason": h.reason,
-                     "session_id": h.session_id, "changed_at": _iso(h.changed_at),
-                     "before": h.before, "after": h.after} for h in history(db, c.id)],
+        "history": [_history_doc(h) for h in history(db, c.id) if h.entry_table != "extkin"],
+        "external_history": [_history_doc(h) for h in history(db, c.id, "extkin")],
         "sessions": [{"id": s.id, "method": s.method, "target_table": s.target_table,
                       "target_no": s.target_no, "params": s.params, "state": s.state,
                       "created_at": _iso(s.created_at), "result": s.result_values(),
@@ -400,6 +399,12 @@ def backup(db: Session, c: Controller) -> dict[str, Any]:
                      for s in list_sessions(db, c.id)],
         "files": [{"format": f.format, "text": f.text} for f in list_controller_files(db, c.id)],
     }
+
+
+def _history_doc(h: EntryHistory) -> dict[str, Any]:
+    return {"id": h.id, "table": h.entry_table, "number": h.number, "reason": h.reason,
+            "session_id": h.session_id, "changed_at": _iso(h.changed_at), "before": h.before,
+            "after": h.after}
 
 
 def _dt(s: str | None) -> datetime | None:
@@ -459,7 +464,7 @@ def restore_backup(db: Session, c: Controller, doc: dict[str, Any]) -> tuple[int
         x.updated_at = _dt(xd.get("updated_at"))
         db.add(x)  # (the count stays the tool and base slots')
     n_hist = 0
-    for hd in doc.get("history", []):
+    for hd in doc.get("history", []) + doc.get("external_history", []):
         db.add(EntryHistory(controller_id=c.id, entry_table=hd["table"], number=int(hd["number"]),
                             reason=hd["reason"], session_id=session_ids.get(hd.get("session_id")),
                             changed_at=_dt(hd.get("changed_at")) or utcnow(), before=hd["before"],

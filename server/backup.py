@@ -136,25 +136,30 @@ class EntryIn(SnapshotIn):
 
 class HistoryIn(_Doc):
     id: int | None = None
-    table: Literal["tool", "base", "extkin"]
+    table: TableName
     number: int
     reason: str = Field(max_length=16)
     session_id: RowId | None = None
     changed_at: str | None = None
-    before: SnapshotIn | ExtSnapshotIn
-    after: SnapshotIn | ExtSnapshotIn
+    before: SnapshotIn
+    after: SnapshotIn
 
     _check_time = field_validator("changed_at")(_iso)
 
     @model_validator(mode="after")
     def _fits(self) -> "HistoryIn":
         _number_fits(self.table, self.number)
-        if (self.table == "extkin") != isinstance(self.before, ExtSnapshotIn) or \
-                isinstance(self.before, ExtSnapshotIn) != isinstance(self.after, ExtSnapshotIn):
-            raise ValueError(f"a {self.table} history row holds that table's values")
         _kind_fits(self.table, self.before.kind)
         _kind_fits(self.table, self.after.kind)
         return self
+
+
+class ExtHistoryIn(HistoryIn):
+    """A change of an external kinematic (``external_history`` of the backup)."""
+
+    table: Literal["extkin"]  # type: ignore[assignment]
+    before: ExtSnapshotIn
+    after: ExtSnapshotIn
 
 
 class PointIn(_Doc):
@@ -264,6 +269,7 @@ class BackupIn(_Doc):
     entries: list[EntryIn]
     external_kinematics: list[ExtEntryIn] = Field(default_factory=list)
     history: list[HistoryIn] = Field(default_factory=list)
+    external_history: list[ExtHistoryIn] = Field(default_factory=list)
     sessions: list[SessionIn] = Field(default_factory=list)
     files: list[FileIn] = Field(default_factory=list)
 
