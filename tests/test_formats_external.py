@@ -8,8 +8,10 @@ documented layouts (docs/formats.md, "External kinematics") are read.
 
 from __future__ import annotations
 
+import difflib
 import re
 from dataclasses import replace
+from pathlib import Path
 
 import numpy as np
 import pytest
@@ -451,3 +453,105 @@ def test_setup_refuses_what_no_controller_can_hold():
             with pytest.raises(FormatError) as err:
                 write(kins, bases)
             assert err.value.loc == loc, (write.__name__, loc)
+
+
+# --------------------------------------------------------------------------- patching
+
+
+DATA = Path(__file__).parent / "data"
+CELL7 = (DATA / "kuka_cell7_config.dat").read_bytes().decode()  # MACHINE_DEF[2] "DKP_400_1"
+ABB7 = (DATA / "abb_cell7.mod").read_text()  # wTurntable on "STN1"
+MACHINE7 = "\r\n".join([
+    "&ACCESS RV", "&REL 2", "DEFDAT  $MACHINE PUBLIC", ";FOLD EXTERNAL KINEMATICS",
+    "DECL EX_KIN $EX_KIN={ET1 #EASYS,ET2 #NONE,ET3 #NONE,ET4 #NONE,ET5 #NONE,ET6 #NONE}",
+    "DECL ET_AX $ET1_AX={TR_A1 #E1,TR_A2 #E2,TR_A3 #NONE}",
+    '$ET1_NAME[]="DKP_400_1"',
+    "FRAME $ET1_TA1KR={X 0.0,Y 0.0,Z 700.000,A 0.0,B 90.0000,C 0.0}  ; tilt axis",
+    "FRAME $ET1_TA2A1={X 0.0,Y 0.0,Z -250.000,A 0.0,B -90.0000,C 0.0}",
+    "FRAME $ET1_TA3A2={X 0.0,Y 0.0,Z 0.0,A 0.0,B 0.0,C 0.0}",
+    "FRAME $ET1_TFLA3={X 0.0,Y 0.0,Z 0.0,A 0.0,B 0.0,C 0.0}",
+    "DECL ET_AX $ET2_AX={TR_A1 #NONE,TR_A2 #NONE,TR_A3 #NONE}",
+    '$ET2_NAME[]=" "',
+    "FRAME $ET2_TA1KR={X 0.0,Y 0.0,Z 0.0,A 0.0,B 0.0,C 0.0}",
+    ";ENDFOLD", "ENDDAT", ""])
+
+
+def changed_lines(a: str, b: str) -> list[str]:
+    return [d[2:].rstrip("\r\n") for d in difflib.ndiff(a.splitlines(True), b.splitlines(True))
+            if d[:1] in "+-"]
+
+
+def test_kuka_patch_without_change_gives_the_files_back_byte_for_byte():
+    setup = read_kuka_external(MACHINE7, CELL7)
+    assert [(k.name, k.kind, k.axes) for k in setup.kinematics] == \
+        [("DKP_400_1", "positioner_2axis", ("E1", "E2"))]
+    assert [b.number for b in setup.bases] == [3]
+    text = kuka_external_kinematics(setup.kinematics, setup.bases, machine_template=MACHINE7,
+                                    config_template=CELL7)
+    assert text.machine_dat == MACHINE7 and text.config_dat == CELL7
+
+
+def test_kuka_patch_touches_only_the_numbers_that_changed():
+    setup = read_kuka_external(MACHINE7, CELL7)
+    (k,) = setup.kinematics
+    moved = replace(k, root=replace(k.root, x=1850.5),
+                    axis_frames=(k.axis_frames[0], replace(k.axis_frames[1], z=-251.25)))
+    base = replace(setup.bases[0], pose=replace(setup.bases[0].pose, y=7.5))
+    text = kuka_external_kinematics([moved], [base], machine_template=MACHINE7,
+                                    config_template=CELL7)
+    assert changed_lines(MACHINE7, text.machine_dat) == [
+        "FRAME $ET1_TA2A1={X 0.0,Y 0.0,Z -250.000,A 0.0,B -90.0000,C 0.0}",
+        "FRAME $ET1_TA2A1={X 0.0,Y 0.0,Z -251.25,A 0.0,B -90.0000,C 0.0}"]
+    diff = changed_lines(CELL7, text.config_dat)
+    assert len(diff) == 4 and any(x.startswith("MACHINE_DEF[2]=") and "X 1850.5," in x
+                                  and "A 180.000," in x for x in diff)
+    assert any(x.startswith("BASE_DATA[3]=") and ",Y 7.5," in x for x in diff)
+    back = read_kuka_external(text.machine_dat, text.config_dat)
+    assert same_chain(back.kinematics[0], moved) and back.bases == [base]
+
+
+def test_kuka_patch_adds_a_kinematic_the_files_lack_and_refuses_a_full_machine_def():
+    setup = read_kuka_external(MACHINE7, CELL7)
+    table = turntable(3, "TABLE2", Pose(0, 2000, 0, 0, 0, 0), "E3")
+    with pytest.raises(FormatError) as err:
+        kuka_external_kinematics([*setup.kinematics, table], setup.bases,
+                                 machine_template=MACHINE7, config_template=CELL7)
+    assert err.value.loc[-1] == "MACHINE_DEF" and "MACHINE_DEF[4]" in err.value.reason
+    text = kuka_external_kinematics([*setup.kinematics, table], setup.bases,
+                                    machine_template=MACHINE7)
+    added = changed_lines(MACHINE7, text.machine_dat)
+    assert "DECL ET_AX $ET3_AX={TR_A1 #E3,TR_A2 #NONE,TR_A3 #NONE}" in added
+    assert text.machine_dat.index("$ET3_TFLA3") < text.machine_dat.index("ENDDAT")
+    assert "\r\nFRAME $ET3_TA1KR" in text.machine_dat  # the file's own line ends
+
+
+def test_abb_patch_touches_only_the_attributes_that_changed():
+    moc = "\r\n".join([
+        "MOC:CFG_1.0:5:0::", "#", "MECHANICAL_UNIT:", "",
+        '      -name "STN1" -use_run_enable "" -use_single_0 "STN1" -stand_by_state ', "#",
+        "ROBOT:", "", '      -name "ROB_1" -use_robot_type "ROB1_6700_2.65_235"\\',
+        "      -base_mass 55.1 -use_lin_jog \"ROB1\"", "#", "SINGLE:", "",
+        '      -name "STN1" -use_single_type "STN1" -use_joint "STN1"\\',
+        "      -base_frame_pos_x 1.85 -base_frame_orient_u0 6.12323E-17\\",
+        "      -base_frame_orient_u3 1", ""])
+    setup = read_abb_external(moc, ABB7)
+    (k,) = setup.kinematics
+    assert (k.name, k.kind) == ("STN1", "turntable")
+    assert same_pose(k.root, Pose(1850, 0, 0, 180, 0, 0), 1e-9, 1e-6)
+    assert [b.number for b in setup.bases] == [3] and setup.bases[0].mech_unit == "STN1"
+    same = abb_mechanical_units([k], setup.bases, moc_template=moc, rapid_template=ABB7)
+    assert same.moc_cfg == moc and same.rapid == ABB7
+    moved = replace(k, root=Pose.from_matrix(k.root.as_matrix() @ Pose(0, 0, 12.5, 0, 0, 0)
+                                             .as_matrix()))
+    base = replace(setup.bases[0], pose=replace(setup.bases[0].pose, z=450.0))
+    text = abb_mechanical_units([moved], [base], moc_template=moc, rapid_template=ABB7)
+    diff = changed_lines(moc, text.moc_cfg)
+    assert diff == ["      -base_frame_orient_u3 1", "      -base_frame_orient_u3 1\\",
+                    "      -base_frame_pos_z 0.0125"]
+    back = read_abb_external(text.moc_cfg, text.rapid)
+    assert same_chain(back.kinematics[0], moved, 1e-6)
+    assert same_pose(back.bases[0].pose, base.pose)
+    assert len(changed_lines(ABB7, text.rapid)) == 2  # the wTurntable line, before and after
+    with pytest.raises(FormatError) as err:
+        abb_mechanical_units([replace(k, name="STN2")], [], moc_template=moc)
+    assert err.value.loc == ("moc_template", "SINGLE STN2")

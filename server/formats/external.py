@@ -39,10 +39,10 @@ import numpy as np
 from server.bounds import MECH_UNIT_CHARS, check_name, check_value
 from server.formats import kuka as _kuka
 from server.formats.abb import _quat, export_abb, rapid_name, read_abb
-from server.formats.model import FormatError, FrameEntry, one_line
+from server.formats.model import FormatError, FrameEntry, family_of, one_line
 from solvers.errors import CalibrationError
 from solvers.external.common import rz
-from solvers.frames import Pose, invert, matrix_from_abb, translation
+from solvers.frames import Pose, angle_between_deg, invert, matrix_from_abb, translation
 from solvers.validate import FloatArray
 
 __all__ = [
@@ -318,7 +318,9 @@ def _ex_kin_type(k: ExternalKinematic) -> str:
 
 
 def kuka_external_kinematics(kinematics: Iterable[ExternalKinematic],
-                             bases: Iterable[FrameEntry] = ()) -> KukaExternalText:
+                             bases: Iterable[FrameEntry] = (), *,
+                             machine_template: str | None = None,
+                             config_template: str | None = None) -> KukaExternalText:
     """The KUKA machine data of external kinematics and the ``$config.dat`` entries of the
     bases on them.
 
@@ -334,12 +336,29 @@ def kuka_external_kinematics(kinematics: Iterable[ExternalKinematic],
     Reals have the shortest digits that read back as the same double (``krl_real``); names
     go through :func:`kuka_machine_name` (a name cannot add a line).
 
+    Parameters
+    ----------
+    kinematics : iterable of ExternalKinematic
+        Every external kinematic of the cell (ETn not listed is written ``#NONE``).
+    bases : iterable of FrameEntry
+        ``coordinated_base`` entries whose ``mech_unit`` is a listed (rotary) kinematic.
+    machine_template, config_template : str, optional, keyword-only
+        The whole ``$machine.dat`` / ``$config.dat`` imported before: the result is that file
+        with only the values that changed rewritten (numbers whose value did not change keep
+        their digits, with no change the file comes back byte for byte); variables it lacks
+        are added before ``ENDDAT``. A ``MACHINE_DEF`` is found by its ``NAME[]``, else
+        ``MACHINE_DEF[n+1]`` is used when free and declared; the bases go through
+        :func:`~server.formats.kuka.export_kuka` with the template (their slots are replaced
+        whole).
+
     Raises
     ------
     FormatError
         ``("kinematics", i, field)``: a number or axis used twice, two names written alike,
         two linear units; ``("bases", i, field)``: a base not a ``coordinated_base``, on no
-        listed kinematic or on the linear unit, a slot given twice.
+        listed kinematic or on the linear unit, a slot given twice;
+        ``("config_template", "line N", "MACHINE_DEF")``: no free entry for a new kinematic;
+        a template's own read errors.
 
     Examples
     --------
@@ -356,37 +375,151 @@ def kuka_external_kinematics(kinematics: Iterable[ExternalKinematic],
     MACHINE_DEF[2]={NAME[] "TABLE",COOP_KRC_INDEX 1,PARENT[] " ",ROOT {X 1500.0,Y 0.0,Z 300.0,A 0.0,B 0.0,C 0.0},MECH_TYPE #EASYS,GEOMETRY[] " "}
     """
     kins, base_list, by_name = _check_setup(kinematics, bases, _kname)
+    machine = _machine_items(kins)
+    config = _config_items(kins, {k.number: _machine_def_index(k) for k in kins})
+    if machine_template is None:
+        md = ["; External kinematics written by pendant (docs/formats.md): put these values",
+              "; into the same declarations of KRC:\\R1\\Mada\\$machine.dat",
+              *(line for _, line, _ in machine)]
+        md_text = "\n".join(md) + "\n"
+    else:
+        md_text = _patch_krl(machine_template, machine, "machine_template")
+    if config_template is None:
+        cd = ["; Bases on external kinematics written by pendant (docs/formats.md): put these",
+              "; values into the same entries of KRC:\\R1\\System\\$config.dat",
+              *(line for _, line, _ in config)]
+        for b in base_list:
+            k = by_name[b.mech_unit]  # type: ignore[index]
+            n = b.number
+            cd += [f"BASE_DATA[{n}]={_kuka._frame(b.pose)}",
+                   f"BASE_NAME[{n},]={_kuka._name(b.name)}", f"BASE_TYPE[{n}]=#BASE",
+                   f"MACHINE_FRAME_DAT[{n}]="
+                   f"{_kuka._machine_frame(_kname(k), _machine_def_index(k))}"]
+        cd_text = "\n".join(cd) + "\n"
+    else:
+        cd_text = _patch_config(config_template, kins, base_list, by_name)
+    return KukaExternalText(md_text, cd_text)
+
+
+#: (variable, line to write, target: an aggregate's values by key path or a string's text)
+_Item = tuple[str | None, str, object]
+
+
+def _frame_target(p: Pose) -> dict[tuple[str, ...], object]:
+    return {(k,): float(x) for k, x in zip(_kuka._FRAME_KEYS, p.as_array())}
+
+
+def _machine_items(kins: list[ExternalKinematic]) -> list[_Item]:
+    """The ``$machine.dat`` lines of ``kins`` with what each must hold (for patching)."""
     by_num = {k.number: k for k in kins}
-    ex_kin = ",".join(f"ET{n} {_ex_kin_type(by_num[n]) if n in by_num else '#NONE'}"
-                      for n in range(1, MAX_KINEMATICS + 1))
-    md = ["; External kinematics written by pendant (docs/formats.md): put these values",
-          "; into the same declarations of KRC:\\R1\\Mada\\$machine.dat",
-          f"DECL EX_KIN $EX_KIN={{{ex_kin}}}"]
-    cd = ["; Bases on external kinematics written by pendant (docs/formats.md): put these",
-          "; values into the same entries of KRC:\\R1\\System\\$config.dat"]
+    types = {f"ET{n}": _ex_kin_type(by_num[n]) if n in by_num else "#NONE"
+             for n in range(1, MAX_KINEMATICS + 1)}
+    ex_kin = ",".join(f"{et} {t}" for et, t in types.items())
+    items: list[_Item] = [("EX_KIN", f"DECL EX_KIN $EX_KIN={{{ex_kin}}}",
+                           {(et,): t for et, t in types.items()})]
     for k in kins:
         n = k.number
-        axes = [*k.axes, "#NONE", "#NONE"][:3]
-        ax = ",".join(f"TR_A{i} {a if a.startswith('#') else '#' + a}"
-                      for i, a in enumerate(axes, 1))
+        axes = {f"TR_A{i}": f"#{a}" for i, a in enumerate([*k.axes, "NONE", "NONE"][:3], 1)}
+        ax = ",".join(f"{tr} {a}" for tr, a in axes.items())
         frames = [*k.axis_frames, Pose(), Pose()][:3] + [k.flange]
-        md += [f"; ET{n}: {k.kind.replace('_', ' ')}", f"DECL ET_AX $ET{n}_AX={{{ax}}}",
-               f'$ET{n}_NAME[]="{_kname(k)}"']
-        md += [f"FRAME $ET{n}_{suffix}={_kuka._frame(p)}" for suffix, p in zip(_FRAMES, frames)]
+        items += [(None, f"; ET{n}: {k.kind.replace('_', ' ')}", None),
+                  (f"ET{n}_AX", f"DECL ET_AX $ET{n}_AX={{{ax}}}",
+                   {(tr,): a for tr, a in axes.items()}),
+                  (f"ET{n}_NAME[]", f'$ET{n}_NAME[]="{_kname(k)}"', _kname(k))]
+        items += [(f"ET{n}_{sfx}", f"FRAME $ET{n}_{sfx}={_kuka._frame(p)}", _frame_target(p))
+                  for sfx, p in zip(_FRAMES, frames)]
         if k.linear:
-            md.append(f"FRAME $ERSYSROOT={_kuka._frame(k.root)}")
+            items.append(("ERSYSROOT", f"FRAME $ERSYSROOT={_kuka._frame(k.root)}",
+                          _frame_target(k.root)))
+    return items
+
+
+def _config_items(kins: list[ExternalKinematic], index: dict[int, int]) -> list[_Item]:
+    """The ``MACHINE_DEF`` lines of the base kinematics (ETn at ``index[n]``)."""
+    items: list[_Item] = []
+    for k in kins:
+        if k.linear:
+            continue
+        i, name, typ = index[k.number], _kname(k), _ex_kin_type(k)
+        target = {("NAME[]",): name, ("MECH_TYPE",): typ,
+                  **{("ROOT", *key): v for key, v in _frame_target(k.root).items()}}
+        items.append((f"MACHINE_DEF[{i}]",
+                      f'MACHINE_DEF[{i}]={{NAME[] "{name}",COOP_KRC_INDEX 1,PARENT[] " ",'
+                      f'ROOT {_kuka._frame(k.root)},MECH_TYPE {typ},GEOMETRY[] " "}}', target))
+    return items
+
+
+def _patch_krl(template: str, items: list[_Item], what: str) -> str:
+    """``template`` (a whole KRL data file) with each item's values patched into its line,
+    and the lines of items it lacks added before ``ENDDAT``; other bytes kept."""
+    found = _krl_values(template, what)
+    lines = template.splitlines(keepends=True)
+    eol = "\r\n" if lines and lines[0].endswith("\r\n") else "\n"
+    added = []
+    for key, line, target in items:
+        if key is None:
+            continue
+        if key not in found:
+            added.append(line + eol)
+            continue
+        f = found[key]
+        raw = lines[f.line - 1]
+        a, b = f.span
+        rhs = raw[a:b]
+        if isinstance(target, dict):
+            new = _kuka._patch_numbers(rhs, target, f.line, key)
         else:
-            cd.append(f'MACHINE_DEF[{_machine_def_index(k)}]={{NAME[] "{_kname(k)}",'
-                      'COOP_KRC_INDEX 1,'
-                      f'PARENT[] " ",ROOT {_kuka._frame(k.root)},MECH_TYPE {_ex_kin_type(k)},'
-                      'GEOMETRY[] " "}')
-    for b in base_list:
-        k = by_name[b.mech_unit]  # type: ignore[index]
-        n = b.number
-        cd += [f"BASE_DATA[{n}]={_kuka._frame(b.pose)}", f"BASE_NAME[{n},]={_kuka._name(b.name)}",
-               f"BASE_TYPE[{n}]=#BASE",
-               f"MACHINE_FRAME_DAT[{n}]={_kuka._machine_frame(_kname(k), _machine_def_index(k))}"]
-    return KukaExternalText("\n".join(md) + "\n", "\n".join(cd) + "\n")
+            new = rhs if re.fullmatch(r'"\s*' + re.escape(str(target)) + r'\s*"', rhs) \
+                else f'"{target}"'
+        lines[f.line - 1] = raw[:a] + new + raw[b:]
+    if added:
+        at = next((i for i, raw in enumerate(lines)
+                   if _kuka._ENDDAT.match(_kuka._strip_comment(raw))), len(lines))
+        if at == len(lines) and lines and not lines[-1].endswith(("\n", "\r")):
+            lines[-1] += eol
+        lines[at:at] = added
+    return "".join(lines)
+
+
+def _patch_config(template: str, kins: list[ExternalKinematic], bases: list[FrameEntry],
+                  by_name: dict[str, ExternalKinematic]) -> str:
+    """A whole ``$config.dat`` with the kinematics' ``MACHINE_DEF`` entries (where the file
+    names them, else at index n + 1) and the bases on them patched in (``export_kuka``)."""
+    found = _krl_values(template, "config_template")
+    defs = _machine_defs(found)
+    decl = re.search(r"^[ \t]*DECL\s+\w+\s+MACHINE_DEF\s*\[\s*(\d+)\s*\]", template,
+                     re.IGNORECASE | re.MULTILINE)
+    index: dict[int, int] = {}
+    for k in kins:
+        if k.linear:
+            continue
+        name = _kname(k).upper()
+        if name in defs:
+            index[k.number] = defs[name][1]
+            continue
+        i = _machine_def_index(k)
+        key = f"MACHINE_DEF[{i}]"
+        if key in found:
+            other = _agg_at(found[key], "config_template", key).get("NAME[]")
+            if isinstance(other, str) and other[1:-1].strip():
+                raise FormatError(("config_template", f"line {found[key].line}", key),
+                                  f"holds {other} and no MACHINE_DEF names {_kname(k)!r}: "
+                                  "free the entry or name the kinematic like it")
+        if decl and i > int(decl.group(1)):
+            line = template.count("\n", 0, decl.start()) + 1
+            raise FormatError(("config_template", f"line {line}", "MACHINE_DEF"),
+                              f"declared with {decl.group(1)} entries; ET{k.number} "
+                              f"({_kname(k)!r}) needs MACHINE_DEF[{i}]: enlarge the array on "
+                              "the controller or free an entry")
+        index[k.number] = i
+    text = _patch_krl(template, _config_items(kins, index), "config_template")
+    written = {_kname(k).upper() for k in kins}
+    slots = {b.number for b in bases}
+    keep = [e for e in _kuka.read_kuka(text).entries
+            if not (e.kind == "coordinated_base" and (e.mech_unit or "").upper() in written)
+            and not (family_of(e.kind) == "stationary" and e.number in slots)]
+    new = [replace(b, mech_unit=_kname(by_name[b.mech_unit])) for b in bases]  # type: ignore
+    return _kuka.export_kuka(keep + new, template=text)
 
 
 _KRL_LINE = re.compile(r"^\s*(?:DECL\s+)?(?:GLOBAL\s+)?(?:\w+\s+)?\$?(\w+)\s*(\[[^\]]*\])?\s*=\s*"
@@ -400,6 +533,7 @@ _USED = re.compile(r"EX_KIN|ERSYSROOT|ET[1-6]_(AX|NAME\[\]|TA1KR|TA2A1|TA3A2|TFL
 class _Found:
     value: object
     line: int
+    span: tuple[int, int] = (0, 0)  # of the right-hand side in its line
 
 
 def _krl_values(text: str, what: str) -> dict[str, _Found]:
@@ -419,7 +553,7 @@ def _krl_values(text: str, what: str) -> dict[str, _Found]:
         if key in out and _USED.fullmatch(key):
             raise FormatError((what, f"line {number}", key),
                               f"assigned twice (first on line {out[key].line})")
-        out.setdefault(key, _Found(m.group(3), number))
+        out.setdefault(key, _Found(m.group(3), number, m.span(3)))
     return out
 
 
@@ -647,11 +781,12 @@ def _moc_num(v: float) -> str:
     return s.upper() if "e" in s else s.removesuffix(".0") if s.endswith(".0") else s
 
 
-def _moc_base_frame(T: FloatArray) -> list[str]:
-    """``-base_frame_pos_x .. -base_frame_orient_u3`` of ``T`` (metres; u0 the scalar)."""
+def _moc_base_frame(T: FloatArray) -> list[tuple[str, str]]:
+    """``(attribute, value)`` of ``base_frame_pos_x .. base_frame_orient_u3`` of ``T``
+    (metres; u0 the scalar)."""
     q = _quat(T)
     values = [*(T[:3, 3] / 1000.0), *q]
-    return [f"-{a} {_moc_num(v)}" for a, v in zip(_MOC_ATTRS, values)]
+    return [(a, _moc_num(v)) for a, v in zip(_MOC_ATTRS, values)]
 
 
 def _moc_instance(parts: list[str]) -> list[str]:
@@ -669,7 +804,8 @@ def _moc_instance(parts: list[str]) -> list[str]:
 
 def abb_mechanical_units(kinematics: Iterable[ExternalKinematic],
                          bases: Iterable[FrameEntry] = (), robot: str = "ROB_1",
-                         module_name: str = "ExtUnits") -> AbbExternalText:
+                         module_name: str = "ExtUnits", *, moc_template: str | None = None,
+                         rapid_template: str | None = None) -> AbbExternalText:
     """ABB ``MOC.cfg`` base frames of the external kinematics and the work objects on them.
 
     Per kinematic (name ``u`` = :func:`abb_unit_name`):
@@ -688,11 +824,29 @@ def abb_mechanical_units(kinematics: Iterable[ExternalKinematic],
     (:func:`~server.formats.abb.export_abb`). Quaternions are those ``export_abb`` writes
     for the same rotation.
 
+    Parameters
+    ----------
+    kinematics, bases
+        As :func:`kuka_external_kinematics`.
+    robot : str
+        The ``ROBOT`` instance a linear unit carries.
+    module_name : str
+        The RAPID module of a fresh export.
+    moc_template, rapid_template : str, optional, keyword-only
+        The controller's whole ``MOC.cfg`` / RAPID module imported before: the base-frame
+        attributes of its ``ROBOT`` and ``SINGLE`` instances are patched in place (a position
+        that moved by more than 1e-9 mm, the quaternion when the rotation turned by more than
+        1e-9 deg; an attribute RobotWare left out is added on a continuation line unless its
+        default holds); the work objects go through
+        :func:`~server.formats.abb.export_abb` with the template. With no change both come
+        back byte for byte.
+
     Raises
     ------
     FormatError
         As :func:`kuka_external_kinematics`; ``("robot",)`` for a robot name that is no
-        identifier.
+        identifier; ``("moc_template", "SINGLE <name>")`` when the template lacks the
+        instance (the units themselves are the controller's configuration).
 
     Examples
     --------
@@ -723,94 +877,199 @@ def abb_mechanical_units(kinematics: Iterable[ExternalKinematic],
         return unit_names[k.name]
 
     kins, base_list, by_name = _check_setup(kinematics, bases, written)
-    mech: list[list[str]] = []
-    singles: list[list[str]] = []
-    robots: list[list[str]] = []
+    insts = _moc_items(kins, unit_names, robot)
+    if moc_template is None:
+        lines = ["MOC:CFG_1.0:6:0::"]
+        for typ in ("MECHANICAL_UNIT", "ROBOT", "SINGLE"):
+            chosen = [attrs for t, attrs in insts if t == typ]
+            if chosen:
+                lines += ["#", f"{typ}:"]
+                for attrs in chosen:
+                    lines += ["", *_moc_instance([f"-{a} {v}" for a, v in attrs])]
+        moc = "\n".join(lines) + "\n"
+    else:
+        moc = _patch_moc(moc_template, insts)
+    wobjs = []
+    for b in base_list:
+        k = by_name[b.mech_unit]  # type: ignore[index]
+        pose = b.pose if k.flange == Pose() else _pose(k.flange.as_matrix() @ b.pose.as_matrix())
+        wobjs.append(replace(b, pose=pose, mech_unit=unit_names[k.name]))
+    if rapid_template is None:
+        rapid = export_abb(wobjs, module_name=module_name)
+    else:
+        units = {u.upper() for u in unit_names.values()}
+        slots = {b.number for b in wobjs}
+        keep = [e for e in read_abb(rapid_template).entries
+                if not (e.kind == "coordinated_base" and (e.mech_unit or "").upper() in units)
+                and not (family_of(e.kind) == "stationary" and e.number in slots)]
+        rapid = export_abb(keep + wobjs, template=rapid_template)
+    return AbbExternalText(moc, rapid)
+
+
+def _moc_items(kins: list[ExternalKinematic], unit_names: dict[str, str],
+               robot: str) -> list[tuple[str, list[tuple[str, str]]]]:
+    """``(TYPE, [(attribute, value)])`` of every instance the kinematics need."""
+    out: list[tuple[str, list[tuple[str, str]]]] = []
     for k in kins:
         u = unit_names[k.name]
         first = k.root.as_matrix() @ k.axis_frames[0].as_matrix()
         if k.kind == "positioner_2axis":
             s1, s2 = f"{u}_1", f"{u}_2"
-            mech.append([f'-name "{u}"', f'-use_single_0 "{s1}"', f'-use_single_1 "{s2}"'])
-            singles.append([f'-name "{s1}"', *_moc_base_frame(first)])
-            singles.append([f'-name "{s2}"', *_moc_base_frame(k.axis_frames[1].as_matrix()),
-                            f'-base_frame_coordinated "{s1}"'])
+            out.append(("MECHANICAL_UNIT", [("name", f'"{u}"'), ("use_single_0", f'"{s1}"'),
+                                            ("use_single_1", f'"{s2}"')]))
+            out.append(("SINGLE", [("name", f'"{s1}"'), *_moc_base_frame(first)]))
+            out.append(("SINGLE", [("name", f'"{s2}"'),
+                                   *_moc_base_frame(k.axis_frames[1].as_matrix()),
+                                   ("base_frame_coordinated", f'"{s1}"')]))
         else:
-            mech.append([f'-name "{u}"', f'-use_single_0 "{u}"'])
-            singles.append([f'-name "{u}"', *_moc_base_frame(first)])
+            out.append(("MECHANICAL_UNIT", [("name", f'"{u}"'), ("use_single_0", f'"{u}"')]))
+            out.append(("SINGLE", [("name", f'"{u}"'), *_moc_base_frame(first)]))
         if k.linear:
-            robots.append([f'-name "{robot}"', *_moc_base_frame(k.flange.as_matrix()),
-                           f'-base_frame_coordinated "{u}"'])
-    lines = ["MOC:CFG_1.0:6:0::"]
-    for typ, insts in (("MECHANICAL_UNIT", mech), ("ROBOT", robots), ("SINGLE", singles)):
-        if not insts:
-            continue
-        lines += ["#", f"{typ}:"]
-        for parts in insts:
-            lines += ["", *_moc_instance(parts)]
-    wobjs = []
-    for b in base_list:
-        k = by_name[b.mech_unit]  # type: ignore[index]
-        T = k.flange.as_matrix() @ b.pose.as_matrix()
-        wobjs.append(replace(b, pose=_pose(T), mech_unit=unit_names[k.name]))
-    rapid = export_abb(wobjs, module_name=module_name)
-    return AbbExternalText("\n".join(lines) + "\n", rapid)
-
-
-def _moc_instances(text: str) -> dict[str, list[tuple[dict[str, object], int]]]:
-    """``TYPE -> [(attributes, line)]`` of a MOC.cfg: instances joined across ``\\`` line
-    ends; an attribute without a value (``-valid``) is True."""
-    if not isinstance(text, str):
-        raise FormatError(("moc_cfg",), f"expected text, got {type(text).__name__}")
-    out: dict[str, list[tuple[dict[str, object], int]]] = {}
-    typ: str | None = None
-    cur, start = "", 0
-    lines = text.replace("\r\n", "\n").replace("\r", "\n").split("\n")
-
-    def flush() -> None:
-        nonlocal cur
-        if cur.strip() and typ is not None:
-            out.setdefault(typ, []).append((_moc_attrs(cur, start), start))
-        cur = ""
-
-    for number, raw in enumerate(lines, 1):
-        s = raw.strip()
-        if not cur and (not s or s.startswith("#") or re.fullmatch(r"\w+:CFG_[\d.]+:.*", s)):
-            if s.startswith("#"):
-                typ = None
-            continue
-        m = re.fullmatch(r"([A-Z][A-Z0-9_]*):", s)
-        if not cur and m:
-            typ = m.group(1)
-            continue
-        if not cur:
-            start = number
-        if s.endswith("\\"):
-            cur += s[:-1] + " "
-            continue
-        cur += s
-        flush()
-    if cur.strip():
-        raise FormatError(("moc_cfg", f"line {start}"), "an instance ends with '\\' at the "
-                          "end of the file: the file was cut short")
+            out.append(("ROBOT", [("name", f'"{robot}"'), *_moc_base_frame(k.flange.as_matrix()),
+                                  ("base_frame_coordinated", f'"{u}"')]))
     return out
+
+
+def _same_moc_value(old: object, new: str) -> bool:
+    if new.startswith('"'):
+        return old == new[1:-1]
+    try:
+        return float(old) == float(new)  # type: ignore[arg-type]
+    except (TypeError, ValueError):
+        return False
+
+
+def _same_frame_attrs(inst: _MocInst, want: dict[str, str], name: str) -> set[str]:
+    """The base-frame attributes of ``inst`` that need no rewrite: each position within 1e-9
+    mm of the wanted one, the four quaternion values when the rotation is within 1e-9 deg
+    (a value read and written back differs only in float dust, 6.12323E-17 for 0)."""
+    if not all(a in want for a in _MOC_ATTRS):
+        return set()
+    old = _moc_frame(inst.attrs, inst.line, name)
+    new = matrix_from_abb([float(want[a]) * 1000.0 for a in _MOC_ATTRS[:3]],
+                          [float(want[a]) for a in _MOC_ATTRS[3:]])
+    same = {a for a, o, n in zip(_MOC_ATTRS[:3], old[:3, 3], new[:3, 3]) if abs(o - n) <= 1e-9}
+    if float(angle_between_deg(old[:3, :3], new[:3, :3])) <= 1e-9:
+        same |= set(_MOC_ATTRS[3:])
+    return same
+
+
+def _patch_moc(template: str, insts: list[tuple[str, list[tuple[str, str]]]]) -> str:
+    """``template`` (a whole MOC.cfg) with the base-frame attributes of its ``ROBOT`` and
+    ``SINGLE`` instances patched: a value that changed is rewritten in place, one the file
+    lacks (RobotWare leaves defaults out) is added on a continuation line of its instance
+    unless the default holds; every other byte kept. The mechanical units themselves are
+    the controller's configuration: a ``SINGLE`` or ``ROBOT`` the file lacks is refused."""
+    crlf = template.count("\r\n") > template.count("\n") / 2
+    text = _lf(template)
+    scanned = {(i.typ, str(i.attrs.get("name", "")).upper()): i for i in _moc_scan(text)}
+    defaults = dict(zip(_MOC_ATTRS, _MOC_DEFAULT))
+    edits: list[tuple[int, int, str]] = []
+    for typ, attrs in insts:
+        if typ == "MECHANICAL_UNIT":
+            continue
+        name = attrs[0][1][1:-1]
+        inst = scanned.get((typ, name.upper()))
+        if inst is None:
+            raise FormatError(("moc_template", f"{typ} {name}"),
+                              f'the MOC.cfg has no {typ} -name "{name}": configure the unit '
+                              "on the controller (or name the kinematic like its unit)")
+        add = []
+        same = _same_frame_attrs(inst, dict(attrs[1:]), name)
+        for a, v in attrs[1:]:
+            if a in same:
+                continue
+            if a in inst.spans:
+                if not _same_moc_value(inst.attrs[a], v):
+                    edits.append((*inst.spans[a], v))
+            elif a not in inst.attrs and not (a in defaults and float(v) == defaults[a]):
+                add.append(f"-{a} {v}")
+        if add:
+            edits.append((inst.end, inst.end, "\\\n" + "\n".join(_moc_instance(add))))
+    out = text
+    for start, end, repl in sorted(edits, reverse=True):
+        out = out[:start] + repl + out[end:]
+    return out.replace("\n", "\r\n") if crlf else out
+
+
+@dataclass
+class _MocInst:
+    """One MOC.cfg instance: its type, first line, attributes (a flag without a value is
+    True), the offsets of each value in the text and the offset where its last line ends."""
+
+    typ: str
+    line: int
+    attrs: dict[str, object]
+    spans: dict[str, tuple[int, int]]
+    end: int
 
 
 _MOC_TOKEN = re.compile(r'\s*-(\w+)(?:\s+("[^"]*"|[^\s"-][^\s"]*|-[\d.][^\s"]*))?')
 
 
-def _moc_attrs(text: str, line: int) -> dict[str, object]:
-    attrs: dict[str, object] = {}
+def _moc_scan(text: str) -> list[_MocInst]:
+    """Every instance of a MOC.cfg (LF line ends), joined across ``\\`` continuations."""
+    if not isinstance(text, str):
+        raise FormatError(("moc_cfg",), f"expected text, got {type(text).__name__}")
+    out: list[_MocInst] = []
+    typ: str | None = None
+    joined, offs, start = "", [], 0  # offs: offset in text of each joined character
     pos = 0
-    while pos < len(text.rstrip()):
-        m = _MOC_TOKEN.match(text, pos)
+    for number, raw in enumerate(text.split("\n"), 1):
+        line_at, pos = pos, pos + len(raw) + 1
+        s = raw.strip()
+        if not joined and (not s or s.startswith("#") or re.fullmatch(r"\w+:CFG_[\d.]+:.*", s)):
+            typ = None if s.startswith("#") else typ
+            continue
+        m = re.fullmatch(r"([A-Z][A-Z0-9_]*):", s)
+        if not joined and m:
+            typ = m.group(1)
+            continue
+        if not joined:
+            start = number
+        body = raw.rstrip()
+        more = body.endswith("\\")
+        body = body[:-1] if more else body
+        joined += body + " "
+        offs += [line_at + i for i in range(len(body))] + [-1]
+        if more:
+            continue
+        if typ is not None:
+            out.append(_moc_parse(joined, offs, typ, start, line_at + len(raw.rstrip())))
+        joined, offs = "", []
+    if joined.strip():
+        raise FormatError(("moc_cfg", f"line {start}"), "an instance ends with '\\' at the "
+                          "end of the file: the file was cut short")
+    return out
+
+
+def _moc_parse(joined: str, offs: list[int], typ: str, line: int, end: int) -> _MocInst:
+    attrs: dict[str, object] = {}
+    spans: dict[str, tuple[int, int]] = {}
+    pos = 0
+    while pos < len(joined.rstrip()):
+        m = _MOC_TOKEN.match(joined, pos)
         if not m:
             raise FormatError(("moc_cfg", f"line {line}"),
-                              f"cannot read {text[pos:].strip()[:40]!r}")
+                              f"cannot read {joined[pos:].strip()[:40]!r}")
         key, val = m.group(1), m.group(2)
         attrs[key] = True if val is None else val[1:-1] if val.startswith('"') else val
+        if val is not None and -1 not in offs[m.start(2):m.end(2)]:
+            spans[key] = (offs[m.start(2)], offs[m.end(2) - 1] + 1)
         pos = m.end()
-    return attrs
+    return _MocInst(typ, line, attrs, spans, end)
+
+
+def _moc_instances(text: str) -> dict[str, list[tuple[dict[str, object], int]]]:
+    """``TYPE -> [(attributes, line)]`` of a MOC.cfg (any line ends)."""
+    out: dict[str, list[tuple[dict[str, object], int]]] = {}
+    for inst in _moc_scan(_lf(text)):
+        out.setdefault(inst.typ, []).append((inst.attrs, inst.line))
+    return out
+
+
+def _lf(text: object) -> object:
+    return text.replace("\r\n", "\n").replace("\r", "\n") if isinstance(text, str) else text
 
 
 def _moc_frame(attrs: dict[str, object], line: int, name: str) -> FloatArray:
