@@ -555,3 +555,24 @@ def test_abb_patch_touches_only_the_attributes_that_changed():
     with pytest.raises(FormatError) as err:
         abb_mechanical_units([replace(k, name="STN2")], [], moc_template=moc)
     assert err.value.loc == ("moc_template", "SINGLE STN2")
+
+
+def test_kuka_reads_the_kl1500_frames_of_a_real_machine_dat():
+    """The linear-unit frames of a KR C2 on a KL1500 as a robot-forum.com post quotes its
+    $machine.dat (thread 35176, with the file's German comments): TA1KR turns z (the travel)
+    horizontal 450 mm above the root, TFLA3 turns the robot upright again."""
+    machine = "\n".join([
+        "DECL EX_KIN $EX_KIN={ET1 #ERSYS,ET2 #NONE,ET3 #NONE,ET4 #NONE,ET5 #NONE,ET6 #NONE}",
+        "DECL ET_AX $ET1_AX={TR_A1 #E1,TR_A2 #NONE,TR_A3 #NONE}", '$ET1_NAME[]="KL1500_1"',
+        "FRAME $ET1_TA1KR={X 0.0,Y 0.0,Z 450.0,A 0.0,B 0.0,C 90.0} ;FRAME ZWISCHEN A1 UND "
+        "FUSSPUNKT DER KIN IN TRAFO ET1",
+        "FRAME $ET1_TA2A1={X 0.0,Y 0.0,Z 0.0,A 0.0,B 0.0,C 0.0} ;ZWISCHEN A2 UND A1",
+        "FRAME $ET1_TA3A2={X 0.0,Y 0.0,Z 0.0,A 0.0,B 0.0,C 0.0} ;ZWISCHEN A3 UND A2",
+        "FRAME $ET1_TFLA3={X 0.0,Y 0.0,Z 0.0,A 0.0,B 0.0,C -90.0} ;ZWISCHEN FL UND A3",
+        "FRAME $ERSYSROOT={X 0.0,Y 0.0,Z 0.0,A 0.0,B 0.0,C 0.0}", ""])
+    (k,) = read_kuka_external(machine).kinematics
+    assert (k.kind, k.name, k.axes) == ("linear_unit", "KL1500_1", ("E1",))
+    for e in (0.0, 1000.0, 2750.0):
+        T = flange_matrix(k, [e])
+        assert np.allclose(T[:3, :3], np.eye(3), atol=1e-12)  # the robot stays upright
+        assert np.allclose(T[:3, 3], [0.0, -e, 450.0], atol=1e-9)  # along the rail, 450 up
