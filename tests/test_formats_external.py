@@ -29,8 +29,11 @@ from server.formats.external import (
     turntable,
 )
 from solvers.errors import CalibrationError
+from solvers.external import linear_unit as solve_linear_unit
+from solvers.external import positioner_2axis as solve_positioner
 from solvers.external import root_point
 from solvers.external.common import rz
+from solvers.external_sim import make_linear_unit, make_positioner
 from solvers.frames import Pose, angle_between_deg, invert
 
 RNG = np.random.default_rng(13)
@@ -576,3 +579,39 @@ def test_kuka_reads_the_kl1500_frames_of_a_real_machine_dat():
         T = flange_matrix(k, [e])
         assert np.allclose(T[:3, :3], np.eye(3), atol=1e-12)  # the robot stays upright
         assert np.allclose(T[:3, 3], [0.0, -e, 450.0], atol=1e-9)  # along the rail, 450 up
+
+
+# --------------------------------------------------------------------------- from the solvers
+
+
+def test_positioner_from_its_solver_predicts_the_mark_after_the_round_trip():
+    """A simulated tilt-and-turn positioner whose axes miss each other by 3 mm: the solver's
+    tilt root and T_tiltflange_turnroot, written to $machine.dat / $config.dat and read
+    back, put a mark on the table where the positioner really carries it at new axis values."""
+    pos = make_positioner(axis_offset_mm=3.0, turn_tilt_deg=0.5)
+    mark = np.array([180.0, 60.0, 0.0])
+    tilt_values, turn_values = np.array([-60.0, -20.0, 20.0, 60.0]), np.array([0, 90, 180, 270.0])
+    tilt = pos.mark(mark, tilt_values, np.zeros(4))
+    turn = pos.mark(mark, np.full(4, 20.0), turn_values)
+    res = solve_positioner(tilt, tilt_values, turn, turn_values, 20.0)
+    kin = positioner_2axis(1, "DKP_400_1", res.report.extras["tilt_root"], res.frame)
+    text = kuka_external_kinematics([kin])
+    back = read_kuka_external(text.machine_dat, text.config_dat).kinematics[0]
+    mark_in_flange = invert(flange_matrix(back, [20.0, 0.0])) @ np.r_[turn[0], 1.0]
+    for t, th in ((-45.0, 30.0), (10.0, -120.0), (55.0, 200.0)):
+        want = pos.mark(mark, np.array([t]), np.array([th]))[0]
+        assert np.allclose((flange_matrix(back, [t, th]) @ mark_in_flange)[:3], want, atol=1e-6)
+
+
+def test_linear_unit_from_its_solver_carries_the_robot_along_the_rail():
+    """A simulated rail tilted 1 deg: ext.linear_unit's T_base_rail through $machine.dat
+    and back moves the robot base so that the fixed mark appears where the rail shows it."""
+    rail = make_linear_unit(direction_tilt_deg=1.0)
+    mark = np.array([1500.0, 400.0, 200.0])
+    values = np.array([0.0, 400.0, 800.0, 1200.0, 1600.0])
+    res = solve_linear_unit(rail.mark_in_base(mark, values), values)
+    kin = linear_unit(1, "KL1500", res.frame)
+    back = read_kuka_external(kuka_external_kinematics([kin]).machine_dat).kinematics[0]
+    for e in (250.0, 1000.0, 2000.0):
+        seen = invert(flange_matrix(back, [e])) @ np.r_[rail.mark_in_base(mark, [0.0])[0], 1.0]
+        assert np.allclose(seen[:3], rail.mark_in_base(mark, [e])[0], atol=1e-6)
