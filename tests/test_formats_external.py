@@ -251,6 +251,8 @@ def test_kuka_reads_a_fragment_written_as_the_machine_data_manual_shows_it():
      ("machine_dat", "line 11", "ET1_TFLA3"), "assigned twice (first on line 10)"),
     (lambda md, cd: (md.replace("TR_A2 #NONE,TR_A3 #NONE", "TR_A2 #E2,TR_A3 #E3"), cd),
      ("machine_dat", "line 5", "$ET1_AX"), "three-axis kinematics are not supported"),
+    (lambda md, cd: (md.replace("TR_A3 #NONE", "TR_A3 #E3"), cd),
+     ("machine_dat", "line 5", "$ET1_AX.TR_A2"), "without gaps"),
 ])
 def test_kuka_reader_names_what_is_wrong(edit, loc, reason):
     text = kuka_external_kinematics([turntable(1, "TABLE", Pose(0, 0, 300, 0, 0, 0))])
@@ -410,6 +412,20 @@ def test_abb_reader_names_what_is_wrong(edit, field, reason):
         read_abb_external(edit(moc))
     assert err.value.loc[0] == "moc_cfg" and err.value.loc[-1] == field
     assert reason in err.value.reason
+
+
+def test_abb_reader_refuses_units_it_cannot_chain():
+    """Two singles of one unit that do not carry each other (two stations), or a unit riding
+    on another, are no kinematic pendant models: refused, naming the single."""
+    posi = positioner_2axis(1, "STN1", Pose(1500, 0, 600, 0, 90, 0), Pose(0, 0, 200, 0, -90, 0))
+    moc = abb_mechanical_units([posi]).moc_cfg
+    with pytest.raises(FormatError) as err:
+        read_abb_external(moc.replace('-base_frame_coordinated "STN1_1"', ""))
+    assert err.value.loc[-1] == "STN1_2.base_frame_coordinated"
+    moc = abb_mechanical_units([turntable(1, "STN1", Pose(1500, 0, 0, 0, 0, 0))]).moc_cfg
+    with pytest.raises(FormatError) as err:
+        read_abb_external(moc.rstrip("\n") + ' -base_frame_coordinated "TRACK"\n')
+    assert err.value.loc[-1] == "STN1.base_frame_coordinated" and "TRACK" in err.value.reason
 
 
 def test_abb_moc_cut_short_is_refused():

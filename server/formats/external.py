@@ -641,6 +641,12 @@ def _read_et(n: int, typ: str, mv: dict[str, _Found], defs: dict[str, tuple[Pose
     for i in (1, 2, 3):
         a = str(ax.get(f"TR_A{i}", "#NONE")).upper()
         if a == "#NONE":
+            later = [j for j in range(i + 1, 4) if str(ax.get(f"TR_A{j}", "#NONE")).upper()
+                     != "#NONE"]
+            if later:
+                raise FormatError((what, f"line {ax_found.line}", f"$ET{n}_AX.TR_A{i}"),
+                                  f"#NONE before TR_A{later[0]}: the axes are assigned from "
+                                  "left to right without gaps")
             break
         if not re.fullmatch(r"#E[1-6]", a):
             raise FormatError((what, f"line {ax_found.line}", f"$ET{n}_AX.TR_A{i}"),
@@ -1149,6 +1155,14 @@ def read_abb_external(moc_cfg: str, rapid: str | None = None,
                                   f"names the single {s!r}, which the file does not define")
         a1, l1 = singles[used[0]]
         T1 = _moc_frame(a1, l1, used[0])
+        moved_by = [str(singles[u][0].get("base_frame_coordinated", "")) for u in used]
+        if moved_by[0].strip() or (len(used) == 2 and moved_by[1] != used[0]):
+            i = 0 if moved_by[0].strip() else 1
+            raise FormatError(("moc_cfg", f"line {singles[used[i]][1]}",
+                               f"{used[i]}.base_frame_coordinated"),
+                              f"is {moved_by[i]!r}: supported are a unit on the floor and, in a "
+                              f"two-axis positioner, its second single moved by the first "
+                              f"({used[0]!r})")
         axes = tuple(f"E{axis_no + i}" for i in range(len(used)))
         axis_no += len(used)
         number = len(kins) + 1
