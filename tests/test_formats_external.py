@@ -15,13 +15,17 @@ from pathlib import Path
 
 import numpy as np
 import pytest
+from hypothesis import given, settings
+from hypothesis import strategies as st
 
+from server.bounds import unprintable
 from server.formats import FormatError, FrameEntry, export_abb, export_kuka
 from server.formats.external import (
     ExternalKinematic,
     abb_mechanical_units,
     flange_matrix,
     kuka_external_kinematics,
+    kuka_machine_name,
     linear_unit,
     positioner_2axis,
     read_abb_external,
@@ -631,3 +635,30 @@ def test_linear_unit_from_its_solver_carries_the_robot_along_the_rail():
     for e in (250.0, 1000.0, 2000.0):
         seen = invert(flange_matrix(back, [e])) @ np.r_[rail.mark_in_base(mark, [0.0])[0], 1.0]
         assert np.allclose(seen[:3], rail.mark_in_base(mark, [e])[0], atol=1e-6)
+
+
+@settings(max_examples=150, deadline=None)
+@given(kname=st.text(min_size=1, max_size=32).filter(
+           lambda s: s.strip() and not any(unprintable(c) for c in s)),
+       bname=st.text(max_size=64))
+def test_any_name_keeps_every_line_and_reads_back(kname: str, bname: str):
+    """Whatever the names (any Unicode, quotes, braces, ``;``, ``-attr``, line breaks in a
+    base's name): the texts have the lines of plain names, and each reads back with the
+    base still on its kinematic."""
+    kin = turntable(1, kname, Pose(1000, 0, 0, 0, 0, 0))
+    base = FrameEntry(5, bname, "coordinated_base", Pose(1, 2, 3, 0, 0, 0), None, kname)
+    plain = (kuka_external_kinematics([turntable(1, "T", Pose())],
+                                      [FrameEntry(5, "b", "coordinated_base", Pose(), None, "T")]),
+             abb_mechanical_units([turntable(1, "T", Pose())],
+                                  [FrameEntry(5, "b", "coordinated_base", Pose(), None, "T")]))
+    k, a = kuka_external_kinematics([kin], [base]), abb_mechanical_units([kin], [base])
+    for got, want in zip((k.machine_dat, k.config_dat, a.moc_cfg, a.rapid),
+                         (plain[0].machine_dat, plain[0].config_dat, plain[1].moc_cfg,
+                          plain[1].rapid)):
+        # a long name may continue a MOC.cfg instance on the next line ("\\"), nothing else
+        assert len(got.replace("\\\n", " ").splitlines()) == \
+            len(want.replace("\\\n", " ").splitlines())
+    kk = read_kuka_external(k.machine_dat, k.config_dat)
+    assert kk.bases[0].mech_unit == kk.kinematics[0].name == kuka_machine_name(kname)
+    aa = read_abb_external(a.moc_cfg, a.rapid)
+    assert aa.bases[0].mech_unit == aa.kinematics[0].name
