@@ -8,18 +8,24 @@ documented layouts (docs/formats.md, "External kinematics") are read.
 
 from __future__ import annotations
 
+import difflib
 import re
 from dataclasses import replace
+from pathlib import Path
 
 import numpy as np
 import pytest
+from hypothesis import example, given, settings
+from hypothesis import strategies as st
 
+from server.bounds import unprintable
 from server.formats import FormatError, FrameEntry, export_abb, export_kuka
 from server.formats.external import (
     ExternalKinematic,
     abb_mechanical_units,
     flange_matrix,
     kuka_external_kinematics,
+    kuka_machine_name,
     linear_unit,
     positioner_2axis,
     read_abb_external,
@@ -27,8 +33,11 @@ from server.formats.external import (
     turntable,
 )
 from solvers.errors import CalibrationError
+from solvers.external import linear_unit as solve_linear_unit
+from solvers.external import positioner_2axis as solve_positioner
 from solvers.external import root_point
 from solvers.external.common import rz
+from solvers.external_sim import make_linear_unit, make_positioner
 from solvers.frames import Pose, angle_between_deg, invert
 
 RNG = np.random.default_rng(13)
@@ -246,6 +255,8 @@ def test_kuka_reads_a_fragment_written_as_the_machine_data_manual_shows_it():
      ("machine_dat", "line 11", "ET1_TFLA3"), "assigned twice (first on line 10)"),
     (lambda md, cd: (md.replace("TR_A2 #NONE,TR_A3 #NONE", "TR_A2 #E2,TR_A3 #E3"), cd),
      ("machine_dat", "line 5", "$ET1_AX"), "three-axis kinematics are not supported"),
+    (lambda md, cd: (md.replace("TR_A3 #NONE", "TR_A3 #E3"), cd),
+     ("machine_dat", "line 5", "$ET1_AX.TR_A2"), "without gaps"),
 ])
 def test_kuka_reader_names_what_is_wrong(edit, loc, reason):
     text = kuka_external_kinematics([turntable(1, "TABLE", Pose(0, 0, 300, 0, 0, 0))])
@@ -407,6 +418,20 @@ def test_abb_reader_names_what_is_wrong(edit, field, reason):
     assert reason in err.value.reason
 
 
+def test_abb_reader_refuses_units_it_cannot_chain():
+    """Two singles of one unit that do not carry each other (two stations), or a unit riding
+    on another, are no kinematic pendant models: refused, naming the single."""
+    posi = positioner_2axis(1, "STN1", Pose(1500, 0, 600, 0, 90, 0), Pose(0, 0, 200, 0, -90, 0))
+    moc = abb_mechanical_units([posi]).moc_cfg
+    with pytest.raises(FormatError) as err:
+        read_abb_external(moc.replace('-base_frame_coordinated "STN1_1"', ""))
+    assert err.value.loc[-1] == "STN1_2.base_frame_coordinated"
+    moc = abb_mechanical_units([turntable(1, "STN1", Pose(1500, 0, 0, 0, 0, 0))]).moc_cfg
+    with pytest.raises(FormatError) as err:
+        read_abb_external(moc.rstrip("\n") + ' -base_frame_coordinated "TRACK"\n')
+    assert err.value.loc[-1] == "STN1.base_frame_coordinated" and "TRACK" in err.value.reason
+
+
 def test_abb_moc_cut_short_is_refused():
     moc = abb_mechanical_units([turntable(1, "STN1", Pose(1500, 0, 300, 0, 0, 0))]).moc_cfg
     with pytest.raises(FormatError, match="cut short"):
@@ -451,3 +476,190 @@ def test_setup_refuses_what_no_controller_can_hold():
             with pytest.raises(FormatError) as err:
                 write(kins, bases)
             assert err.value.loc == loc, (write.__name__, loc)
+
+
+# --------------------------------------------------------------------------- patching
+
+
+DATA = Path(__file__).parent / "data"
+CELL7 = (DATA / "kuka_cell7_config.dat").read_bytes().decode()  # MACHINE_DEF[2] "DKP_400_1"
+ABB7 = (DATA / "abb_cell7.mod").read_text()  # wTurntable on "STN1"
+MACHINE7 = "\r\n".join([
+    "&ACCESS RV", "&REL 2", "DEFDAT  $MACHINE PUBLIC", ";FOLD EXTERNAL KINEMATICS",
+    "DECL EX_KIN $EX_KIN={ET1 #EASYS,ET2 #NONE,ET3 #NONE,ET4 #NONE,ET5 #NONE,ET6 #NONE}",
+    "DECL ET_AX $ET1_AX={TR_A1 #E1,TR_A2 #E2,TR_A3 #NONE}",
+    '$ET1_NAME[]="DKP_400_1"',
+    "FRAME $ET1_TA1KR={X 0.0,Y 0.0,Z 700.000,A 0.0,B 90.0000,C 0.0}  ; tilt axis",
+    "FRAME $ET1_TA2A1={X 0.0,Y 0.0,Z -250.000,A 0.0,B -90.0000,C 0.0}",
+    "FRAME $ET1_TA3A2={X 0.0,Y 0.0,Z 0.0,A 0.0,B 0.0,C 0.0}",
+    "FRAME $ET1_TFLA3={X 0.0,Y 0.0,Z 0.0,A 0.0,B 0.0,C 0.0}",
+    "DECL ET_AX $ET2_AX={TR_A1 #NONE,TR_A2 #NONE,TR_A3 #NONE}",
+    '$ET2_NAME[]=" "',
+    "FRAME $ET2_TA1KR={X 0.0,Y 0.0,Z 0.0,A 0.0,B 0.0,C 0.0}",
+    ";ENDFOLD", "ENDDAT", ""])
+
+
+def changed_lines(a: str, b: str) -> list[str]:
+    return [d[2:].rstrip("\r\n") for d in difflib.ndiff(a.splitlines(True), b.splitlines(True))
+            if d[:1] in "+-"]
+
+
+def test_kuka_patch_without_change_gives_the_files_back_byte_for_byte():
+    setup = read_kuka_external(MACHINE7, CELL7)
+    assert [(k.name, k.kind, k.axes) for k in setup.kinematics] == \
+        [("DKP_400_1", "positioner_2axis", ("E1", "E2"))]
+    assert [b.number for b in setup.bases] == [3]
+    text = kuka_external_kinematics(setup.kinematics, setup.bases, machine_template=MACHINE7,
+                                    config_template=CELL7)
+    assert text.machine_dat == MACHINE7 and text.config_dat == CELL7
+
+
+def test_kuka_patch_touches_only_the_numbers_that_changed():
+    setup = read_kuka_external(MACHINE7, CELL7)
+    (k,) = setup.kinematics
+    moved = replace(k, root=replace(k.root, x=1850.5),
+                    axis_frames=(k.axis_frames[0], replace(k.axis_frames[1], z=-251.25)))
+    base = replace(setup.bases[0], pose=replace(setup.bases[0].pose, y=7.5))
+    text = kuka_external_kinematics([moved], [base], machine_template=MACHINE7,
+                                    config_template=CELL7)
+    assert changed_lines(MACHINE7, text.machine_dat) == [
+        "FRAME $ET1_TA2A1={X 0.0,Y 0.0,Z -250.000,A 0.0,B -90.0000,C 0.0}",
+        "FRAME $ET1_TA2A1={X 0.0,Y 0.0,Z -251.25,A 0.0,B -90.0000,C 0.0}"]
+    diff = changed_lines(CELL7, text.config_dat)
+    assert len(diff) == 4 and any(x.startswith("MACHINE_DEF[2]=") and "X 1850.5," in x
+                                  and "A 180.000," in x for x in diff)
+    assert any(x.startswith("BASE_DATA[3]=") and ",Y 7.5," in x for x in diff)
+    back = read_kuka_external(text.machine_dat, text.config_dat)
+    assert same_chain(back.kinematics[0], moved) and back.bases == [base]
+
+
+def test_kuka_patch_adds_a_kinematic_the_files_lack_and_refuses_a_full_machine_def():
+    setup = read_kuka_external(MACHINE7, CELL7)
+    table = turntable(3, "TABLE2", Pose(0, 2000, 0, 0, 0, 0), "E3")
+    with pytest.raises(FormatError) as err:
+        kuka_external_kinematics([*setup.kinematics, table], setup.bases,
+                                 machine_template=MACHINE7, config_template=CELL7)
+    assert err.value.loc[-1] == "MACHINE_DEF" and "MACHINE_DEF[4]" in err.value.reason
+    text = kuka_external_kinematics([*setup.kinematics, table], setup.bases,
+                                    machine_template=MACHINE7)
+    added = changed_lines(MACHINE7, text.machine_dat)
+    assert "DECL ET_AX $ET3_AX={TR_A1 #E3,TR_A2 #NONE,TR_A3 #NONE}" in added
+    assert text.machine_dat.index("$ET3_TFLA3") < text.machine_dat.index("ENDDAT")
+    assert "\r\nFRAME $ET3_TA1KR" in text.machine_dat  # the file's own line ends
+
+
+def test_abb_patch_touches_only_the_attributes_that_changed():
+    moc = "\r\n".join([
+        "MOC:CFG_1.0:5:0::", "#", "MECHANICAL_UNIT:", "",
+        '      -name "STN1" -use_run_enable "" -use_single_0 "STN1" -stand_by_state ', "#",
+        "ROBOT:", "", '      -name "ROB_1" -use_robot_type "ROB1_6700_2.65_235"\\',
+        "      -base_mass 55.1 -use_lin_jog \"ROB1\"", "#", "SINGLE:", "",
+        '      -name "STN1" -use_single_type "STN1" -use_joint "STN1"\\',
+        "      -base_frame_pos_x 1.85 -base_frame_orient_u0 6.12323E-17\\",
+        "      -base_frame_orient_u3 1", ""])
+    setup = read_abb_external(moc, ABB7)
+    (k,) = setup.kinematics
+    assert (k.name, k.kind) == ("STN1", "turntable")
+    assert same_pose(k.root, Pose(1850, 0, 0, 180, 0, 0), 1e-9, 1e-6)
+    assert [b.number for b in setup.bases] == [3] and setup.bases[0].mech_unit == "STN1"
+    same = abb_mechanical_units([k], setup.bases, moc_template=moc, rapid_template=ABB7)
+    assert same.moc_cfg == moc and same.rapid == ABB7
+    moved = replace(k, root=Pose.from_matrix(k.root.as_matrix() @ Pose(0, 0, 12.5, 0, 0, 0)
+                                             .as_matrix()))
+    base = replace(setup.bases[0], pose=replace(setup.bases[0].pose, z=450.0))
+    text = abb_mechanical_units([moved], [base], moc_template=moc, rapid_template=ABB7)
+    diff = changed_lines(moc, text.moc_cfg)
+    assert diff == ["      -base_frame_orient_u3 1", "      -base_frame_orient_u3 1\\",
+                    "      -base_frame_pos_z 0.0125"]
+    back = read_abb_external(text.moc_cfg, text.rapid)
+    assert same_chain(back.kinematics[0], moved, 1e-6)
+    assert same_pose(back.bases[0].pose, base.pose)
+    assert len(changed_lines(ABB7, text.rapid)) == 2  # the wTurntable line, before and after
+    with pytest.raises(FormatError) as err:
+        abb_mechanical_units([replace(k, name="STN2")], [], moc_template=moc)
+    assert err.value.loc == ("moc_template", "SINGLE STN2")
+
+
+def test_kuka_reads_the_kl1500_frames_of_a_real_machine_dat():
+    """The linear-unit frames of a KR C2 on a KL1500 as a robot-forum.com post quotes its
+    $machine.dat (thread 35176, with the file's German comments): TA1KR turns z (the travel)
+    horizontal 450 mm above the root, TFLA3 turns the robot upright again."""
+    machine = "\n".join([
+        "DECL EX_KIN $EX_KIN={ET1 #ERSYS,ET2 #NONE,ET3 #NONE,ET4 #NONE,ET5 #NONE,ET6 #NONE}",
+        "DECL ET_AX $ET1_AX={TR_A1 #E1,TR_A2 #NONE,TR_A3 #NONE}", '$ET1_NAME[]="KL1500_1"',
+        "FRAME $ET1_TA1KR={X 0.0,Y 0.0,Z 450.0,A 0.0,B 0.0,C 90.0} ;FRAME ZWISCHEN A1 UND "
+        "FUSSPUNKT DER KIN IN TRAFO ET1",
+        "FRAME $ET1_TA2A1={X 0.0,Y 0.0,Z 0.0,A 0.0,B 0.0,C 0.0} ;ZWISCHEN A2 UND A1",
+        "FRAME $ET1_TA3A2={X 0.0,Y 0.0,Z 0.0,A 0.0,B 0.0,C 0.0} ;ZWISCHEN A3 UND A2",
+        "FRAME $ET1_TFLA3={X 0.0,Y 0.0,Z 0.0,A 0.0,B 0.0,C -90.0} ;ZWISCHEN FL UND A3",
+        "FRAME $ERSYSROOT={X 0.0,Y 0.0,Z 0.0,A 0.0,B 0.0,C 0.0}", ""])
+    (k,) = read_kuka_external(machine).kinematics
+    assert (k.kind, k.name, k.axes) == ("linear_unit", "KL1500_1", ("E1",))
+    for e in (0.0, 1000.0, 2750.0):
+        T = flange_matrix(k, [e])
+        assert np.allclose(T[:3, :3], np.eye(3), atol=1e-12)  # the robot stays upright
+        assert np.allclose(T[:3, 3], [0.0, -e, 450.0], atol=1e-9)  # along the rail, 450 up
+
+
+# --------------------------------------------------------------------------- from the solvers
+
+
+def test_positioner_from_its_solver_predicts_the_mark_after_the_round_trip():
+    """A simulated tilt-and-turn positioner whose axes miss each other by 3 mm: the solver's
+    tilt root and T_tiltflange_turnroot, written to $machine.dat / $config.dat and read
+    back, put a mark on the table where the positioner really carries it at new axis values."""
+    pos = make_positioner(axis_offset_mm=3.0, turn_tilt_deg=0.5)
+    mark = np.array([180.0, 60.0, 0.0])
+    tilt_values, turn_values = np.array([-60.0, -20.0, 20.0, 60.0]), np.array([0, 90, 180, 270.0])
+    tilt = pos.mark(mark, tilt_values, np.zeros(4))
+    turn = pos.mark(mark, np.full(4, 20.0), turn_values)
+    res = solve_positioner(tilt, tilt_values, turn, turn_values, 20.0)
+    kin = positioner_2axis(1, "DKP_400_1", res.report.extras["tilt_root"], res.frame)
+    text = kuka_external_kinematics([kin])
+    back = read_kuka_external(text.machine_dat, text.config_dat).kinematics[0]
+    mark_in_flange = invert(flange_matrix(back, [20.0, 0.0])) @ np.r_[turn[0], 1.0]
+    for t, th in ((-45.0, 30.0), (10.0, -120.0), (55.0, 200.0)):
+        want = pos.mark(mark, np.array([t]), np.array([th]))[0]
+        assert np.allclose((flange_matrix(back, [t, th]) @ mark_in_flange)[:3], want, atol=1e-6)
+
+
+def test_linear_unit_from_its_solver_carries_the_robot_along_the_rail():
+    """A simulated rail tilted 1 deg: ext.linear_unit's T_base_rail through $machine.dat
+    and back moves the robot base so that the fixed mark appears where the rail shows it."""
+    rail = make_linear_unit(direction_tilt_deg=1.0)
+    mark = np.array([1500.0, 400.0, 200.0])
+    values = np.array([0.0, 400.0, 800.0, 1200.0, 1600.0])
+    res = solve_linear_unit(rail.mark_in_base(mark, values), values)
+    kin = linear_unit(1, "KL1500", res.frame)
+    back = read_kuka_external(kuka_external_kinematics([kin]).machine_dat).kinematics[0]
+    for e in (250.0, 1000.0, 2000.0):
+        seen = invert(flange_matrix(back, [e])) @ np.r_[rail.mark_in_base(mark, [0.0])[0], 1.0]
+        assert np.allclose(seen[:3], rail.mark_in_base(mark, [e])[0], atol=1e-6)
+
+
+@settings(max_examples=150, deadline=None)
+@given(kname=st.text(min_size=1, max_size=32).filter(
+           lambda s: s.strip() and not any(unprintable(c) for c in s)),
+       bname=st.text(max_size=64))
+@example(kname='"', bname="\n")  # nothing of the name is left: KUKA writes ET1
+def test_any_name_keeps_every_line_and_reads_back(kname: str, bname: str):
+    """Whatever the names (any Unicode, quotes, braces, ``;``, ``-attr``, line breaks in a
+    base's name): the texts have the lines of plain names, and each reads back with the
+    base still on its kinematic."""
+    kin = turntable(1, kname, Pose(1000, 0, 0, 0, 0, 0))
+    base = FrameEntry(5, bname, "coordinated_base", Pose(1, 2, 3, 0, 0, 0), None, kname)
+    plain = (kuka_external_kinematics([turntable(1, "T", Pose())],
+                                      [FrameEntry(5, "b", "coordinated_base", Pose(), None, "T")]),
+             abb_mechanical_units([turntable(1, "T", Pose())],
+                                  [FrameEntry(5, "b", "coordinated_base", Pose(), None, "T")]))
+    k, a = kuka_external_kinematics([kin], [base]), abb_mechanical_units([kin], [base])
+    for got, want in zip((k.machine_dat, k.config_dat, a.moc_cfg, a.rapid),
+                         (plain[0].machine_dat, plain[0].config_dat, plain[1].moc_cfg,
+                          plain[1].rapid)):
+        # a long name may continue a MOC.cfg instance on the next line ("\\"), nothing else
+        assert len(got.replace("\\\n", " ").splitlines()) == \
+            len(want.replace("\\\n", " ").splitlines())
+    kk = read_kuka_external(k.machine_dat, k.config_dat)
+    assert kk.bases[0].mech_unit == kk.kinematics[0].name == (kuka_machine_name(kname) or "ET1")
+    aa = read_abb_external(a.moc_cfg, a.rapid)
+    assert aa.bases[0].mech_unit == aa.kinematics[0].name

@@ -594,9 +594,10 @@ def import_kuka(text: str) -> list[FrameEntry]:
 # --------------------------------------------------------------------------- patching
 
 
-def _patch_numbers(rhs: str, target: dict[tuple[str, ...], float], line: int, fld: str) -> str:
-    """``rhs`` with each number at key path ``target`` replaced when its value differs; every
-    other character (spacing, digits of unchanged numbers) kept."""
+def _patch_numbers(rhs: str, target: dict[tuple[str, ...], object], line: int, fld: str) -> str:
+    """``rhs`` with each value at key path ``target`` replaced when it differs (a number by
+    value, an ``#ENUM`` ignoring case, a ``"string"`` by its trimmed text); every other
+    character (spacing, digits of unchanged numbers) kept."""
     out, pos, path = [], 0, []  # type: ignore[var-annotated]
     key = None
     for kind, tok, start, end in _tokens(rhs, line, fld):
@@ -607,14 +608,25 @@ def _patch_numbers(rhs: str, target: dict[tuple[str, ...], float], line: int, fl
             key = None
         elif kind == "}" and path:
             path.pop()
-        elif kind == "num" and key is not None:
-            want = target.get((*path, key))
-            if want is not None and float(tok) != want:
-                out.append(rhs[pos:start] + krl_real(want))
+        elif kind in ("num", "enum", "str") and key is not None:
+            new = _changed_token(kind, tok, target.get((*path, key)))
+            if new is not None:
+                out.append(rhs[pos:start] + new)
                 pos = end
             key = None
     out.append(rhs[pos:])
     return "".join(out)
+
+
+def _changed_token(kind: str, tok: str, want: object) -> str | None:
+    """The text for ``want`` where the token ``tok`` stands, or None when it already holds it."""
+    if want is None:
+        return None
+    if kind == "num":
+        return None if float(tok) == want else krl_real(want)  # type: ignore[arg-type]
+    if kind == "enum":
+        return None if tok.upper() == str(want).upper() else str(want)
+    return None if tok[1:-1].strip() == str(want) else f'"{want or " "}"'
 
 
 def _frame_target(p: Pose | None, prefix: tuple[str, ...] = ()) -> dict:
