@@ -133,6 +133,7 @@ def create_app(settings: Settings | None = None) -> FastAPI:
                                      "fixed-tool and workpiece calibration menus as a REST "
                                      "service.")
     audit.install()
+    tokens.install_cache_hook()  # a revocation flushed here empties the token cache
     engine = make_engine(settings.db_url)
     check_schema(engine, settings.migrate)
     app.state.engine = engine
