@@ -10,7 +10,7 @@ from collections.abc import Sequence
 from datetime import datetime
 from typing import Any
 
-from sqlalchemy import select
+from sqlalchemy import Connection, select
 from sqlalchemy.exc import IntegrityError
 from sqlalchemy.orm import Session
 
@@ -66,12 +66,13 @@ def create_controller(db: Session, name: str, robot_key: str | None, custom_robo
     return c
 
 
-def max_id(db: Session) -> int:
+def max_id(db: Session | Connection) -> int:
     """The largest row id of this backend (ids are INTEGER primary keys)."""
-    return MAX_ID_OF.get(db.get_bind().dialect.name, MAX_ID)
+    bind = db.get_bind() if isinstance(db, Session) else db
+    return MAX_ID_OF.get(bind.dialect.name, MAX_ID)
 
 
-def _row_id(value: int, db: Session | None = None) -> int | None:
+def _row_id(value: int, db: Session | Connection | None = None) -> int | None:
     """``value`` if it can be a row id of ``db``'s backend, else None (not found, rather than an
     overflow in the driver or the server)."""
     limit = MAX_ID if db is None else max_id(db)
@@ -83,7 +84,7 @@ def _get(db: Session, model: type, row_id: int) -> Any:
     return None if rid is None else db.get(model, rid)
 
 
-def lock_controller(db: Session, controller_id: int) -> None:
+def lock_controller(db: Session | Connection, controller_id: int) -> None:
     """Start the request's write: lock the controller's row until commit (``SELECT ... FOR
     UPDATE`` on PostgreSQL; on SQLite the transaction's ``BEGIN IMMEDIATE`` already locks the
     database). Everything the request then reads of this controller is what it will change."""

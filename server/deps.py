@@ -1,27 +1,38 @@
-"""Request dependencies: one DB session per request, committed when the route returns.
+"""Request dependencies: one DB session per request, committed before the answer is sent.
 
 A request that writes is atomic in the database, whichever process or host serves it: on
 SQLite its transaction starts with ``BEGIN IMMEDIATE`` (SQLite's write lock, across processes),
-and on PostgreSQL it first locks its controller's row (``SELECT ... FOR UPDATE``), so every
-read-modify-write of one controller (jog, touch-up, compute, save, import, restore, physics,
-slot edits) runs after the previous one committed. Correctness rests on those database locks
-alone, across processes and hosts.
+and on PostgreSQL it first locks its controller's row (``SELECT ... FOR UPDATE``, run by the
+session's ``after_begin`` hook as the transaction starts), so every read-modify-write of one
+controller (jog, touch-up, compute, save, import, restore, physics, slot edits) runs after the
+previous one committed. Correctness rests on those database locks alone, across processes and
+hosts.
+
+**One thread per transaction.** A sync route that takes a session (``SessionDep``) runs its
+whole transaction in its one worker thread: the transaction begins at the route's first query
+and :func:`one_thread` commits it (or rolls it back) in that thread as the route returns. The
+write lock is then held only while the route computes, never while a request waits for the
+event loop to hand it its next thread. What is left for :func:`get_session` (an async route,
+an Idempotency-Key claim) still takes its own thread.
 
 In the process, writers pass a bulkhead first (``app.state.writers``, an ``asyncio.Semaphore``
 of :func:`writer_slots`): a request waiting for a database lock holds a thread of the
-threadpool, and if every thread waited, the request holding the lock could not get one to
-finish and commit. The bulkhead keeps threads free for it (and for readers); it orders
-nothing and protects no data.
+threadpool, and if every thread waited, none would be left for readers. The bulkhead keeps
+threads free; it orders nothing and protects no data.
 """
 
 from __future__ import annotations
 
 import asyncio
-from collections.abc import AsyncIterator
-from typing import Annotated
+import functools
+import inspect
+from collections.abc import AsyncIterator, Callable
+from typing import Annotated, Any
 
-from fastapi import Depends, Request
-from sqlalchemy.orm import Session
+from fastapi import Depends, FastAPI, Request
+from fastapi.routing import APIRoute
+from sqlalchemy import event
+from sqlalchemy.orm import Session, sessionmaker
 from starlette.concurrency import run_in_threadpool
 
 from db import crud
@@ -30,6 +41,7 @@ from server import idempotency
 
 READ_METHODS = ("GET", "HEAD", "OPTIONS")
 WRITER_SLOTS = {"sqlite": 1}  # SQLite has one writer per database anyway; PostgreSQL: 8
+LOCK_ON_BEGIN = "pendant_lock_controller"  # Session.info: the controller to lock at BEGIN
 
 
 def writer_slots(dialect: str) -> int:
@@ -37,23 +49,35 @@ def writer_slots(dialect: str) -> int:
     return WRITER_SLOTS.get(dialect, 8)
 
 
-def _begin_write(db: Session, request: Request) -> None:
-    """Lock what the request will change (PostgreSQL: its controller's row), claim its
-    Idempotency-Key in the same transaction."""
+def _controller_id(request: Request) -> int | None:
     cid = request.path_params.get("controller_id")
-    if cid is not None:
-        try:
-            crud.lock_controller(db, int(cid))
-        except ValueError:
-            pass  # not an int: the route's own validation answers 422
+    try:
+        return None if cid is None else int(cid)
+    except ValueError:
+        return None  # not an int: the route's own validation answers 422
+
+
+def _begin_write(db: Session, request: Request) -> None:
+    """Begin the transaction now (its ``after_begin`` hook locks the controller), and claim the
+    request's Idempotency-Key in it."""
+    db.connection()
     idempotency.claim(db, request)
+
+
+def _lock_at_begin(db: Session, _transaction: object, connection: Any) -> None:
+    """``after_begin`` of every request session: a writer locks its controller's row first
+    (PostgreSQL; SQLite's ``BEGIN IMMEDIATE`` has already locked the database)."""
+    cid = db.info.pop(LOCK_ON_BEGIN, None)
+    if cid is not None and connection.dialect.name != "sqlite":
+        crud.lock_controller(connection, cid)
 
 
 async def get_session(request: Request) -> AsyncIterator[Session]:
     """A session bound to this app's engine; commit on success, roll back on any error.
 
     Used with ``scope="function"`` so the commit happens before the response is sent: a
-    client that got a 2xx finds its change in the DB.
+    client that got a 2xx finds its change in the DB. A sync route's own thread commits
+    (:func:`one_thread`); this dependency commits what is still open after the route.
     """
     maker = request.app.state.sessionmaker
     writes = request.method not in READ_METHODS
@@ -63,12 +87,18 @@ async def get_session(request: Request) -> AsyncIterator[Session]:
     db: Session = write_session(maker) if writes else maker()
     try:
         if writes:
-            await idempotency.read_body(request)
-            await run_in_threadpool(_begin_write, db, request)
+            cid = _controller_id(request)
+            if cid is not None:
+                db.info[LOCK_ON_BEGIN] = cid
+            if idempotency.has_key(request):
+                await idempotency.read_body(request)
+                await run_in_threadpool(_begin_write, db, request)
         yield db
-        await run_in_threadpool(db.commit)
+        if db.in_transaction():
+            await run_in_threadpool(db.commit)
     except BaseException:
-        await run_in_threadpool(db.rollback)
+        if db.in_transaction():
+            await run_in_threadpool(db.rollback)
         raise
     finally:
         db.close()
@@ -76,9 +106,44 @@ async def get_session(request: Request) -> AsyncIterator[Session]:
             slots.release()
 
 
+def one_thread(endpoint: Callable[..., Any]) -> Callable[..., Any]:
+    """``endpoint`` (a sync route) committing the session it was given in its own thread, as it
+    returns (rolled back if it raises). Async routes are returned unchanged."""
+    if getattr(endpoint, "_one_thread", False) or inspect.iscoroutinefunction(endpoint):
+        return endpoint
+
+    @functools.wraps(endpoint)
+    def run(*args: Any, **kwargs: Any) -> Any:
+        db = next((v for v in kwargs.values() if isinstance(v, Session)), None)
+        if db is None:
+            return endpoint(*args, **kwargs)
+        try:
+            result = endpoint(*args, **kwargs)
+            db.commit()
+        except BaseException:
+            db.rollback()
+            raise
+        return result
+
+    run._one_thread = True  # type: ignore[attr-defined]
+    return run
+
+
+def in_one_thread(router: Any) -> None:
+    """Wrap every sync route of ``router`` with :func:`one_thread` (before it is included:
+    FastAPI builds the served route from ``route.endpoint``)."""
+    for route in router.routes:
+        if isinstance(route, APIRoute):
+            route.endpoint = one_thread(route.endpoint)
+            route.dependant.call = one_thread(route.dependant.call)
+
+
 SessionDep = Annotated[Session, Depends(get_session, scope="function")]
 
 
-def install(app) -> None:  # noqa: ANN001
-    """The writers' bulkhead of ``app`` (see the module's docstring)."""
+def install(app: FastAPI) -> None:
+    """The writers' bulkhead of ``app`` and the row lock at BEGIN (see the module's docstring)."""
     app.state.writers = asyncio.Semaphore(writer_slots(app.state.engine.dialect.name))
+    maker: sessionmaker = app.state.sessionmaker
+    if not event.contains(maker, "after_begin", _lock_at_begin):
+        event.listen(maker, "after_begin", _lock_at_begin)

@@ -66,6 +66,11 @@ def _key(request: Request) -> str | None:
     return key
 
 
+def has_key(request: Request) -> bool:
+    """Whether the request is a POST that sent an Idempotency-Key (valid or not)."""
+    return request.method == "POST" and HEADER in request.headers
+
+
 async def read_body(request: Request) -> None:
     """Read (and cache) the body before the threadpool needs it for the fingerprint."""
     if _key(request) is not None:
