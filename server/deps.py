@@ -29,8 +29,10 @@ import inspect
 from collections.abc import AsyncIterator, Callable
 from typing import Annotated, Any
 
-from fastapi import Depends, FastAPI, Request
+from fastapi import Depends, FastAPI, Request, Response
+from fastapi.datastructures import DefaultPlaceholder
 from fastapi.routing import APIRoute
+from pydantic import BaseModel
 from sqlalchemy import event
 from sqlalchemy.orm import Session, sessionmaker
 from starlette.concurrency import run_in_threadpool
@@ -106,9 +108,33 @@ async def get_session(request: Request) -> AsyncIterator[Session]:
             slots.release()
 
 
-def one_thread(endpoint: Callable[..., Any]) -> Callable[..., Any]:
+def _answer(result: Any, route: APIRoute, kwargs: dict[str, Any]) -> Any:
+    """``result`` as the JSON response FastAPI would send (same bytes, status and headers of
+    the route's ``response`` parameter), when it is exactly the route's response model; else
+    ``result`` unchanged for FastAPI to serialize."""
+    if (type(result) is not route.response_model or not isinstance(result, BaseModel)
+            or not route.response_model_by_alias or route.response_model_include is not None
+            or route.response_model_exclude is not None or route.response_model_exclude_unset
+            or route.response_model_exclude_defaults or route.response_model_exclude_none
+            or not isinstance(route.response_class, DefaultPlaceholder)):
+        return result
+    sub = next((v for v in kwargs.values() if isinstance(v, Response)), None)
+    status = (sub.status_code if sub is not None else None) or route.status_code or 200
+    answer = Response(result.__pydantic_serializer__.to_json(result, by_alias=True),
+                      status_code=status, media_type="application/json")
+    if sub is not None:
+        answer.headers.raw.extend(sub.headers.raw)
+    return answer
+
+
+SessionDep = Annotated[Session, Depends(get_session, scope="function")]
+
+
+def one_thread(endpoint: Callable[..., Any], route: APIRoute | None = None) -> Callable[..., Any]:
     """``endpoint`` (a sync route) committing the session it was given in its own thread, as it
-    returns (rolled back if it raises). Async routes are returned unchanged."""
+    returns (rolled back if it raises); with ``route``, a result of the route's response model
+    is also serialized there (FastAPI would validate it again in another thread). Async routes
+    are returned unchanged."""
     if getattr(endpoint, "_one_thread", False) or inspect.iscoroutinefunction(endpoint):
         return endpoint
 
@@ -116,14 +142,15 @@ def one_thread(endpoint: Callable[..., Any]) -> Callable[..., Any]:
     def run(*args: Any, **kwargs: Any) -> Any:
         db = next((v for v in kwargs.values() if isinstance(v, Session)), None)
         if db is None:
-            return endpoint(*args, **kwargs)
-        try:
             result = endpoint(*args, **kwargs)
-            db.commit()
-        except BaseException:
-            db.rollback()
-            raise
-        return result
+        else:
+            try:
+                result = endpoint(*args, **kwargs)
+                db.commit()
+            except BaseException:
+                db.rollback()
+                raise
+        return result if route is None else _answer(result, route, kwargs)
 
     run._one_thread = True  # type: ignore[attr-defined]
     return run
@@ -134,11 +161,8 @@ def in_one_thread(router: Any) -> None:
     FastAPI builds the served route from ``route.endpoint``)."""
     for route in router.routes:
         if isinstance(route, APIRoute):
-            route.endpoint = one_thread(route.endpoint)
-            route.dependant.call = one_thread(route.dependant.call)
-
-
-SessionDep = Annotated[Session, Depends(get_session, scope="function")]
+            route.endpoint = one_thread(route.endpoint, route)
+            route.dependant.call = route.endpoint
 
 
 def install(app: FastAPI) -> None:
