@@ -12,13 +12,14 @@ from typing import Any
 
 from sqlalchemy import Connection, select
 from sqlalchemy.exc import IntegrityError
-from sqlalchemy.orm import Session
+from sqlalchemy.orm import Session, joinedload
 
 from db.models import (BASE_SLOTS, TOOL_SLOTS, CalibSession, Controller, ControllerFile,
                        EntryHistory, FrameEntry, StoredDocument, TaughtPoint, utcnow)
 from db.outbox import emit
 
 SLOTS = {"tool": TOOL_SLOTS, "base": BASE_SLOTS}
+SESSION_WITH_POINTS = [joinedload(CalibSession.points)]
 MAX_ID = 2**63 - 1  # SQLite INTEGER: a larger id cannot be a row (and would overflow the driver)
 MAX_ID_OF = {"postgresql": 2**31 - 1}  # INTEGER primary keys of other backends (PostgreSQL int4)
 DEFAULT_KIND = {"tool": "tool", "base": "base"}
@@ -79,9 +80,9 @@ def _row_id(value: int, db: Session | Connection | None = None) -> int | None:
     return value if -limit <= value <= limit else None
 
 
-def _get(db: Session, model: type, row_id: int) -> Any:
+def _get(db: Session, model: type, row_id: int, **kw: Any) -> Any:
     rid = _row_id(row_id, db)
-    return None if rid is None else db.get(model, rid)
+    return None if rid is None else db.get(model, rid, **kw)
 
 
 def lock_controller(db: Session | Connection, controller_id: int) -> None:
@@ -248,7 +249,8 @@ def open_session(db: Session, controller: Controller, method: str, target_table:
 
 
 def get_session(db: Session, controller_id: int, session_id: int) -> CalibSession:
-    s = _get(db, CalibSession, session_id)
+    """The session with its taught points (one query: every use of a session reads them)."""
+    s = _get(db, CalibSession, session_id, options=SESSION_WITH_POINTS)
     if s is None or s.controller_id != controller_id:
         raise NotFound(("session_id",), f"no session {session_id} on controller {controller_id}")
     return s
@@ -291,8 +293,7 @@ def put_point(db: Session, s: CalibSession, step: int, source: str, pose_values:
     p.vx_mm_s, p.vy_mm_s, p.vz_mm_s = ((None, None, None) if velocity_mm_s is None
                                        else (float(v) for v in velocity_mm_s))
     _stale(s)
-    db.flush()
-    return p
+    return p  # flushed with the request's next query, ETag or commit
 
 
 def touch_session(s: CalibSession) -> None:

@@ -15,6 +15,12 @@ write lock is then held only while the route computes, never while a request wai
 event loop to hand it its next thread. What is left for :func:`get_session` (an async route,
 an Idempotency-Key claim) still takes its own thread.
 
+**The SQLite writers' queue.** On SQLite a writer takes its turn in
+``db.session.WriterQueue`` (a thread lock, then a ``flock`` shared by the processes of the
+host) in the route's thread, before ``BEGIN IMMEDIATE``, and gives it up after its commit:
+the next writer goes at once, instead of polling in SQLite's busy handler. It orders writers
+and guards nothing (``BEGIN IMMEDIATE`` does).
+
 In the process, writers pass a bulkhead first (``app.state.writers``, an ``asyncio.Semaphore``
 of :func:`writer_slots`): a request waiting for a database lock holds a thread of the
 threadpool, and if every thread waited, none would be left for readers. The bulkhead keeps
@@ -38,12 +44,13 @@ from sqlalchemy.orm import Session, sessionmaker
 from starlette.concurrency import run_in_threadpool
 
 from db import crud
-from db.session import write_session
+from db.session import WriterTurn, write_session, writer_queue
 from server import idempotency
 
 READ_METHODS = ("GET", "HEAD", "OPTIONS")
-WRITER_SLOTS = {"sqlite": 1}  # SQLite has one writer per database anyway; PostgreSQL: 8
 LOCK_ON_BEGIN = "pendant_lock_controller"  # Session.info: the controller to lock at BEGIN
+TURN = "pendant_writer_turn"  # Session.info: the request's db.session.WriterTurn (SQLite)
+WRITER_SLOTS = {"sqlite": 4}  # threads of one process waiting in SQLite's writer queue; PG: 8
 
 
 def writer_slots(dialect: str) -> int:
@@ -59,9 +66,26 @@ def _controller_id(request: Request) -> int | None:
         return None  # not an int: the route's own validation answers 422
 
 
+def _turn(db: Session) -> WriterTurn | None:
+    return db.info.get(TURN)
+
+
+def _take_turn(db: Session) -> None:
+    turn = _turn(db)
+    if turn is not None:
+        turn.take()
+
+
+def _give_turn(db: Session) -> None:
+    turn = _turn(db)
+    if turn is not None:
+        turn.give()
+
+
 def _begin_write(db: Session, request: Request) -> None:
     """Begin the transaction now (its ``after_begin`` hook locks the controller), and claim the
     request's Idempotency-Key in it."""
+    _take_turn(db)
     db.connection()
     idempotency.claim(db, request)
 
@@ -92,20 +116,32 @@ async def get_session(request: Request) -> AsyncIterator[Session]:
             cid = _controller_id(request)
             if cid is not None:
                 db.info[LOCK_ON_BEGIN] = cid
+            queue = request.app.state.writer_queue
+            if queue is not None:
+                db.info[TURN] = WriterTurn(queue)
             if idempotency.has_key(request):
                 await idempotency.read_body(request)
                 await run_in_threadpool(_begin_write, db, request)
         yield db
         if db.in_transaction():
-            await run_in_threadpool(db.commit)
+            await run_in_threadpool(_end, db, db.commit)
     except BaseException:
         if db.in_transaction():
-            await run_in_threadpool(db.rollback)
+            await run_in_threadpool(_end, db, db.rollback)
         raise
     finally:
+        _give_turn(db)  # a turn taken by a route that never ended its transaction
         db.close()
         if slots is not None:
             slots.release()
+
+
+def _end(db: Session, finish: Callable[[], None]) -> None:
+    """Commit or roll back (``finish``), then give the writer's turn to the next."""
+    try:
+        finish()
+    finally:
+        _give_turn(db)
 
 
 def _answer(result: Any, route: APIRoute, kwargs: dict[str, Any]) -> Any:
@@ -144,12 +180,15 @@ def one_thread(endpoint: Callable[..., Any], route: APIRoute | None = None) -> C
         if db is None:
             result = endpoint(*args, **kwargs)
         else:
+            _take_turn(db)  # a SQLite writer waits here, not polling in BEGIN IMMEDIATE
             try:
                 result = endpoint(*args, **kwargs)
                 db.commit()
             except BaseException:
                 db.rollback()
                 raise
+            finally:
+                _give_turn(db)
         return result if route is None else _answer(result, route, kwargs)
 
     run._one_thread = True  # type: ignore[attr-defined]
@@ -168,6 +207,7 @@ def in_one_thread(router: Any) -> None:
 def install(app: FastAPI) -> None:
     """The writers' bulkhead of ``app`` and the row lock at BEGIN (see the module's docstring)."""
     app.state.writers = asyncio.Semaphore(writer_slots(app.state.engine.dialect.name))
+    app.state.writer_queue = writer_queue(app.state.engine)
     maker: sessionmaker = app.state.sessionmaker
     if not event.contains(maker, "after_begin", _lock_at_begin):
         event.listen(maker, "after_begin", _lock_at_begin)
