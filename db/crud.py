@@ -10,7 +10,7 @@ from collections.abc import Sequence
 from datetime import datetime
 from typing import Any
 
-from sqlalchemy import Connection, select
+from sqlalchemy import Connection, bindparam, select
 from sqlalchemy.exc import IntegrityError
 from sqlalchemy.orm import Session, joinedload
 
@@ -20,6 +20,9 @@ from db.outbox import emit
 
 SLOTS = {"tool": TOOL_SLOTS, "base": BASE_SLOTS}
 SESSION_WITH_POINTS = [joinedload(CalibSession.points)]
+ENTRY = select(FrameEntry).where(  # one slot (built once: every slot read and write uses it)
+    FrameEntry.controller_id == bindparam("controller_id"),
+    FrameEntry.entry_table == bindparam("table"), FrameEntry.number == bindparam("number"))
 MAX_ID = 2**63 - 1  # SQLite INTEGER: a larger id cannot be a row (and would overflow the driver)
 MAX_ID_OF = {"postgresql": 2**31 - 1}  # INTEGER primary keys of other backends (PostgreSQL int4)
 DEFAULT_KIND = {"tool": "tool", "base": "base"}
@@ -125,9 +128,7 @@ def get_entry(db: Session, controller_id: int, table: str, number: int) -> Frame
         raise NotFound(("number",), f"{table} slots are numbered 1..{SLOTS[table]}, got {number}")
     if _row_id(controller_id, db) is None:
         raise NotFound(("controller_id",), f"no controller {controller_id}")
-    e = db.scalar(select(FrameEntry).where(FrameEntry.controller_id == controller_id,
-                                           FrameEntry.entry_table == table,
-                                           FrameEntry.number == number))
+    e = db.scalar(ENTRY, {"controller_id": controller_id, "table": table, "number": number})
     if e is None:
         raise NotFound(("number",), f"no {table} {number} on controller {controller_id}")
     return e

@@ -32,13 +32,14 @@ from __future__ import annotations
 import asyncio
 import functools
 import inspect
+import typing
 from collections.abc import AsyncIterator, Callable
 from typing import Annotated, Any
 
 from fastapi import Depends, FastAPI, Request, Response
 from fastapi.datastructures import DefaultPlaceholder
 from fastapi.routing import APIRoute
-from pydantic import BaseModel
+from pydantic import BaseModel, TypeAdapter
 from sqlalchemy import event
 from sqlalchemy.orm import Session, sessionmaker
 from starlette.concurrency import run_in_threadpool
@@ -144,19 +145,38 @@ def _end(db: Session, finish: Callable[[], None]) -> None:
         _give_turn(db)
 
 
+def _model_of(route: APIRoute) -> type[BaseModel] | None:
+    """The model of a route answering a model or a list of one (else None)."""
+    model = route.response_model
+    if typing.get_origin(model) is list:
+        (model,) = typing.get_args(model) or (None,)
+    return model if isinstance(model, type) and issubclass(model, BaseModel) else None
+
+
+@functools.lru_cache(maxsize=512)
+def _adapter(model: Any) -> TypeAdapter:
+    return TypeAdapter(model)
+
+
 def _answer(result: Any, route: APIRoute, kwargs: dict[str, Any]) -> Any:
     """``result`` as the JSON response FastAPI would send (same bytes, status and headers of
-    the route's ``response`` parameter), when it is exactly the route's response model; else
-    ``result`` unchanged for FastAPI to serialize."""
-    if (type(result) is not route.response_model or not isinstance(result, BaseModel)
-            or not route.response_model_by_alias or route.response_model_include is not None
+    the route's ``response`` parameter), when it is exactly the route's response model (or a
+    list of exactly its model); else ``result`` unchanged for FastAPI to serialize."""
+    model = _model_of(route)
+    if (model is None or not route.response_model_by_alias
+            or route.response_model_include is not None
             or route.response_model_exclude is not None or route.response_model_exclude_unset
             or route.response_model_exclude_defaults or route.response_model_exclude_none
             or not isinstance(route.response_class, DefaultPlaceholder)):
         return result
+    if model is route.response_model:
+        if type(result) is not model:
+            return result
+    elif type(result) is not list or any(type(item) is not model for item in result):
+        return result
     sub = next((v for v in kwargs.values() if isinstance(v, Response)), None)
     status = (sub.status_code if sub is not None else None) or route.status_code or 200
-    answer = Response(result.__pydantic_serializer__.to_json(result, by_alias=True),
+    answer = Response(_adapter(route.response_model).dump_json(result, by_alias=True),
                       status_code=status, media_type="application/json")
     if sub is not None:
         answer.headers.raw.extend(sub.headers.raw)
