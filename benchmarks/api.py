@@ -10,11 +10,13 @@ phases with ``wrk`` (C, two threads, ``--connections`` 20):
 - ``controllers``: ``GET /controllers``;
 - ``tool``: ``GET /controllers/1/tools/1``.
 
-It prints requests/s and wrk's latency percentiles per phase, and any non-2xx answer. Then, with
+It prints requests/s, wrk's latency percentiles, any non-2xx answer, the service's CPU time
+per request (user + system of the uvicorn processes over the phase, from /proc: unlike req/s it
+hardly moves with what else runs on the machine) and the load average, per phase. Then, with
 PostgreSQL (Debian's ``pg_virtualenv`` makes a throw-away cluster; ``--no-pg`` skips it), the
 touch-up phase again at the best worker count. The last line is
 ``rps=<touch-up req/s, SQLite, best worker count> p99_ms=<its p99> pg_rps=<touch-up req/s on
-PostgreSQL, or n/a>``.
+PostgreSQL, or n/a> read_rps=<the slower of the two reads, at its best worker count>``.
 
     python benchmarks/api.py [--workers 1,2] [--connections 20] [--seconds 10] [--no-pg]
 
@@ -108,6 +110,24 @@ def start(db_url: str, port: int, workers: int) -> subprocess.Popen:
     return subprocess.Popen(cmd, cwd=ROOT, env=env, stdout=subprocess.DEVNULL)
 
 
+def service_pids(proc: subprocess.Popen) -> list[int]:
+    """uvicorn's process and its workers (``--workers N`` > 1 starts N children)."""
+    out = subprocess.run(["pgrep", "-P", str(proc.pid)], capture_output=True, text=True).stdout
+    return [proc.pid, *(int(p) for p in out.split())]
+
+
+def cpu_seconds(pids: list[int]) -> float:
+    """User + system CPU time of ``pids`` so far (Linux /proc; 0 where it cannot be read)."""
+    total = 0.0
+    for pid in pids:
+        try:
+            fields = Path(f"/proc/{pid}/stat").read_text().rsplit(")", 1)[1].split()
+        except OSError:
+            continue
+        total += (int(fields[11]) + int(fields[12])) / os.sysconf("SC_CLK_TCK")
+    return total
+
+
 def stop(proc: subprocess.Popen) -> None:
     proc.terminate()
     try:
@@ -171,10 +191,14 @@ def run_service(db_url: str, workers: int, args: argparse.Namespace, phases: tup
         urls = {"touch-up": (base, script), "controllers": (f"{base}/controllers", None),
                 "tool": (f"{base}/controllers/1/tools/1", None)}
         out = {}
+        pids = service_pids(proc)
         for name in phases:
             url, s = urls[name]
             wrk(url, args.connections, min(2.0, args.seconds), s)  # warm-up
+            cpu0 = cpu_seconds(pids)
             out[name] = wrk(url, args.connections, args.seconds, s)
+            out[name]["cpu_ms"] = (cpu_seconds(pids) - cpu0) * 1e3 / max(out[name]["requests"], 1)
+            out[name]["load"] = os.getloadavg()[0]
         return out
     finally:
         stop(proc)
@@ -208,10 +232,11 @@ def pg_touch_rps(workers: int, args: argparse.Namespace) -> str:
 def show(title: str, rows: dict[str, dict]) -> None:
     print(title)
     print(f"  {'phase':12s} {'requests':>9s} {'non2xx':>7s} {'req/s':>8s} {'p50_ms':>7s} "
-          f"{'p90_ms':>7s} {'p99_ms':>7s}")
+          f"{'p90_ms':>7s} {'p99_ms':>7s} {'cpu_ms/req':>10s} {'load':>5s}")
     for name, r in rows.items():
         print(f"  {name:12s} {r['requests']:9.0f} {r['non2xx']:7.0f} {r['rps']:8.1f} "
-              f"{r['p50_ms']:7.1f} {r['p90_ms']:7.1f} {r['p99_ms']:7.1f}  {r['socket_errors']}")
+              f"{r['p50_ms']:7.1f} {r['p90_ms']:7.1f} {r['p99_ms']:7.1f} {r['cpu_ms']:10.2f} "
+              f"{r['load']:5.2f}  {r['socket_errors']}")
 
 
 def main() -> int:
@@ -246,9 +271,12 @@ def main() -> int:
     best = max(counts, key=lambda n: results[n]["touch-up"]["rps"])
     pg = pg_touch_rps(best, args)
     t = results[best]["touch-up"]
+    reads = {n: min(results[n]["controllers"]["rps"], results[n]["tool"]["rps"]) for n in counts}
+    best_read = max(counts, key=lambda n: reads[n])
     print(f"load average after: {' '.join(f'{v:.2f}' for v in os.getloadavg())}")
-    print(f"best worker count for touch-up: {best}")
-    print(f"rps={t['rps']:.1f} p99_ms={t['p99_ms']:.1f} pg_rps={pg}")
+    print(f"best worker count for touch-up: {best}, for reads: {best_read}")
+    print(f"rps={t['rps']:.1f} p99_ms={t['p99_ms']:.1f} pg_rps={pg} "
+          f"read_rps={reads[best_read]:.1f}")
     return 0
 
 

@@ -10,9 +10,9 @@ from collections.abc import Sequence
 from datetime import datetime
 from typing import Any
 
-from sqlalchemy import select
+from sqlalchemy import Connection, bindparam, select
 from sqlalchemy.exc import IntegrityError
-from sqlalchemy.orm import Session
+from sqlalchemy.orm import Session, joinedload
 
 from db.models import (BASE_SLOTS, TOOL_SLOTS, CalibSession, Controller, ControllerFile,
                        EntryHistory, ExternalKinematic, FrameEntry, StoredDocument, TaughtPoint,
@@ -20,6 +20,10 @@ from db.models import (BASE_SLOTS, TOOL_SLOTS, CalibSession, Controller, Control
 from db.outbox import emit
 
 SLOTS = {"tool": TOOL_SLOTS, "base": BASE_SLOTS}
+SESSION_WITH_POINTS = [joinedload(CalibSession.points)]
+ENTRY = select(FrameEntry).where(  # one slot (built once: every slot read and write uses it)
+    FrameEntry.controller_id == bindparam("controller_id"),
+    FrameEntry.entry_table == bindparam("table"), FrameEntry.number == bindparam("number"))
 MAX_ID = 2**63 - 1  # SQLite INTEGER: a larger id cannot be a row (and would overflow the driver)
 MAX_ID_OF = {"postgresql": 2**31 - 1}  # INTEGER primary keys of other backends (PostgreSQL int4)
 DEFAULT_KIND = {"tool": "tool", "base": "base"}
@@ -67,24 +71,25 @@ def create_controller(db: Session, name: str, robot_key: str | None, custom_robo
     return c
 
 
-def max_id(db: Session) -> int:
+def max_id(db: Session | Connection) -> int:
     """The largest row id of this backend (ids are INTEGER primary keys)."""
-    return MAX_ID_OF.get(db.get_bind().dialect.name, MAX_ID)
+    bind = db.get_bind() if isinstance(db, Session) else db
+    return MAX_ID_OF.get(bind.dialect.name, MAX_ID)
 
 
-def _row_id(value: int, db: Session | None = None) -> int | None:
+def _row_id(value: int, db: Session | Connection | None = None) -> int | None:
     """``value`` if it can be a row id of ``db``'s backend, else None (not found, rather than an
     overflow in the driver or the server)."""
     limit = MAX_ID if db is None else max_id(db)
     return value if -limit <= value <= limit else None
 
 
-def _get(db: Session, model: type, row_id: int) -> Any:
+def _get(db: Session, model: type, row_id: int, **kw: Any) -> Any:
     rid = _row_id(row_id, db)
-    return None if rid is None else db.get(model, rid)
+    return None if rid is None else db.get(model, rid, **kw)
 
 
-def lock_controller(db: Session, controller_id: int) -> None:
+def lock_controller(db: Session | Connection, controller_id: int) -> None:
     """Start the request's write: lock the controller's row until commit (``SELECT ... FOR
     UPDATE`` on PostgreSQL; on SQLite the transaction's ``BEGIN IMMEDIATE`` already locks the
     database). Everything the request then reads of this controller is what it will change."""
@@ -124,9 +129,7 @@ def get_entry(db: Session, controller_id: int, table: str, number: int) -> Frame
         raise NotFound(("number",), f"{table} slots are numbered 1..{SLOTS[table]}, got {number}")
     if _row_id(controller_id, db) is None:
         raise NotFound(("controller_id",), f"no controller {controller_id}")
-    e = db.scalar(select(FrameEntry).where(FrameEntry.controller_id == controller_id,
-                                           FrameEntry.entry_table == table,
-                                           FrameEntry.number == number))
+    e = db.scalar(ENTRY, {"controller_id": controller_id, "table": table, "number": number})
     if e is None:
         raise NotFound(("number",), f"no {table} {number} on controller {controller_id}")
     return e
@@ -266,7 +269,8 @@ def open_session(db: Session, controller: Controller, method: str, target_table:
 
 
 def get_session(db: Session, controller_id: int, session_id: int) -> CalibSession:
-    s = _get(db, CalibSession, session_id)
+    """The session with its taught points (one query: every use of a session reads them)."""
+    s = _get(db, CalibSession, session_id, options=SESSION_WITH_POINTS)
     if s is None or s.controller_id != controller_id:
         raise NotFound(("session_id",), f"no session {session_id} on controller {controller_id}")
     return s
@@ -312,8 +316,7 @@ def put_point(db: Session, s: CalibSession, step: int, source: str, pose_values:
     p.vx_mm_s, p.vy_mm_s, p.vz_mm_s = ((None, None, None) if velocity_mm_s is None
                                        else (float(v) for v in velocity_mm_s))
     _stale(s)
-    db.flush()
-    return p
+    return p  # flushed with the request's next query, ETag or commit
 
 
 def touch_session(s: CalibSession) -> None:

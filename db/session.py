@@ -15,6 +15,8 @@ from __future__ import annotations
 
 import contextlib
 import fcntl
+import os
+import threading
 from collections.abc import Iterator
 from pathlib import Path
 
@@ -62,6 +64,77 @@ def make_sessionmaker(engine: Engine) -> sessionmaker[Session]:
 def write_session(maker: sessionmaker[Session]) -> Session:
     """A session whose transaction is a writer's: ``BEGIN IMMEDIATE`` on SQLite."""
     return maker(bind=maker.kw["bind"].execution_options(**WRITE))
+
+
+class WriterQueue:
+    """Where the writers of one SQLite database wait their turn in this process: a thread lock,
+    then an exclusive ``flock`` on ``<db>.writer.lock`` (so the processes of one host queue too).
+
+    A waiting writer sleeps until the holder's turn ends and then goes at once: without the
+    queue, a writer that finds the database locked polls in SQLite's busy handler (sleeps of 1,
+    2, 5, ... 100 ms), which is most of a p99 under load. The queue orders writers and protects
+    nothing: the data stays guarded by ``BEGIN IMMEDIATE``, so a writer that does not queue (a
+    job worker, the CLI) is still correct, it only polls. The kernel drops a ``flock`` with the
+    process that held it (kill -9 included).
+    """
+
+    def __init__(self, path: str | None) -> None:
+        self.path = path
+        self._lock = threading.Lock()
+        self._fd: int | None = None
+
+    def acquire(self) -> None:
+        self._lock.acquire()
+        try:
+            if self.path is not None:
+                if self._fd is None:
+                    self._fd = os.open(self.path, os.O_RDWR | os.O_CREAT, 0o600)
+                fcntl.flock(self._fd, fcntl.LOCK_EX)
+        except BaseException:
+            self._lock.release()
+            raise
+
+    def release(self) -> None:
+        try:
+            if self._fd is not None:
+                fcntl.flock(self._fd, fcntl.LOCK_UN)
+        finally:
+            self._lock.release()
+
+
+class WriterTurn:
+    """One request's turn in its database's :class:`WriterQueue` (taken at most once)."""
+
+    def __init__(self, queue: WriterQueue) -> None:
+        self.queue, self.held = queue, False
+
+    def take(self) -> None:
+        if not self.held:
+            self.queue.acquire()
+            self.held = True
+
+    def give(self) -> None:
+        if self.held:
+            self.held = False
+            self.queue.release()
+
+
+_QUEUES: dict[str, WriterQueue] = {}
+_QUEUES_LOCK = threading.Lock()
+
+
+def writer_queue(engine: Engine) -> WriterQueue | None:
+    """The :class:`WriterQueue` of a SQLite ``engine`` in this process (None for PostgreSQL,
+    whose writers lock rows, not the database)."""
+    if engine.dialect.name != "sqlite":
+        return None
+    path = engine.url.database
+    on_disk = bool(path) and path != ":memory:" and not path.startswith("file:")
+    key = os.path.abspath(path) if on_disk else f"memory:{id(engine.pool)}"
+    with _QUEUES_LOCK:
+        if key not in _QUEUES:
+            _QUEUES[key] = WriterQueue(f"{key}.writer.lock" if on_disk else None)
+        return _QUEUES[key]
 
 
 def is_postgres(db: Session | Engine) -> bool:

@@ -138,6 +138,7 @@ def create_app(settings: Settings | None = None) -> FastAPI:
                                      "fixed-tool and workpiece calibration menus as a REST "
                                      "service.")
     audit.install()
+    tokens.install_cache_hook()  # a revocation flushed here empties the token cache
     engine = make_engine(settings.db_url)
     check_schema(engine, settings.migrate)
     app.state.engine = engine
@@ -150,10 +151,9 @@ def create_app(settings: Settings | None = None) -> FastAPI:
     _install_health(app)
     app.add_middleware(BodyLimits)
     for module in (controllers, robot, tool, base, fixed_tool, workpiece, sessions, export,
-                   analysis, jobs, auth_routes, webhooks):
+                   analysis, jobs, auth_routes, webhooks, plan_router, external_router):
+        deps.in_one_thread(module.router)  # a route's transaction runs in its one thread
         app.include_router(module.router)
-    app.include_router(plan_router.router)
-    app.include_router(external_router.router)
     bootstrap(app)
     if settings.cors_origins:
         from starlette.middleware.cors import CORSMiddleware

@@ -1,35 +1,57 @@
-"""Request dependencies: one DB session per request, committed when the route returns.
+"""Request dependencies: one DB session per request, committed before the answer is sent.
 
 A request that writes is atomic in the database, whichever process or host serves it: on
 SQLite its transaction starts with ``BEGIN IMMEDIATE`` (SQLite's write lock, across processes),
-and on PostgreSQL it first locks its controller's row (``SELECT ... FOR UPDATE``), so every
-read-modify-write of one controller (jog, touch-up, compute, save, import, restore, physics,
-slot edits) runs after the previous one committed. Correctness rests on those database locks
-alone, across processes and hosts.
+and on PostgreSQL it first locks its controller's row (``SELECT ... FOR UPDATE``, run by the
+session's ``after_begin`` hook as the transaction starts), so every read-modify-write of one
+controller (jog, touch-up, compute, save, import, restore, physics, slot edits) runs after the
+previous one committed. Correctness rests on those database locks alone, across processes and
+hosts.
+
+**One thread per transaction.** A sync route that takes a session (``SessionDep``) runs its
+whole transaction in its one worker thread: the transaction begins at the route's first query
+and :func:`one_thread` commits it (or rolls it back) in that thread as the route returns. The
+write lock is then held only while the route computes, never while a request waits for the
+event loop to hand it its next thread. What is left for :func:`get_session` (an async route,
+an Idempotency-Key claim) still takes its own thread.
+
+**The SQLite writers' queue.** On SQLite a writer takes its turn in
+``db.session.WriterQueue`` (a thread lock, then a ``flock`` shared by the processes of the
+host) in the route's thread, before ``BEGIN IMMEDIATE``, and gives it up after its commit:
+the next writer goes at once, instead of polling in SQLite's busy handler. It orders writers
+and guards nothing (``BEGIN IMMEDIATE`` does).
 
 In the process, writers pass a bulkhead first (``app.state.writers``, an ``asyncio.Semaphore``
 of :func:`writer_slots`): a request waiting for a database lock holds a thread of the
-threadpool, and if every thread waited, the request holding the lock could not get one to
-finish and commit. The bulkhead keeps threads free for it (and for readers); it orders
-nothing and protects no data.
+threadpool, and if every thread waited, none would be left for readers. The bulkhead keeps
+threads free; it orders nothing and protects no data.
 """
 
 from __future__ import annotations
 
 import asyncio
-from collections.abc import AsyncIterator
-from typing import Annotated
+import functools
+import inspect
+import typing
+from collections.abc import AsyncIterator, Callable
+from typing import Annotated, Any
 
-from fastapi import Depends, Request
-from sqlalchemy.orm import Session
+from fastapi import Depends, FastAPI, Request, Response
+from fastapi.datastructures import DefaultPlaceholder
+from fastapi.routing import APIRoute
+from pydantic import BaseModel, TypeAdapter
+from sqlalchemy import event
+from sqlalchemy.orm import Session, sessionmaker
 from starlette.concurrency import run_in_threadpool
 
 from db import crud
-from db.session import write_session
+from db.session import WriterTurn, write_session, writer_queue
 from server import idempotency
 
 READ_METHODS = ("GET", "HEAD", "OPTIONS")
-WRITER_SLOTS = {"sqlite": 1}  # SQLite has one writer per database anyway; PostgreSQL: 8
+LOCK_ON_BEGIN = "pendant_lock_controller"  # Session.info: the controller to lock at BEGIN
+TURN = "pendant_writer_turn"  # Session.info: the request's db.session.WriterTurn (SQLite)
+WRITER_SLOTS = {"sqlite": 4}  # threads of one process waiting in SQLite's writer queue; PG: 8
 
 
 def writer_slots(dialect: str) -> int:
@@ -37,23 +59,52 @@ def writer_slots(dialect: str) -> int:
     return WRITER_SLOTS.get(dialect, 8)
 
 
-def _begin_write(db: Session, request: Request) -> None:
-    """Lock what the request will change (PostgreSQL: its controller's row), claim its
-    Idempotency-Key in the same transaction."""
+def _controller_id(request: Request) -> int | None:
     cid = request.path_params.get("controller_id")
-    if cid is not None:
-        try:
-            crud.lock_controller(db, int(cid))
-        except ValueError:
-            pass  # not an int: the route's own validation answers 422
+    try:
+        return None if cid is None else int(cid)
+    except ValueError:
+        return None  # not an int: the route's own validation answers 422
+
+
+def _turn(db: Session) -> WriterTurn | None:
+    return db.info.get(TURN)
+
+
+def _take_turn(db: Session) -> None:
+    turn = _turn(db)
+    if turn is not None:
+        turn.take()
+
+
+def _give_turn(db: Session) -> None:
+    turn = _turn(db)
+    if turn is not None:
+        turn.give()
+
+
+def _begin_write(db: Session, request: Request) -> None:
+    """Begin the transaction now (its ``after_begin`` hook locks the controller), and claim the
+    request's Idempotency-Key in it."""
+    _take_turn(db)
+    db.connection()
     idempotency.claim(db, request)
+
+
+def _lock_at_begin(db: Session, _transaction: object, connection: Any) -> None:
+    """``after_begin`` of every request session: a writer locks its controller's row first
+    (PostgreSQL; SQLite's ``BEGIN IMMEDIATE`` has already locked the database)."""
+    cid = db.info.pop(LOCK_ON_BEGIN, None)
+    if cid is not None and connection.dialect.name != "sqlite":
+        crud.lock_controller(connection, cid)
 
 
 async def get_session(request: Request) -> AsyncIterator[Session]:
     """A session bound to this app's engine; commit on success, roll back on any error.
 
     Used with ``scope="function"`` so the commit happens before the response is sent: a
-    client that got a 2xx finds its change in the DB.
+    client that got a 2xx finds its change in the DB. A sync route's own thread commits
+    (:func:`one_thread`); this dependency commits what is still open after the route.
     """
     maker = request.app.state.sessionmaker
     writes = request.method not in READ_METHODS
@@ -63,22 +114,120 @@ async def get_session(request: Request) -> AsyncIterator[Session]:
     db: Session = write_session(maker) if writes else maker()
     try:
         if writes:
-            await idempotency.read_body(request)
-            await run_in_threadpool(_begin_write, db, request)
+            cid = _controller_id(request)
+            if cid is not None:
+                db.info[LOCK_ON_BEGIN] = cid
+            queue = request.app.state.writer_queue
+            if queue is not None:
+                db.info[TURN] = WriterTurn(queue)
+            if idempotency.has_key(request):
+                await idempotency.read_body(request)
+                await run_in_threadpool(_begin_write, db, request)
         yield db
-        await run_in_threadpool(db.commit)
+        if db.in_transaction():
+            await run_in_threadpool(_end, db, db.commit)
     except BaseException:
-        await run_in_threadpool(db.rollback)
+        if db.in_transaction():
+            await run_in_threadpool(_end, db, db.rollback)
         raise
     finally:
+        _give_turn(db)  # a turn taken by a route that never ended its transaction
         db.close()
         if slots is not None:
             slots.release()
 
 
+def _end(db: Session, finish: Callable[[], None]) -> None:
+    """Commit or roll back (``finish``), then give the writer's turn to the next."""
+    try:
+        finish()
+    finally:
+        _give_turn(db)
+
+
+def _model_of(route: APIRoute) -> type[BaseModel] | None:
+    """The model of a route answering a model or a list of one (else None)."""
+    model = route.response_model
+    if typing.get_origin(model) is list:
+        (model,) = typing.get_args(model) or (None,)
+    return model if isinstance(model, type) and issubclass(model, BaseModel) else None
+
+
+@functools.lru_cache(maxsize=512)
+def _adapter(model: Any) -> TypeAdapter:
+    return TypeAdapter(model)
+
+
+def _answer(result: Any, route: APIRoute, kwargs: dict[str, Any]) -> Any:
+    """``result`` as the JSON response FastAPI would send (same bytes, status and headers of
+    the route's ``response`` parameter), when it is exactly the route's response model (or a
+    list of exactly its model); else ``result`` unchanged for FastAPI to serialize."""
+    model = _model_of(route)
+    if (model is None or not route.response_model_by_alias
+            or route.response_model_include is not None
+            or route.response_model_exclude is not None or route.response_model_exclude_unset
+            or route.response_model_exclude_defaults or route.response_model_exclude_none
+            or not isinstance(route.response_class, DefaultPlaceholder)):
+        return result
+    if model is route.response_model:
+        if type(result) is not model:
+            return result
+    elif type(result) is not list or any(type(item) is not model for item in result):
+        return result
+    sub = next((v for v in kwargs.values() if isinstance(v, Response)), None)
+    status = (sub.status_code if sub is not None else None) or route.status_code or 200
+    answer = Response(_adapter(route.response_model).dump_json(result, by_alias=True),
+                      status_code=status, media_type="application/json")
+    if sub is not None:
+        answer.headers.raw.extend(sub.headers.raw)
+    return answer
+
+
 SessionDep = Annotated[Session, Depends(get_session, scope="function")]
 
 
-def install(app) -> None:  # noqa: ANN001
-    """The writers' bulkhead of ``app`` (see the module's docstring)."""
+def one_thread(endpoint: Callable[..., Any], route: APIRoute | None = None) -> Callable[..., Any]:
+    """``endpoint`` (a sync route) committing the session it was given in its own thread, as it
+    returns (rolled back if it raises); with ``route``, a result of the route's response model
+    is also serialized there (FastAPI would validate it again in another thread). Async routes
+    are returned unchanged."""
+    if getattr(endpoint, "_one_thread", False) or inspect.iscoroutinefunction(endpoint):
+        return endpoint
+
+    @functools.wraps(endpoint)
+    def run(*args: Any, **kwargs: Any) -> Any:
+        db = next((v for v in kwargs.values() if isinstance(v, Session)), None)
+        if db is None:
+            result = endpoint(*args, **kwargs)
+        else:
+            _take_turn(db)  # a SQLite writer waits here, not polling in BEGIN IMMEDIATE
+            try:
+                result = endpoint(*args, **kwargs)
+                db.commit()
+            except BaseException:
+                db.rollback()
+                raise
+            finally:
+                _give_turn(db)
+        return result if route is None else _answer(result, route, kwargs)
+
+    run._one_thread = True  # type: ignore[attr-defined]
+    return run
+
+
+def in_one_thread(router: Any) -> None:
+    """Wrap every sync route of ``router`` with :func:`one_thread` (before it is included:
+    FastAPI builds the served route from ``route.endpoint``)."""
+    for route in router.routes:
+        if isinstance(route, APIRoute):
+            route.endpoint = one_thread(route.endpoint, route)
+            route.dependant.call = route.endpoint
+
+
+def install(app: FastAPI) -> None:
+    """The writers' bulkhead of ``app`` and the row lock at BEGIN (see the module's docstring)."""
     app.state.writers = asyncio.Semaphore(writer_slots(app.state.engine.dialect.name))
+    app.state.writer_queue = writer_queue(app.state.engine)
+    maker: sessionmaker = app.state.sessionmaker
+    if not event.contains(maker, "after_begin", _lock_at_begin):
+        event.listen(maker, "after_begin", _lock_at_begin)

@@ -29,7 +29,7 @@ from sqlalchemy.orm import Session
 from starlette.types import ASGIApp, Message, Receive, Scope, Send
 
 from db.models import IdempotencyKey, utcnow
-from db.session import write_session
+from db.session import WriterQueue, WriterTurn, write_session
 
 HEADER = "idempotency-key"
 KEEP = timedelta(hours=24)
@@ -64,6 +64,11 @@ def _key(request: Request) -> str | None:
         raise IdempotencyError(400, f"Idempotency-Key must be 1..{MAX_KEY} printable "
                                     "characters (a UUID, say)")
     return key
+
+
+def has_key(request: Request) -> bool:
+    """Whether the request is a POST that sent an Idempotency-Key (valid or not)."""
+    return request.method == "POST" and HEADER in request.headers
 
 
 async def read_body(request: Request) -> None:
@@ -109,14 +114,20 @@ def claim(db: Session, request: Request) -> None:
     raise Replay(row)
 
 
-def _store(maker: Any, key: str, status: int, headers: dict[str, str], body: bytes) -> None:
+def _store(maker: Any, queue: WriterQueue | None, key: str, status: int,
+           headers: dict[str, str], body: bytes) -> None:
+    turn = None if queue is None else WriterTurn(queue)
     db = write_session(maker)
     try:
+        if turn is not None:
+            turn.take()  # SQLite: in the writers' queue (db.session.WriterQueue)
         db.execute(update(IdempotencyKey).where(IdempotencyKey.key == key)
                    .values(status=status, headers=headers, body=body))
         db.commit()
     finally:
         db.close()
+        if turn is not None:
+            turn.give()
 
 
 class IdempotencyMiddleware:
@@ -151,7 +162,8 @@ class IdempotencyMiddleware:
         from starlette.concurrency import run_in_threadpool
 
         async with self.fastapi_app.state.writers:  # the writers' bulkhead (server.deps)
-            await run_in_threadpool(_store, self.fastapi_app.state.sessionmaker, key,
+            await run_in_threadpool(_store, self.fastapi_app.state.sessionmaker,
+                                    self.fastapi_app.state.writer_queue, key,
                                     int(start["status"]), kept, b"".join(chunks))
 
 

@@ -38,25 +38,28 @@ def _refuse(status: int, loc: tuple[str, ...], msg: str, kind: str) -> HTTPExcep
                          headers=headers)
 
 
-def _actor(request: Request) -> tokens.Actor | None:
-    """The actor of the request's credential (None: no credential); raises 401 on a bad one."""
+def _bearer_secret(header: str) -> str:
+    scheme, _, secret = header.partition(" ")
+    if scheme.lower() != "bearer" or not secret.strip():
+        raise _refuse(401, ("header", "authorization"),
+                      "must be 'Bearer <token>' (pendant tokens create)", "unauthorized")
+    return secret.strip()
+
+
+def _bearer_actor(request: Request, digest: str) -> tokens.Actor:
+    """The actor of a bearer token not in the cache (read from the DB, in a thread)."""
+    actor = tokens.verified_actor(request.app.state.sessionmaker, digest)
+    if actor is None:
+        raise _refuse(401, ("header", "authorization"),
+                      "unknown, expired or revoked token", "unauthorized")
+    return actor
+
+
+def _cookie_actor(request: Request, cookie: str) -> tokens.Actor:
+    """The actor of the browser login's cookie; raises 401 on an ended one, 403 on a command
+    without the login's CSRF token."""
     settings = request.app.state.settings
-    header = request.headers.get("authorization")
-    cookie = request.cookies.get(SESSION_COOKIE)
     with request.app.state.sessionmaker() as db:
-        if header is not None:
-            scheme, _, secret = header.partition(" ")
-            if scheme.lower() != "bearer" or not secret.strip():
-                raise _refuse(401, ("header", "authorization"),
-                              "must be 'Bearer <token>' (pendant tokens create)", "unauthorized")
-            found = tokens.actor_of_token(db, secret.strip())
-            if found is None:
-                raise _refuse(401, ("header", "authorization"),
-                              "unknown, expired or revoked token", "unauthorized")
-            user, role = found
-            return tokens.Actor(user.name, role.name, frozenset(role.permissions), "api")
-        if cookie is None:
-            return None
         found_web = tokens.web_session(db, cookie)
         if found_web is None:
             raise _refuse(401, ("cookie", SESSION_COOKIE),
@@ -73,6 +76,22 @@ def _actor(request: Request) -> tokens.Actor | None:
                 ws.last_seen_at = now  # a command keeps the login awake; reads do not
                 db.commit()
         return actor
+
+
+async def _actor(request: Request) -> tokens.Actor | None:
+    """The actor of the request's credential (None: no credential); raises 401 on a bad one.
+
+    A bearer token verified in the last second comes from ``tokens.CACHE`` without a thread
+    or a query (docs/security.md, "Credentials")."""
+    header = request.headers.get("authorization")
+    if header is not None:
+        digest = tokens.sha256(_bearer_secret(header))
+        actor = tokens.CACHE.get(digest)
+        return actor or await run_in_threadpool(_bearer_actor, request, digest)
+    cookie = request.cookies.get(SESSION_COOKIE)
+    if cookie is None:
+        return None
+    return await run_in_threadpool(_cookie_actor, request, cookie)
 
 
 async def authorize(request: Request) -> None:
@@ -92,7 +111,7 @@ async def authorize(request: Request) -> None:
     if not settings.auth:
         actor = tokens.Actor("no-auth", "Administrator", frozenset(PERMISSIONS), "api")
     else:
-        actor = await run_in_threadpool(_actor, request)
+        actor = await _actor(request)
         if actor is None:
             raise _refuse(401, ("header", "authorization"), "log in: a bearer token "
                           "(pendant tokens create) or the pendant's login page", "unauthorized")

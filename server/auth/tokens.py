@@ -9,10 +9,12 @@ from __future__ import annotations
 
 import hashlib
 import secrets
+import threading
+import time
 from dataclasses import dataclass
 from datetime import datetime, timedelta
 
-from sqlalchemy import select
+from sqlalchemy import event, select
 from sqlalchemy.orm import Session
 
 from db.auth_models import ApiToken, Role, User, WebSession
@@ -22,6 +24,8 @@ from server.auth.permissions import DEFAULT_ROLES, IDLE_ROLE, PERMISSIONS
 
 TOKEN_PREFIX = "pdt_"
 BOOTSTRAP_USER = "admin"
+CACHE_TTL_S = 1.0  # a verified token is trusted this long by one process (docs/security.md)
+CACHE_MAX = 4096  # tokens remembered per process (the oldest entries go first)
 
 
 def new_secret() -> str:
@@ -165,14 +169,86 @@ def _active(u: User | None) -> bool:
 
 def actor_of_token(db: Session, secret: str) -> tuple[User, Role] | None:
     """The user and role of a valid (known, unexpired, unrevoked) bearer token, else None."""
-    t = db.scalar(select(ApiToken).where(ApiToken.token_sha256 == sha256(secret)))
+    found = _actor_of_digest(db, sha256(secret))
+    return None if found is None else found[0]
+
+
+def _actor_of_digest(db: Session, digest: str) -> tuple[tuple[User, Role], datetime | None] | None:
+    """((user, role), the token's expiry) of a valid token by its SHA-256, else None."""
+    t = db.scalar(select(ApiToken).where(ApiToken.token_sha256 == digest))
     now = utcnow()
     if t is None or t.revoked_at is not None or (t.expires_at and t.expires_at <= now):
         return None
     u = db.get(User, t.user_id)
     if not _active(u):
         return None
-    return u, db.get(Role, u.role)  # type: ignore[union-attr, return-value]
+    return (u, db.get(Role, u.role)), t.expires_at  # type: ignore[union-attr, return-value]
+
+
+class TokenCache:
+    """Verified bearer tokens of this process, each trusted for at most ``CACHE_TTL_S``.
+
+    A request whose token was verified less than a second ago skips the three lookups (token,
+    user, role) and the thread they need. The bound on revocation: a change of a token, user
+    or role flushed by *this* process empties the cache at once (a ``before_flush`` hook), so
+    here a revoked token is refused on its next request; another process (the CLI, another
+    worker or host) refuses it within ``CACHE_TTL_S``. An entry never outlives the token's own
+    expiry. Keys are the secrets' SHA-256, never the secrets.
+    """
+
+    def __init__(self, ttl_s: float = CACHE_TTL_S, max_entries: int = CACHE_MAX) -> None:
+        self.ttl_s, self.max_entries = ttl_s, max_entries
+        self._entries: dict[str, tuple[float, Actor]] = {}
+        self._lock = threading.Lock()
+
+    def get(self, digest: str) -> Actor | None:
+        hit = self._entries.get(digest)
+        if hit is None or hit[0] <= time.monotonic():
+            return None
+        return hit[1]
+
+    def put(self, digest: str, actor: Actor, expires_at: datetime | None) -> None:
+        until = time.monotonic() + self.ttl_s
+        if expires_at is not None:  # never trusted past the token's own expiry
+            until = min(until, time.monotonic() + (expires_at - utcnow()).total_seconds())
+        with self._lock:
+            if len(self._entries) >= self.max_entries:
+                self._entries.pop(next(iter(self._entries)))
+            self._entries[digest] = (until, actor)
+
+    def clear(self) -> None:
+        with self._lock:
+            self._entries.clear()
+
+
+CACHE = TokenCache()
+_AUTH_ROWS = (ApiToken, User, Role)
+
+
+def _forget_on_change(db: Session, _ctx: object, _instances: object) -> None:
+    """Empty :data:`CACHE` when a flush changes a token, user or role (revocations included)."""
+    if any(isinstance(o, _AUTH_ROWS) for o in (*db.dirty, *db.deleted)):
+        CACHE.clear()
+
+
+def install_cache_hook() -> None:
+    """Hook every ORM session (idempotent)."""
+    if not event.contains(Session, "before_flush", _forget_on_change):
+        event.listen(Session, "before_flush", _forget_on_change)
+
+
+def verified_actor(db_factory, digest: str) -> Actor | None:  # noqa: ANN001
+    """The actor of a valid bearer token by its SHA-256, read from the DB (``db_factory()``
+    gives a session) and remembered in :data:`CACHE`; None for an unknown, expired or revoked
+    token. Callers look in ``CACHE.get(digest)`` first (it needs no thread)."""
+    with db_factory() as db:
+        found = _actor_of_digest(db, digest)
+    if found is None:
+        return None
+    (user, role), expires_at = found
+    actor = Actor(user.name, role.name, frozenset(role.permissions), "api")
+    CACHE.put(digest, actor, expires_at)
+    return actor
 
 
 # -------------------------------------------------------------------------- browser logins

@@ -1,0 +1,81 @@
+"""The request path's structure (issue 8, speed): one worker thread per request, SQLite writers
+queued without polling, a remembered token. Behaviour only: the speed itself is measured by
+``benchmarks/api.py``, not here."""
+
+from __future__ import annotations
+
+import subprocess
+import sys
+import threading
+
+import anyio.to_thread
+
+from api_helpers import *  # noqa: F403
+from api_helpers import C, ok, open_session
+from db.session import WriterQueue
+
+LOCK_PROBE = ("import fcntl, os, sys\n"
+              "fd = os.open(sys.argv[1], os.O_RDWR)\n"
+              "fcntl.flock(fd, fcntl.LOCK_EX | fcntl.LOCK_NB)\n")
+
+
+def test_a_request_takes_one_worker_thread(client, monkeypatch):
+    """Auth (a remembered token), the transaction and the answer's serialization all run
+    without a second hop between the event loop and the threadpool."""
+    url = open_session(client, "tool.xyz_4point", 1)
+    ok(client.post(f"{url}/touch-up", json={"step": 0}))  # the token is now verified
+    hops: list[str] = []
+    run_sync = anyio.to_thread.run_sync
+
+    async def counting(func, *args, **kw):  # noqa: ANN001, ANN202
+        hops.append(getattr(func, "__name__", repr(func)))
+        return await run_sync(func, *args, **kw)
+
+    monkeypatch.setattr(anyio.to_thread, "run_sync", counting)
+    for method, path, body in (("GET", f"{C}/tools/1", None), ("GET", "/controllers", None),
+                               ("POST", f"{url}/touch-up", {"step": 1}), ("GET", url, None),
+                               ("POST", f"{url}/touch-up", {"step": 99})):
+        hops.clear()
+        r = client.request(method, path, json=body)
+        assert r.status_code == (422 if body == {"step": 99} else 200), r.text
+        assert len(hops) == 1, (method, path, hops)
+    monkeypatch.undo()
+    touched = client.post(f"{url}/touch-up", json={"step": 2})
+    assert touched.status_code == 200 and touched.headers["content-type"] == "application/json"
+    got = client.get(url)
+    assert touched.headers["etag"] == got.headers["etag"]  # the answer carries its ETag
+    assert touched.json() == got.json()
+    assert [st["filled"] for st in got.json()["steps"]] == [True, True, True, False]
+    created = client.post(f"{C}/sessions", json={"method": "tool.xyz_4point", "target_no": 2})
+    assert created.status_code == 201 and created.headers["etag"] == '"1"'
+
+
+def test_a_failed_write_gives_up_its_turn(client):
+    """A write refused inside its transaction rolls back and lets the next writer in (the
+    SQLite writers' queue is not left held)."""
+    url = open_session(client, "tool.xyz_4point", 1)
+    for _ in range(3):
+        assert client.post(f"{url}/touch-up", json={"step": 99}).status_code == 422
+        assert client.post(f"{url}/touch-up", json={"step": 0}).status_code == 200
+
+
+def test_sqlite_writers_queue_in_the_process_and_across_processes(tmp_path):
+    path = str(tmp_path / "pendant.db.writer.lock")
+    queue = WriterQueue(path)
+    queue.acquire()
+    held = subprocess.run([sys.executable, "-c", LOCK_PROBE, path], capture_output=True)
+    assert held.returncode != 0 and b"BlockingIOError" in held.stderr  # another process waits
+    got = threading.Event()
+
+    def second_writer() -> None:
+        queue.acquire()
+        got.set()
+        queue.release()
+
+    t = threading.Thread(target=second_writer)
+    t.start()
+    assert not got.wait(0.2)  # a second writer of this process waits its turn
+    queue.release()
+    assert got.wait(30)
+    t.join()
+    assert subprocess.run([sys.executable, "-c", LOCK_PROBE, path]).returncode == 0
