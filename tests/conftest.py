@@ -16,7 +16,7 @@ Two markers sort the suite for ``tests/run`` (they are set here, at collection, 
   several uvicorn workers, SIGKILLs, a 45-analyses flood with a latency bound. They load the
   machine's cores themselves, so when pytest-xdist runs the suite in several processes
   (``tests/run``: ``-n auto``) a serial test runs alone: it waits until the other processes'
-  current tests end, and they wait until it ends (:func:`_one_serial_test_at_a_time`).
+  current tests end, and they wait until it ends (:func:`pytest_runtest_protocol`).
 """
 
 from __future__ import annotations
@@ -143,21 +143,23 @@ def _flock(path: Path, mode: int):  # noqa: ANN202
             fcntl.flock(f, fcntl.LOCK_UN)
 
 
-@pytest.fixture(autouse=True)
-def _one_serial_test_at_a_time(request: pytest.FixtureRequest,  # noqa: ANN202
-                               tmp_path_factory: pytest.TempPathFactory):
+@pytest.hookimpl(hookwrapper=True, tryfirst=True)
+def pytest_runtest_protocol(item: pytest.Item, nextitem: pytest.Item | None):  # noqa: ANN201
     """Under pytest-xdist: a ``serial`` test holds the run's lock exclusively, every other
-    test holds it shared, so a serial test runs with no other test beside it. The gate (taken
-    by a serial test while it waits, passed through by the others) keeps a stream of short
-    tests on the other processes from starving it. Without xdist: nothing to do."""
-    workerinput = getattr(request.config, "workerinput", None)
+    test holds it shared, so a serial test (its fixtures' setup and teardown included) runs
+    with no other test beside it. The gate (held by a serial test while it waits, passed
+    through by the others) keeps a stream of short tests on the other processes from starving
+    it. The wait comes before pytest-timeout's clock starts (this wrapper runs first). Without
+    xdist: nothing to do."""
+    workerinput = getattr(item.config, "workerinput", None)
     if workerinput is None:
         yield
         return
     # the run's temporary folder (each xdist process has its basetemp inside it)
-    stem = tmp_path_factory.getbasetemp().parent / f"serial-{workerinput['testrunuid']}"
-    gate, run = stem.with_suffix(".gate"), stem.with_suffix(".run")
-    if request.node.get_closest_marker("serial") is not None:
+    folder = item.config._tmp_path_factory.getbasetemp().parent  # noqa: SLF001
+    gate = folder / f"serial-{workerinput['testrunuid']}.gate"
+    run = gate.with_suffix(".run")
+    if item.get_closest_marker("serial") is not None:
         with _flock(gate, fcntl.LOCK_EX), _flock(run, fcntl.LOCK_EX):
             yield
         return
