@@ -12,11 +12,13 @@ Two markers sort the suite for ``tests/run`` (they are set here, at collection, 
   tests that name their own SQLite file run in the SQLite pass only: on PostgreSQL they
   would prove the same thing again. ``@pytest.mark.db`` forces it where the search cannot
   see the call.
-- ``serial``: the load and crash tests (``SERIAL_MODULES``, or ``@pytest.mark.serial``):
-  several uvicorn workers, SIGKILLs, a 45-analyses flood with a latency bound. They load the
-  machine's cores themselves, so when pytest-xdist runs the suite in several processes
-  (``tests/run``: ``-n auto``) a serial test runs alone: it waits until the other processes'
-  current tests end, and they wait until it ends (:func:`pytest_runtest_protocol`).
+- ``load``: the load and crash tests (``LOAD_MODULES``): several uvicorn workers, SIGKILLs, a
+  45-analyses flood with a latency bound. They are also ``serial``; the lowest-versions pass
+  leaves them out (``tests/run`` says why).
+- ``serial``: a test that loads the machine itself or measures it (the ``load`` tests, and
+  ``@pytest.mark.serial`` where a test says so). When pytest-xdist runs the suite in several
+  processes (``tests/run``: ``-n auto``) a serial test runs alone: it waits until the other
+  processes' current tests end, and they wait until it ends (:func:`pytest_runtest_protocol`).
 """
 
 from __future__ import annotations
@@ -68,14 +70,16 @@ def chromium():  # noqa: ANN201
 
 TESTS_DIR = Path(__file__).resolve().parent
 DB_ENTRY_POINTS = frozenset({"fresh_url", "fresh_pg_url", "backends"})  # db_backends' doors
-SERIAL_MODULES = frozenset({"test_workers.py", "test_jobs_flood.py"})
+LOAD_MODULES = frozenset({"test_workers.py", "test_jobs_flood.py"})
 
 
 def pytest_configure(config: pytest.Config) -> None:
     config.addinivalue_line("markers", "db: opens the suite's database (the PostgreSQL pass "
                                        "runs it); set by tests/conftest.py")
-    config.addinivalue_line("markers", "serial: a load or crash test, run on its own, not "
-                                       "beside other tests (tests/run)")
+    config.addinivalue_line("markers", "load: a load or crash test (also serial); set by "
+                                       "tests/conftest.py")
+    config.addinivalue_line("markers", "serial: runs on its own, not beside other tests "
+                                       "(under pytest-xdist)")
 
 
 def _code_objects(code: types.CodeType):  # noqa: ANN201
@@ -127,7 +131,8 @@ def pytest_collection_modifyitems(config: pytest.Config, items: list[pytest.Item
     for item in items:
         if item.get_closest_marker("db") is None and _opens_db(item):
             item.add_marker(pytest.mark.db)
-        if item.path.name in SERIAL_MODULES:
+        if item.path.name in LOAD_MODULES:
+            item.add_marker(pytest.mark.load)
             item.add_marker(pytest.mark.serial)
 
 

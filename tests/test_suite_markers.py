@@ -1,6 +1,7 @@
 """The markers tests/run sorts the suite by (set in tests/conftest.py at collection): ``db``
 for a test that opens the suite's database -- through a fixture at any depth, a helper of
-tests/, or a direct call of db_backends -- and ``serial`` for the load and crash tests."""
+tests/, or a direct call of db_backends -- ``load`` (and ``serial``) for the
+load and crash tests."""
 
 from __future__ import annotations
 
@@ -27,13 +28,14 @@ def test_a_test_that_opens_no_database_is_not_db(request, tmp_path, rng):  # noq
     # conftest's rng fixture: no database behind it
     assert request.node.get_closest_marker("db") is None
     assert request.node.get_closest_marker("serial") is None
+    assert request.node.get_closest_marker("load") is None
 
 
-def test_every_serial_module_exists():
-    """A renamed load test would silently lose its ``serial`` marker."""
+def test_every_load_module_exists():
+    """A renamed load test would silently lose its ``load`` and ``serial`` markers."""
     from pathlib import Path
 
-    from conftest import SERIAL_MODULES
+    from conftest import LOAD_MODULES
 
     here = Path(__file__).parent
-    assert SERIAL_MODULES and all((here / name).is_file() for name in SERIAL_MODULES)
+    assert LOAD_MODULES and all((here / name).is_file() for name in LOAD_MODULES)
