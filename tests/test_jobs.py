@@ -153,7 +153,6 @@ def test_a_job_over_its_time_limit_is_stopped(db_url, big_recording):
                     reason="with PostgreSQL's native driver the capped job process can abort in C "
                            "code (a 500 'worker' naming the signal, as the killed-job test checks) "
                            "instead of raising MemoryError: known, see the session note")
-@pytest.mark.serial  # alone: beside other tests the capped process can die in C code (a 500)
 def test_a_job_over_its_memory_limit_fails_with_413(db_url, big_recording):
     with make_client(db_url) as client:
         job = ok(client.post(f"/recordings/{post_big(client, big_recording)}/analyze"))
