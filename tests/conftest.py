@@ -1,7 +1,33 @@
 """Shared fixtures: the robot library, a seeded random generator, and for the browser
-tests a live service on a temporary SQLite file with Debian's Chromium."""
+tests a live service on a temporary SQLite file with Debian's Chromium.
+
+Two markers sort the suite for ``tests/run`` (they are set here, at collection, not by hand):
+
+- ``db``: the test opens the suite's database, so the PostgreSQL pass runs it
+  (``-m db``). A test is ``db`` when it, a fixture it uses (at any depth), or a helper of
+  ``tests/`` they call, calls ``db_backends.fresh_url`` or ``db_backends.backends`` -- the
+  only way a test gets a PostgreSQL database. A new test gets its database from there (the
+  ``db_url``/``client``/``site`` fixtures do), so it is picked up without a list to keep.
+  Tests that never open a database (solvers, formats, analysis statistics, doctests) and
+  tests that name their own SQLite file run in the SQLite pass only: on PostgreSQL they
+  would prove the same thing again. ``@pytest.mark.db`` forces it where the search cannot
+  see the call.
+- ``load``: the load and crash tests (``LOAD_MODULES``): several uvicorn workers, SIGKILLs, a
+  45-analyses flood with a latency bound. They are also ``serial``; the lowest-versions pass
+  leaves them out (``tests/run`` says why).
+- ``serial``: a test that loads the machine itself or measures it (the ``load`` tests, and
+  ``@pytest.mark.serial`` where a test says so). When pytest-xdist runs the suite in several
+  processes (``tests/run``: ``-n auto``) a serial test runs alone: it waits until the other
+  processes' current tests end, and they wait until it ends (:func:`pytest_runtest_protocol`).
+"""
 
 from __future__ import annotations
+
+import contextlib
+import fcntl
+import inspect
+import types
+from pathlib import Path
 
 import numpy as np
 import pytest
@@ -38,3 +64,111 @@ def chromium():  # noqa: ANN201
 
     with browser() as b:
         yield b
+
+
+# ------------------------------------------------------------------- the markers of tests/run
+
+TESTS_DIR = Path(__file__).resolve().parent
+DB_ENTRY_POINTS = frozenset({"fresh_url", "fresh_pg_url", "backends"})  # db_backends' doors
+LOAD_MODULES = frozenset({"test_workers.py", "test_jobs_flood.py"})
+
+
+def pytest_configure(config: pytest.Config) -> None:
+    config.addinivalue_line("markers", "db: opens the suite's database (the PostgreSQL pass "
+                                       "runs it); set by tests/conftest.py")
+    config.addinivalue_line("markers", "load: a load or crash test (also serial); set by "
+                                       "tests/conftest.py")
+    config.addinivalue_line("markers", "serial: runs on its own, not beside other tests "
+                                       "(under pytest-xdist)")
+
+
+def _code_objects(code: types.CodeType):  # noqa: ANN201
+    """``code`` and the code of its nested functions, lambdas and comprehensions."""
+    yield code
+    for const in code.co_consts:
+        if isinstance(const, types.CodeType):
+            yield from _code_objects(const)
+
+
+def _in_tests(obj: object) -> bool:
+    try:
+        return Path(inspect.getfile(obj)).resolve().is_relative_to(TESTS_DIR)
+    except TypeError:  # a builtin
+        return False
+
+
+def _reaches_db(obj: object, seen: set[int]) -> bool:
+    """Whether ``obj`` (a function or class of tests/) names a db_backends entry point, itself
+    or through the functions and classes of tests/ it names (recursively)."""
+    obj = inspect.unwrap(getattr(obj, "__func__", obj))
+    if id(obj) in seen or not _in_tests(obj):
+        return False
+    seen.add(id(obj))
+    if inspect.isclass(obj):
+        return any(_reaches_db(v, seen) for v in vars(obj).values()
+                   if inspect.isfunction(v) or isinstance(v, (staticmethod, classmethod)))
+    code = getattr(obj, "__code__", None)
+    if code is None:
+        return False
+    names = {n for c in _code_objects(code) for n in c.co_names}
+    if names & DB_ENTRY_POINTS:
+        return True
+    scope = getattr(obj, "__globals__", {})
+    return any(_reaches_db(scope[n], seen) for n in names
+               if n in scope and (inspect.isfunction(scope[n]) or inspect.isclass(scope[n])))
+
+
+def _opens_db(item: pytest.Item) -> bool:
+    seen: set[int] = set()
+    if _reaches_db(getattr(item, "function", None), seen):
+        return True
+    info = getattr(item, "_fixtureinfo", None)
+    defs = info.name2fixturedefs.values() if info is not None else ()
+    return any(_reaches_db(d.func, seen) for fixturedefs in defs for d in fixturedefs)
+
+
+def pytest_collection_modifyitems(config: pytest.Config, items: list[pytest.Item]) -> None:
+    for item in items:
+        if item.get_closest_marker("db") is None and _opens_db(item):
+            item.add_marker(pytest.mark.db)
+        if item.path.name in LOAD_MODULES:
+            item.add_marker(pytest.mark.load)
+            item.add_marker(pytest.mark.serial)
+
+
+# ------------------------------------------------------------- serial tests under pytest-xdist
+
+@contextlib.contextmanager
+def _flock(path: Path, mode: int):  # noqa: ANN202
+    with open(path, "a+b") as f:
+        fcntl.flock(f, mode)
+        try:
+            yield
+        finally:
+            fcntl.flock(f, fcntl.LOCK_UN)
+
+
+@pytest.hookimpl(hookwrapper=True, tryfirst=True)
+def pytest_runtest_protocol(item: pytest.Item, nextitem: pytest.Item | None):  # noqa: ANN201
+    """Under pytest-xdist: a ``serial`` test holds the run's lock exclusively, every other
+    test holds it shared, so a serial test (its fixtures' setup and teardown included) runs
+    with no other test beside it. The gate (held by a serial test while it waits, passed
+    through by the others) keeps a stream of short tests on the other processes from starving
+    it. The wait comes before pytest-timeout's clock starts (this wrapper runs first). Without
+    xdist: nothing to do."""
+    workerinput = getattr(item.config, "workerinput", None)
+    if workerinput is None:
+        yield
+        return
+    # the run's temporary folder (each xdist process has its basetemp inside it)
+    folder = item.config._tmp_path_factory.getbasetemp().parent  # noqa: SLF001
+    gate = folder / f"serial-{workerinput['testrunuid']}.gate"
+    run = gate.with_suffix(".run")
+    if item.get_closest_marker("serial") is not None:
+        with _flock(gate, fcntl.LOCK_EX), _flock(run, fcntl.LOCK_EX):
+            yield
+        return
+    with _flock(gate, fcntl.LOCK_EX):
+        pass
+    with _flock(run, fcntl.LOCK_SH):
+        yield

@@ -2,15 +2,26 @@
 
 ``PENDANT_TEST_BACKEND=postgresql`` (set by ``tests/run`` for its second pass, inside Debian's
 ``pg_virtualenv``, which exports PGHOST, PGPORT, PGUSER, PGPASSWORD) makes :func:`fresh_url`
-return a new PostgreSQL database per test, copied from a template migrated once. Otherwise it
-is a SQLite file in the test's temporary directory. :func:`pg_available` tells whether a
-PostgreSQL server is reachable (the multi-process tests then run on both backends).
+return a new PostgreSQL database per test, copied from a template migrated once per test
+process (``CREATE DATABASE ... TEMPLATE``). Otherwise it is a SQLite file in the test's
+temporary directory, a copy of a file migrated once per test process. Either way Alembic runs
+once per process (per pytest-xdist worker), not once per test; ``migrated=False`` gives an
+empty database, for the tests of the migrations themselves (and of workers racing on them).
+:func:`pg_available` tells whether a PostgreSQL server is reachable (the multi-process tests
+then run on both backends).
+
+A test (or a fixture it uses) that calls :func:`fresh_url` or :func:`backends` is marked
+``db`` by ``tests/conftest.py``: the PostgreSQL pass runs those.
 """
 
 from __future__ import annotations
 
+import atexit
 import itertools
 import os
+import shutil
+import sqlite3
+import tempfile
 import uuid
 from pathlib import Path
 from urllib.parse import quote
@@ -19,6 +30,7 @@ BACKEND = os.environ.get("PENDANT_TEST_BACKEND", "sqlite")
 TEMPLATE = f"pendant_tpl_{os.getpid()}"
 _counter = itertools.count()
 _template_ready = False
+_sqlite_template: Path | None = None
 
 
 def pg_available() -> bool:
@@ -67,11 +79,34 @@ def fresh_pg_url(migrated: bool = True) -> str:
     return _pg(name)
 
 
+def _migrated_sqlite() -> Path:
+    """A SQLite file migrated to head, once per process; its copies are the tests' databases."""
+    global _sqlite_template
+    if _sqlite_template is None:
+        from db.session import make_engine, upgrade
+
+        folder = tempfile.mkdtemp(prefix="pendant-tpl-")
+        atexit.register(shutil.rmtree, folder, True)
+        path = Path(folder) / "template.db"
+        engine = make_engine(f"sqlite:///{path}")
+        upgrade(engine)
+        engine.dispose()
+        with sqlite3.connect(path) as con:  # one self-contained file: the WAL folded back in
+            con.execute("PRAGMA wal_checkpoint(TRUNCATE)")
+            con.execute("PRAGMA journal_mode=DELETE")
+        _sqlite_template = path
+    return _sqlite_template
+
+
 def fresh_url(tmp_path: Path, backend: str | None = None, migrated: bool = True) -> str:
-    """A fresh database of ``backend`` (default: the suite's) for one test."""
+    """A fresh database of ``backend`` (default: the suite's) for one test: migrated to head
+    (a copy of the template), or empty (``migrated=False``)."""
     if (backend or BACKEND) == "postgresql":
         return fresh_pg_url(migrated)
-    return f"sqlite:///{tmp_path / f'pendant-{next(_counter)}.db'}"
+    path = tmp_path / f"pendant-{next(_counter)}.db"
+    if migrated:
+        shutil.copyfile(_migrated_sqlite(), path)
+    return f"sqlite:///{path}"
 
 
 def backends() -> list[str]:

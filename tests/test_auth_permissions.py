@@ -33,8 +33,9 @@ def concrete(path: str) -> str:
 @pytest.fixture(scope="module")
 def world(tmp_path_factory):  # noqa: ANN001, ANN201
     """The app with one user and token per default role."""
-    db = tmp_path_factory.mktemp("perm") / "p.db"
-    with make_client(f"sqlite:///{db}") as admin:  # noqa: F405
+    from db_backends import fresh_url  # the suite's database: PostgreSQL in its pass
+
+    with make_client(fresh_url(tmp_path_factory.mktemp("perm"))) as admin:  # noqa: F405
         tokens = {}
         for role in ROLES:
             name = role.lower()
