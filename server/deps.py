@@ -211,6 +211,10 @@ def one_thread(endpoint: Callable[..., Any], route: APIRoute | None = None) -> C
                 _give_turn(db)
         return result if route is None else _answer(result, route, kwargs)
 
+    # The endpoint's annotations, evaluated in its own module: FastAPI before 0.123 reads string
+    # annotations (``from __future__ import annotations``) in the wrapper's globals, not the
+    # wrapped function's, and would take a body model for a query parameter.
+    run.__signature__ = inspect.signature(endpoint, eval_str=True)  # type: ignore[attr-defined]
     run._one_thread = True  # type: ignore[attr-defined]
     return run
 
