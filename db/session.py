@@ -15,6 +15,7 @@ from __future__ import annotations
 
 import contextlib
 import fcntl
+import functools
 import os
 import threading
 from collections.abc import Iterator
@@ -61,9 +62,14 @@ def make_sessionmaker(engine: Engine) -> sessionmaker[Session]:
     return sessionmaker(bind=engine, expire_on_commit=False)
 
 
+@functools.lru_cache(maxsize=64)
+def _write_bind(engine: Engine) -> Engine:
+    return engine.execution_options(**WRITE)
+
+
 def write_session(maker: sessionmaker[Session]) -> Session:
     """A session whose transaction is a writer's: ``BEGIN IMMEDIATE`` on SQLite."""
-    return maker(bind=maker.kw["bind"].execution_options(**WRITE))
+    return maker(bind=_write_bind(maker.kw["bind"]))
 
 
 class WriterQueue:

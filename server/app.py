@@ -152,8 +152,7 @@ def create_app(settings: Settings | None = None) -> FastAPI:
     app.add_middleware(BodyLimits)
     for module in (controllers, robot, tool, base, fixed_tool, workpiece, sessions, export,
                    analysis, jobs, auth_routes, webhooks, plan_router, external_router):
-        deps.in_one_thread(module.router)  # a route's transaction runs in its one thread
-        app.include_router(module.router)
+        deps.add_routes(app, module.router)  # flat, each transaction in its route's thread
     bootstrap(app)
     if settings.cors_origins:
         from starlette.middleware.cors import CORSMiddleware

@@ -13,6 +13,7 @@ A transform ``T_a_b`` maps b coordinates into a; compose by matching inner names
 
 from __future__ import annotations
 
+import inspect
 import warnings
 from dataclasses import dataclass
 
@@ -20,6 +21,8 @@ import numpy as np
 from scipy.spatial.transform import Rotation
 
 from solvers.validate import FloatArray, as_array
+
+ASSUME_VALID = "assume_valid" in inspect.signature(Rotation.from_matrix).parameters
 
 KUKA_EULER = "ZYX"  # intrinsic Z, Y', X'' with angles [A, B, C]
 FANUC_EULER = "xyz"  # extrinsic x, y, z with angles [W, P, R]
@@ -53,9 +56,11 @@ class Pose:
         return np.array([self.x, self.y, self.z, self.a, self.b, self.c], dtype=float)
 
     @classmethod
-    def from_matrix(cls, T: FloatArray, decimals: int = 9) -> "Pose":
-        """KUKA pose of a 4x4 transform (rounded to ``decimals`` to drop float dust)."""
-        v = np.round(kuka_from_matrix(T), decimals) + 0.0
+    def from_matrix(cls, T: FloatArray, decimals: int = 9, orthonormal: bool = False) -> "Pose":
+        """KUKA pose of a 4x4 transform (rounded to ``decimals`` to drop float dust).
+        ``orthonormal``: T's rotation is one to float precision (a product of rotations, as
+        forward kinematics gives), so SciPy may skip projecting it onto the nearest one."""
+        v = np.round(kuka_from_matrix(T, orthonormal), decimals) + 0.0
         return cls(*(float(x) for x in v))
 
     @classmethod
@@ -73,12 +78,21 @@ def _compose(R: Rotation, t: FloatArray) -> FloatArray:
     return T
 
 
-def _euler(T: FloatArray, seq: str) -> FloatArray:
+def _rotation(R: FloatArray, orthonormal: bool = False) -> Rotation:
+    """SciPy's rotation of the 3x3 ``R``; ``orthonormal`` skips the projection onto the
+    nearest rotation (``assume_valid``, SciPy >= 1.15; a third of the time of a touch-up's
+    conversion) where ``R`` is one already."""
+    if orthonormal and ASSUME_VALID:
+        return Rotation.from_matrix(R, assume_valid=True)
+    return Rotation.from_matrix(R)
+
+
+def _euler(T: FloatArray, seq: str, orthonormal: bool = False) -> FloatArray:
     """Euler angles (deg); at gimbal lock SciPy sets the third angle to 0, which still
     reproduces the same rotation, so its warning is not passed on to the user."""
     with warnings.catch_warnings():
         warnings.filterwarnings("ignore", message="Gimbal lock detected")
-        return Rotation.from_matrix(T[..., :3, :3]).as_euler(seq, degrees=True)
+        return _rotation(T[..., :3, :3], orthonormal).as_euler(seq, degrees=True)
 
 
 def matrix_from_kuka(xyzabc: FloatArray) -> FloatArray:
@@ -96,10 +110,11 @@ def matrix_from_kuka(xyzabc: FloatArray) -> FloatArray:
     return _compose(Rotation.from_euler(KUKA_EULER, v[..., 3:6], degrees=True), v[..., :3])
 
 
-def kuka_from_matrix(T: FloatArray) -> FloatArray:
-    """KUKA ``[x, y, z, a, b, c]`` (mm, deg) of a 4x4 T or a stack of them."""
+def kuka_from_matrix(T: FloatArray, orthonormal: bool = False) -> FloatArray:
+    """KUKA ``[x, y, z, a, b, c]`` (mm, deg) of a 4x4 T or a stack of them (``orthonormal``:
+    see :func:`_rotation`)."""
     T = np.asarray(T, dtype=float)
-    abc = _euler(T, KUKA_EULER)
+    abc = _euler(T, KUKA_EULER, orthonormal)
     return np.concatenate([T[..., :3, 3], abc], axis=-1)
 
 

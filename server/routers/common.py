@@ -64,7 +64,7 @@ def flange_pose_of(c: Controller, joints_deg: list[float]) -> Pose:
         raise CalibrationError(("joints_deg",),
                                f"has {len(joints_deg)} values; the robot has {robot.dof} joints")
     check_joint_limits(robot, joints_deg)  # joints beyond the limits: wrong robot or a typo
-    return Pose.from_matrix(forward_kinematics(robot, joints_deg))
+    return Pose.from_matrix(forward_kinematics(robot, joints_deg), orthonormal=True)
 
 
 # --------------------------------------------------------------------------------- entries

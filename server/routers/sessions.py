@@ -13,11 +13,13 @@ from fastapi import APIRouter, Body, Response
 
 import emulator
 from db import crud
+from db import rows
+from db import touch_up as touch
 from db.models import EXT_KIN_SLOTS
 from db.outbox import emit
 from server import external as ext
 from server.deps import SessionDep
-from server.preconditions import IfMatch, check, set_etag
+from server.preconditions import IfMatch, check, etag, set_etag
 from server.methods import METHODS, PARAM_HELP
 from server.routers.external import ext_slot_out
 from server.routers.common import (cell_of, check_step, entry_matrix, entry_out, flange_pose_of,
@@ -99,28 +101,34 @@ def get_session(controller_id: int, session_id: int, db: SessionDep,
 def touch_up(controller_id: int, session_id: int, db: SessionDep, response: Response,
              body: TouchUpIn | None = Body(None), if_match: IfMatch = None) -> SessionOut:
     """Fill a step (default: the next empty one) with the emulated robot's current joints, or
-    with ``joints_deg`` / ``flange_pose`` recorded on a real controller."""
+    with ``joints_deg`` / ``flange_pose`` recorded on a real controller.
+
+    The rows are read and written with Core statements (``db.rows``, ``db.touch_up``: the
+    hot path of every menu) in the request's transaction, under its row lock."""
     body = body or TouchUpIn()
-    c = crud.get_controller(db, controller_id)
-    s = _session(db, controller_id, session_id, if_match)
-    crud.require_open(s)
+    conn = db.connection()  # the transaction begins: BEGIN IMMEDIATE / the controller's lock
+    c = rows.controller(conn, controller_id)
+    s = rows.session(conn, controller_id, session_id)
+    check(if_match, s.version, lambda: session_out(s),  # type: ignore[arg-type]
+          f"session {s.id} of controller {controller_id}")
+    crud.require_open(s)  # type: ignore[arg-type]
     if body.joints_deg is not None and body.flange_pose is not None:
         raise CalibrationError(("flange_pose",), "give joints_deg or flange_pose, not both")
-    step = next_step(s) if body.step is None else body.step
-    check_step(s, step)
+    step = next_step(s) if body.step is None else body.step  # type: ignore[arg-type]
+    check_step(s, step)  # type: ignore[arg-type]
     if body.flange_pose is not None:
         pose, joints, source = body.flange_pose.to_pose(), None, "flange_pose"
     else:
         joints = c.joints_deg if body.joints_deg is None else body.joints_deg
         source = "touch_up" if body.joints_deg is None else "joints"
-        pose = flange_pose_of(c, joints)
+        pose = flange_pose_of(c, joints)  # type: ignore[arg-type]
     sign = c.motion_sign if source == "touch_up" else None  # the emulated arm's flanks
     ext_axes = c.external_axes if source == "touch_up" else body.external_axes
-    crud.put_point(db, s, step, source, pose.as_array(), joints, t_s=float(c.clock_s or 0.0),
-                   motion_sign=sign, external_axes=ext_axes)
-    store_state(c, emulator.touched_up(state_of(c)))
-    set_etag(response, db, s)
-    return session_out(s)
+    touch.put_point(conn, s, step, source, pose.as_array(), joints, t_s=float(c.clock_s or 0.0),
+                    motion_sign=sign, external_axes=ext_axes)
+    touch.store_state(conn, c, emulator.touched_up(state_of(c)))  # type: ignore[arg-type]
+    response.headers["ETag"] = etag(s.version)
+    return session_out(s)  # type: ignore[arg-type]
 
 
 @router.delete(PREFIX + "/{session_id}/points/{step}")

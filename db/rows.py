@@ -1,0 +1,108 @@
+"""Plain rows for the hot paths: Core reads that skip the ORM.
+
+A read of one slot, the controller list or a session's touch-ups goes through SQLAlchemy Core
+(cached statements on the request's own connection, so in its transaction) and gives plain
+objects with the models' attribute names: :class:`ControllerRow`, :class:`EntryRow`,
+:class:`SessionRow` and :class:`PointRow`. The ``..._out`` builders of the routes read them as
+they read the models. Through the ORM (identity map, instance state, attribute events) each
+such read cost several tenths of a millisecond more per request (``benchmarks/api.py``,
+README "Speed").
+
+Only reads that change nothing use rows; a change goes through the models (so the audit hook
+sees it), except the touch-up's own rows (:mod:`db.touch_up`).
+"""
+
+from __future__ import annotations
+
+from typing import Any
+
+from sqlalchemy import Connection, bindparam, select
+
+from db.crud import SLOTS, NotFound
+from db.crud import _row_id as row_id
+from db.models import CalibSession, Controller, FrameEntry, TaughtPoint
+
+C, S, P, E = (Controller.__table__, CalibSession.__table__, TaughtPoint.__table__,
+              FrameEntry.__table__)
+RESULT_COLUMNS = ("result_x_mm", "result_y_mm", "result_z_mm", "result_a_deg", "result_b_deg",
+                  "result_c_deg")
+POSE_COLUMNS = ("x_mm", "y_mm", "z_mm", "a_deg", "b_deg", "c_deg")
+
+CONTROLLER = select(C).where(C.c.id == bindparam("b_id"))
+CONTROLLERS = select(C).order_by(C.c.id)
+SESSION = select(S).where(S.c.id == bindparam("b_id"))
+POINTS = select(P).where(P.c.session_id == bindparam("b_sid")).order_by(P.c.step)
+ENTRY = select(E).where(E.c.controller_id == bindparam("b_cid"),
+                        E.c.entry_table == bindparam("b_table"),
+                        E.c.number == bindparam("b_number"))
+
+
+class Row:
+    """A row's columns as attributes (the model's names)."""
+
+    def __init__(self, mapping: Any) -> None:
+        self.__dict__.update(mapping)
+
+
+class ControllerRow(Row):
+    """A ``controller`` row."""
+
+
+class PoseRow(Row):
+    def pose_values(self) -> tuple[float, float, float, float, float, float]:
+        return (self.x_mm, self.y_mm, self.z_mm, self.a_deg, self.b_deg, self.c_deg)
+
+
+class EntryRow(PoseRow):
+    """A ``frame_entry`` row (a tool or base slot)."""
+
+
+class PointRow(PoseRow):
+    """A ``taught_point`` row."""
+
+
+class SessionRow(Row):
+    """A ``calib_session`` row and its points by step (``points``)."""
+
+    points: list[PointRow]
+
+    def result_values(self) -> tuple[float, ...] | None:
+        v = tuple(getattr(self, k) for k in RESULT_COLUMNS)
+        return None if v[0] is None else tuple(float(x) for x in v)
+
+
+def controller(conn: Connection, controller_id: int) -> ControllerRow:
+    """The controller (404 naming ``controller_id`` when there is none)."""
+    rid = row_id(controller_id, conn)
+    row = None if rid is None else conn.execute(CONTROLLER, {"b_id": rid}).first()
+    if row is None:
+        raise NotFound(("controller_id",), f"no controller {controller_id}")
+    return ControllerRow(row._mapping)
+
+
+def controllers(conn: Connection) -> list[ControllerRow]:
+    return [ControllerRow(r._mapping) for r in conn.execute(CONTROLLERS)]
+
+
+def session(conn: Connection, controller_id: int, session_id: int) -> SessionRow:
+    """The session with its taught points (as ``crud.get_session``)."""
+    rid = row_id(session_id, conn)
+    row = None if rid is None else conn.execute(SESSION, {"b_id": rid}).first()
+    if row is None or row.controller_id != controller_id:
+        raise NotFound(("session_id",), f"no session {session_id} on controller {controller_id}")
+    s = SessionRow(row._mapping)
+    s.points = [PointRow(p._mapping) for p in conn.execute(POINTS, {"b_sid": rid})]
+    return s
+
+
+def entry(conn: Connection, controller_id: int, table: str, number: int) -> EntryRow:
+    """One slot (as ``crud.get_entry``, with its 404s)."""
+    if not 1 <= number <= SLOTS[table]:
+        raise NotFound(("number",), f"{table} slots are numbered 1..{SLOTS[table]}, got {number}")
+    if row_id(controller_id, conn) is None:
+        raise NotFound(("controller_id",), f"no controller {controller_id}")
+    row = conn.execute(ENTRY, {"b_cid": controller_id, "b_table": table,
+                               "b_number": number}).first()
+    if row is None:
+        raise NotFound(("number",), f"no {table} {number} on controller {controller_id}")
+    return EntryRow(row._mapping)
