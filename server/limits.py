@@ -14,8 +14,8 @@ An ASGI middleware on every request that has a body (not GET, HEAD, OPTIONS):
 
 from __future__ import annotations
 
+import asyncio
 import json
-import math
 
 import anyio
 from starlette.types import ASGIApp, Message, Receive, Scope, Send
@@ -47,7 +47,13 @@ async def _too_large(send: Send, limit: int, path: str) -> None:
 
 
 class BodyLimits:
-    """The middleware (``app.add_middleware(BodyLimits)``)."""
+    """The middleware (``app.add_middleware(BodyLimits)``).
+
+    A plain asyncio task reads the request's messages into a queue the app reads from, and
+    cancels the app's :class:`anyio.CancelScope` when the body passes its limit or the client
+    leaves. (An anyio task group with a memory stream did the same for 0.2 ms more per POST:
+    a third of what a POST that does nothing costs; benchmarks/README.md.)
+    """
 
     def __init__(self, app: ASGIApp) -> None:
         self.app = app
@@ -68,7 +74,8 @@ class BodyLimits:
                     await _too_large(send, limit, path)
                     return
         state = {"started": False, "done": False, "too_large": False}
-        to_app, from_pump = anyio.create_memory_object_stream[Message](math.inf)
+        messages: asyncio.Queue[Message] = asyncio.Queue()
+        cancel = anyio.CancelScope()
 
         async def app_send(message: Message) -> None:
             if message["type"] == "http.response.start":
@@ -77,28 +84,28 @@ class BodyLimits:
                 state["done"] = True
             await send(message)
 
-        async with anyio.create_task_group() as tg:
-            async def pump() -> None:
-                total = 0
-                while True:
-                    message = await receive()
-                    if message["type"] == "http.request":
-                        total += len(message.get("body", b""))
-                        if total > limit:
-                            state["too_large"] = True
-                            tg.cancel_scope.cancel()
-                            return
-                    elif message["type"] == "http.disconnect":
-                        if not state["done"]:
-                            tg.cancel_scope.cancel()  # the client left: cancel the request
-                        await to_app.send(message)
+        async def pump() -> None:
+            total = 0
+            while True:
+                message = await receive()
+                if message["type"] == "http.request":
+                    total += len(message.get("body", b""))
+                    if total > limit:
+                        state["too_large"] = True
+                        cancel.cancel()
                         return
-                    await to_app.send(message)
+                elif message["type"] == "http.disconnect":
+                    if not state["done"]:
+                        cancel.cancel()  # the client left: cancel the request
+                    messages.put_nowait(message)
+                    return
+                messages.put_nowait(message)
 
-            tg.start_soon(pump)
-            try:
-                await self.app(scope, from_pump.receive, app_send)
-            finally:
-                tg.cancel_scope.cancel()  # the answer is out: stop listening
+        reader = asyncio.get_running_loop().create_task(pump())
+        try:
+            with cancel:
+                await self.app(scope, messages.get, app_send)
+        finally:
+            reader.cancel()  # the answer is out: stop listening
         if state["too_large"] and not state["started"]:
             await _too_large(send, limit, path)
