@@ -14,6 +14,7 @@ it once; :func:`schema_status` tells ``serve`` whether the schema is the code's.
 from __future__ import annotations
 
 import contextlib
+import contextvars
 import fcntl
 import functools
 import os
@@ -53,8 +54,13 @@ def make_engine(url: str) -> Engine:
         @event.listens_for(engine, "begin")
         def _begin(conn) -> None:  # noqa: ANN001
             # a writer takes SQLite's write lock now (BEGIN IMMEDIATE), not at its first
-            # write: so what it read cannot be changed by another process before it writes
-            conn.exec_driver_sql(conn.get_execution_options().get("sqlite_begin", "BEGIN"))
+            # write: so what it read cannot be changed by another process before it writes;
+            # its turn in the writers' queue (if it has one) just before
+            begin = conn.get_execution_options().get("sqlite_begin", "BEGIN")
+            turn = TURN_AT_BEGIN.get()
+            if turn is not None and begin != "BEGIN":
+                turn.take()
+            conn.exec_driver_sql(begin)
     return engine
 
 
@@ -109,7 +115,9 @@ class WriterQueue:
 
 
 class WriterTurn:
-    """One request's turn in its database's :class:`WriterQueue` (taken at most once)."""
+    """One request's turn in its database's :class:`WriterQueue` (taken at most once): taken
+    just before its ``BEGIN IMMEDIATE`` when set as :data:`TURN_AT_BEGIN` (so what a route
+    computes before its first query does not hold up the other writers), or explicitly."""
 
     def __init__(self, queue: WriterQueue) -> None:
         self.queue, self.held = queue, False
@@ -125,6 +133,8 @@ class WriterTurn:
             self.queue.release()
 
 
+TURN_AT_BEGIN: contextvars.ContextVar[WriterTurn | None] = contextvars.ContextVar(
+    "pendant_turn_at_begin", default=None)  # the turn of the writer running in this thread
 _QUEUES: dict[str, WriterQueue] = {}
 _QUEUES_LOCK = threading.Lock()
 

@@ -17,9 +17,9 @@ an Idempotency-Key claim) still takes its own thread.
 
 **The SQLite writers' queue.** On SQLite a writer takes its turn in
 ``db.session.WriterQueue`` (a thread lock, then a ``flock`` shared by the processes of the
-host) in the route's thread, before ``BEGIN IMMEDIATE``, and gives it up after its commit:
-the next writer goes at once, instead of polling in SQLite's busy handler. It orders writers
-and guards nothing (``BEGIN IMMEDIATE`` does).
+host) in the route's thread, just before its ``BEGIN IMMEDIATE``, and gives it up after its
+commit: the next writer goes at once, instead of polling in SQLite's busy handler. It orders
+writers and guards nothing (``BEGIN IMMEDIATE`` does).
 
 In the process, writers pass a bulkhead first (``app.state.writers``, an ``asyncio.Semaphore``
 of :func:`writer_slots`): a request waiting for a database lock holds a thread of the
@@ -45,7 +45,7 @@ from sqlalchemy.orm import Session, sessionmaker
 from starlette.concurrency import run_in_threadpool
 
 from db import crud
-from db.session import WriterTurn, write_session, writer_queue
+from db.session import TURN_AT_BEGIN, WriterTurn, write_session, writer_queue
 from server import idempotency
 
 READ_METHODS = ("GET", "HEAD", "OPTIONS")
@@ -200,13 +200,17 @@ def one_thread(endpoint: Callable[..., Any], route: APIRoute | None = None) -> C
         if db is None:
             result = endpoint(*args, **kwargs)
         else:
-            _take_turn(db)  # a SQLite writer waits here, not polling in BEGIN IMMEDIATE
+            # a SQLite writer takes its turn just before its BEGIN IMMEDIATE (db.session), and
+            # waits there rather than polling in SQLite's busy handler
+            at_begin = TURN_AT_BEGIN.set(_turn(db))
             try:
                 result = endpoint(*args, **kwargs)
                 db.commit()
             except BaseException:
                 _end(db, db.rollback)
                 raise
+            finally:
+                TURN_AT_BEGIN.reset(at_begin)
             _give_turn(db)
         return result if route is None else _answer(result, route, kwargs)
 
