@@ -30,8 +30,14 @@ POSE_COLUMNS = ("x_mm", "y_mm", "z_mm", "a_deg", "b_deg", "c_deg")
 
 CONTROLLER = select(C).where(C.c.id == bindparam("b_id"))
 CONTROLLERS = select(C).order_by(C.c.id)
-SESSION = select(S).where(S.c.id == bindparam("b_id"))
-POINTS = select(P).where(P.c.session_id == bindparam("b_sid")).order_by(P.c.step)
+CONTROLLER_LOCKED = CONTROLLER.with_for_update()  # PostgreSQL's row lock; SQLite ignores it
+# a session and its points in one statement: one row per point (one with NULLs for none)
+SESSION_POINTS = select(*(c.label(f"s_{c.name}") for c in S.c),
+                        *(c.label(f"p_{c.name}") for c in P.c)) \
+    .select_from(S.outerjoin(P, P.c.session_id == S.c.id)) \
+    .where(S.c.id == bindparam("b_id")).order_by(P.c.step)
+S_KEYS = tuple((f"s_{c.name}", c.name) for c in S.c)
+P_KEYS = tuple((f"p_{c.name}", c.name) for c in P.c)
 ENTRY = select(E).where(E.c.controller_id == bindparam("b_cid"),
                         E.c.entry_table == bindparam("b_table"),
                         E.c.number == bindparam("b_number"))
@@ -71,10 +77,13 @@ class SessionRow(Row):
         return None if v[0] is None else tuple(float(x) for x in v)
 
 
-def controller(conn: Connection, controller_id: int) -> ControllerRow:
-    """The controller (404 naming ``controller_id`` when there is none)."""
+def controller(conn: Connection, controller_id: int, lock: bool = False) -> ControllerRow:
+    """The controller (404 naming ``controller_id`` when there is none); ``lock``: with its
+    row locked until commit (``SELECT ... FOR UPDATE`` on PostgreSQL, as ``crud.lock_controller``;
+    a SQLite writer holds the database's lock already)."""
     rid = row_id(controller_id, conn)
-    row = None if rid is None else conn.execute(CONTROLLER, {"b_id": rid}).first()
+    stmt = CONTROLLER_LOCKED if lock else CONTROLLER
+    row = None if rid is None else conn.execute(stmt, {"b_id": rid}).first()
     if row is None:
         raise NotFound(("controller_id",), f"no controller {controller_id}")
     return ControllerRow(row._mapping)
@@ -87,11 +96,13 @@ def controllers(conn: Connection) -> list[ControllerRow]:
 def session(conn: Connection, controller_id: int, session_id: int) -> SessionRow:
     """The session with its taught points (as ``crud.get_session``)."""
     rid = row_id(session_id, conn)
-    row = None if rid is None else conn.execute(SESSION, {"b_id": rid}).first()
-    if row is None or row.controller_id != controller_id:
+    found = [] if rid is None else conn.execute(SESSION_POINTS, {"b_id": rid}).all()
+    if not found or found[0].s_controller_id != controller_id:
         raise NotFound(("session_id",), f"no session {session_id} on controller {controller_id}")
-    s = SessionRow(row._mapping)
-    s.points = [PointRow(p._mapping) for p in conn.execute(POINTS, {"b_sid": rid})]
+    first = found[0]._mapping
+    s = SessionRow({name: first[label] for label, name in S_KEYS})
+    s.points = [PointRow({name: m[label] for label, name in P_KEYS})
+                for m in (r._mapping for r in found) if m["p_id"] is not None]
     return s
 
 

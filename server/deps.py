@@ -91,6 +91,13 @@ def _begin_write(db: Session, request: Request) -> None:
     idempotency.claim(db, request)
 
 
+def lock_here(db: Session) -> bool:
+    """For a route whose first query reads its controller: that read takes the row lock itself
+    (``SELECT ... FOR UPDATE``), one round trip less than the lock at BEGIN, which is skipped.
+    True when the route should lock (a writer); call before the transaction begins."""
+    return db.info.pop(LOCK_ON_BEGIN, None) is not None
+
+
 def _lock_at_begin(db: Session, _transaction: object, connection: Any) -> None:
     """``after_begin`` of every request session: a writer locks its controller's row first
     (PostgreSQL; SQLite's ``BEGIN IMMEDIATE`` has already locked the database)."""

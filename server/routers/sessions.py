@@ -18,6 +18,7 @@ from db import rows
 from db import touch_up as touch
 from db.models import EXT_KIN_SLOTS
 from db.outbox import emit
+from server import deps
 from server import external as ext
 from server.deps import SessionDep
 from server.preconditions import IfMatch, check, etag, set_etag
@@ -126,8 +127,9 @@ def touch_up(controller_id: int, session_id: int, db: SessionDep, response: Resp
     hot path of every menu) in the request's transaction, under its row lock."""
     body = body or TouchUpIn()
     early = _early_pose(controller_id, body)  # before the write lock, if it can be
-    conn = db.connection()  # the transaction begins: BEGIN IMMEDIATE / the controller's lock
-    c = rows.controller(conn, controller_id)
+    lock = deps.lock_here(db)  # the controller's row is locked by the read below (PostgreSQL)
+    conn = db.connection()  # the transaction begins (SQLite: BEGIN IMMEDIATE)
+    c = rows.controller(conn, controller_id, lock=lock)
     s = rows.session(conn, controller_id, session_id)
     check(if_match, s.version, lambda: session_out(s),  # type: ignore[arg-type]
           f"session {s.id} of controller {controller_id}")
