@@ -106,6 +106,23 @@ class WriterQueue:
             self._lock.release()
             raise
 
+    def try_acquire(self) -> bool:
+        """:meth:`acquire` if no one holds the turn (no wait); False if someone does."""
+        if not self._lock.acquire(blocking=False):
+            return False
+        try:
+            if self.path is not None:
+                if self._fd is None:
+                    self._fd = os.open(self.path, os.O_RDWR | os.O_CREAT, 0o600)
+                fcntl.flock(self._fd, fcntl.LOCK_EX | fcntl.LOCK_NB)
+            return True
+        except BlockingIOError:
+            self._lock.release()
+            return False
+        except BaseException:
+            self._lock.release()
+            raise
+
     def release(self) -> None:
         try:
             if self._fd is not None:
@@ -126,6 +143,12 @@ class WriterTurn:
         if not self.held:
             self.queue.acquire()
             self.held = True
+
+    def try_take(self) -> bool:
+        """Take the turn if it is free now (True), else leave it (False)."""
+        if not self.held:
+            self.held = self.queue.try_acquire()
+        return self.held
 
     def give(self) -> None:
         if self.held:

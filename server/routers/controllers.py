@@ -7,7 +7,7 @@ from fastapi import APIRouter, Response
 from db import crud, rows
 from db.models import Controller
 from server import external
-from server.deps import SessionDep
+from server.deps import SessionDep, short
 from server.preconditions import IfMatch, check, etag, set_etag
 from emulator import (THERMAL_WARMUP_S, home_joints, imperfections_document,
                              imperfections_from_document, robot_from_custom)
@@ -29,6 +29,7 @@ def controller_out(c: Controller) -> ControllerOut:
 
 
 @router.get("")
+@short
 def list_controllers(db: SessionDep) -> list[ControllerOut]:
     """Every emulated controller (a Core read: ``db.rows``)."""
     return [controller_out(c) for c in rows.controllers(db.connection())]  # type: ignore[arg-type]
@@ -60,6 +61,7 @@ def changing(db: SessionDep, controller_id: int, if_match: str | None) -> Contro
 
 
 @router.get("/{controller_id}")
+@short
 def get_controller(controller_id: int, db: SessionDep, response: Response) -> ControllerOut:
     """The controller; its ``ETag`` (bumped by every motion and setting) goes with a later
     write as ``If-Match``."""

@@ -20,7 +20,7 @@ from db.models import EXT_KIN_SLOTS
 from db.outbox import emit
 from server import deps
 from server import external as ext
-from server.deps import SessionDep
+from server.deps import SessionDep, short
 from server.preconditions import IfMatch, check, etag, set_etag
 from server.methods import METHODS, PARAM_HELP
 from server.routers.external import ext_slot_out
@@ -90,6 +90,7 @@ def list_sessions(controller_id: int, db: SessionDep, state: str | None = None) 
 
 
 @router.get(PREFIX + "/{session_id}")
+@short
 def get_session(controller_id: int, session_id: int, db: SessionDep,
                 response: Response) -> SessionOut:
     """The steps with their prompts, which are filled, and the report once computed. Its
@@ -118,6 +119,7 @@ def _early_pose(controller_id: int, body: TouchUpIn) -> tuple[tuple, Pose] | Non
 
 
 @router.post(PREFIX + "/{session_id}/touch-up")
+@short
 def touch_up(controller_id: int, session_id: int, db: SessionDep, response: Response,
              body: TouchUpIn | None = Body(None), if_match: IfMatch = None) -> SessionOut:
     """Fill a step (default: the next empty one) with the emulated robot's current joints, or

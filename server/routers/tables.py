@@ -6,7 +6,7 @@ from fastapi import APIRouter, Response
 
 from db import crud, rows
 from db.models import EntryHistory, FrameEntry
-from server.deps import SessionDep
+from server.deps import SessionDep, short
 from server.preconditions import IfMatch, check, etag, set_etag
 from server.routers.common import entry_out, load_values
 from server.schemas import EntryIn, EntryOut, HistoryOut
@@ -64,6 +64,7 @@ def table_router(table: str, path: str, tag: str) -> APIRouter:
         return [entry_out(e) for e in crud.list_entries(db, controller_id, table, kind)]
 
     @router.get("/{number}", name=f"get_{table}", summary=f"One {label} slot")
+    @short
     def get_slot(controller_id: int, number: int, db: SessionDep, response: Response) -> EntryOut:
         """The slot; its ``ETag`` is what a later edit sends as ``If-Match``."""
         e = rows.entry(db.connection(), controller_id, table, number)  # a Core read (db.rows)
