@@ -37,6 +37,7 @@ DEFAULT_TIME_S = 600.0
 DEFAULT_MEMORY_MB = 2048
 NICE = 15  # a job gets ~4 % of a core the request path wants (CFS weights 36 vs 1024)
 RENEW_S = 0.5  # lease renewal and the cancel check of running jobs
+MEMORY_EXIT = 3  # a job process's exit code: out of memory, too short of it to say so itself
 
 
 @dataclass(frozen=True)
@@ -47,8 +48,15 @@ class Limits:
     memory_mb: int = DEFAULT_MEMORY_MB
 
 
+def _memory_limit_error() -> dict[str, Any]:
+    return jobs._error(413, "the job needed more memory than its limit allows; split the "
+                            "recording or raise --job-memory-mb", (), "memory_limit")
+
+
 def _error_of(exc: BaseException) -> dict[str, Any]:
     """The ``{"status", "detail"}`` a route would have answered for ``exc``."""
+    if isinstance(exc, MemoryError):  # before the imports: at the cap they can fail themselves
+        return _memory_limit_error()
     from server.errors import body_loc
     from solvers.errors import CalibrationError, KinematicsError
 
@@ -59,9 +67,6 @@ def _error_of(exc: BaseException) -> dict[str, Any]:
         return jobs._error(404, exc.reason, ("path", *exc.loc), "not_found")
     if isinstance(exc, StateConflict):
         return jobs._error(409, exc.reason, exc.loc, "conflict")
-    if isinstance(exc, MemoryError):
-        return jobs._error(413, "the job needed more memory than its limit allows; split the "
-                                "recording or raise --job-memory-mb", (), "memory_limit")
     return jobs._error(500, f"internal error ({type(exc).__name__}); see the worker log", (),
                        "internal")
 
@@ -90,6 +95,7 @@ def run_job(sm: sessionmaker[Session], job_id: int, kind: str, params: dict[str,
     except Exception as exc:  # noqa: BLE001 - every failure becomes the job's error
         if not isinstance(exc, (MemoryError,)) and _error_of(exc)["status"] == 500:
             log.exception("job %s (%s) failed", job_id, kind)
+        exc.__traceback__ = None  # its frames hold the job's data: free it before reporting
         with sm() as db:
             db.rollback()
             jobs.finish(db, job_id, worker, "failed", error=_error_of(exc))
@@ -129,6 +135,8 @@ def _child(db_url: str, job_id: int, kind: str, params: dict[str, Any], worker: 
         run_job(make_sessionmaker(engine), job_id, kind, params, worker)
         engine.dispose()
         code = 0
+    except MemoryError:  # at the cap before the job ran, or while reporting: the supervisor says 413
+        code = MEMORY_EXIT
     except BaseException:  # noqa: BLE001 - the supervisor reports a child that did not answer
         log.exception("job %s: its process failed", job_id)
     finally:
@@ -223,6 +231,8 @@ class Pool:
             code = r.process.exitcode
             if r.cancel_asked:
                 self._end(job_id, "cancelled")
+            elif code == MEMORY_EXIT:
+                self._end(job_id, "failed", _memory_limit_error())
             elif code != 0:
                 why = (f"killed by signal {signal.Signals(-code).name}" if code and code < 0
                        else f"exit code {code}")
