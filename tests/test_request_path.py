@@ -19,6 +19,19 @@ LOCK_PROBE = ("import fcntl, os, sys\n"
               "fcntl.flock(fd, fcntl.LOCK_EX | fcntl.LOCK_NB)\n")
 
 
+def count_hops(monkeypatch) -> list[str]:  # noqa: ANN001
+    """The names of the functions run in the threadpool from now on (one per hop)."""
+    hops: list[str] = []
+    run_sync = anyio.to_thread.run_sync
+
+    async def counting(func, *args, **kw):  # noqa: ANN001, ANN202
+        hops.append(getattr(func, "__name__", repr(func)))
+        return await run_sync(func, *args, **kw)
+
+    monkeypatch.setattr(anyio.to_thread, "run_sync", counting)
+    return hops
+
+
 SHORT = {"GET /controllers/1/tools/1", "GET /controllers", "POST touch-up", "GET session"}
 
 
@@ -29,14 +42,7 @@ def test_a_request_takes_one_worker_thread(client, monkeypatch):
     SQLite when it need not wait."""
     url = open_session(client, "tool.xyz_4point", 1)
     ok(client.post(f"{url}/touch-up", json={"step": 0}))  # the token is now verified
-    hops: list[str] = []
-    run_sync = anyio.to_thread.run_sync
-
-    async def counting(func, *args, **kw):  # noqa: ANN001, ANN202
-        hops.append(getattr(func, "__name__", repr(func)))
-        return await run_sync(func, *args, **kw)
-
-    monkeypatch.setattr(anyio.to_thread, "run_sync", counting)
+    hops = count_hops(monkeypatch)
     sqlite = client.app.state.engine.dialect.name == "sqlite"
     for name, method, path, body in (
             ("GET /controllers/1/tools/1", "GET", f"{C}/tools/1", None),
@@ -68,14 +74,7 @@ def test_a_short_write_whose_turn_is_taken_waits_in_a_thread(client, monkeypatch
         return  # PostgreSQL: short routes always run in a thread (nothing to check here)
     url = open_session(client, "tool.xyz_4point", 1)
     queue = client.app.state.writer_queue
-    hops: list[str] = []
-    run_sync = anyio.to_thread.run_sync
-
-    async def counting(func, *args, **kw):  # noqa: ANN001, ANN202
-        hops.append(getattr(func, "__name__", repr(func)))
-        return await run_sync(func, *args, **kw)
-
-    monkeypatch.setattr(anyio.to_thread, "run_sync", counting)
+    hops = count_hops(monkeypatch)
     held, go = threading.Event(), threading.Event()
 
     def holder() -> None:
