@@ -21,6 +21,9 @@ host) in the route's thread, just before its ``BEGIN IMMEDIATE``, and gives it u
 commit: the next writer goes at once, instead of polling in SQLite's busy handler. It orders
 writers and guards nothing (``BEGIN IMMEDIATE`` does).
 
+**Short routes** (:func:`short`: a touch-up, the reads of a slot, a controller, a session) run
+on the event loop on SQLite, without a thread, when they need not wait (see there).
+
 In the process, writers pass a bulkhead first (``app.state.writers``, an ``asyncio.Semaphore``
 of :func:`writer_slots`): a request waiting for a database lock holds a thread of the
 threadpool, and if every thread waited, none would be left for readers. The bulkhead keeps

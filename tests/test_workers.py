@@ -48,7 +48,8 @@ def svc(request, tmp_path_factory):  # noqa: ANN001, ANN201
 
 
 def a1(url: str) -> float:
-    return httpx.get(f"{url}{C}/robot").json()["joints_deg"][0]
+    # 30 s: right after kill -9 bursts, under the whole suite, a worker may still be restarting
+    return httpx.get(f"{url}{C}/robot", timeout=30.0).json()["joints_deg"][0]
 
 
 def test_four_workers_migrate_a_fresh_database_once(svc):  # noqa: ANN001
