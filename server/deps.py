@@ -54,7 +54,6 @@ from server import idempotency
 READ_METHODS = ("GET", "HEAD", "OPTIONS")
 LOCK_ON_BEGIN = "pendant_lock_controller"  # Session.info: the controller to lock at BEGIN
 TURN = "pendant_writer_turn"  # Session.info: the request's db.session.WriterTurn (SQLite)
-LOOP_PATIENCE_S = 0.05  # a short SQLite writer's wait for its turn on the event loop
 WRITER_SLOTS = {"sqlite": 4}  # threads of one process waiting in SQLite's writer queue; PG: 8
 
 
@@ -259,21 +258,13 @@ def short(endpoint: Callable[..., Any]) -> Callable[..., Any]:
 
 async def _on_loop(db: Session) -> bool:
     """Whether a :func:`short` route may run on the event loop (see there): a read at once; a
-    writer once it has its turn in the writers' queue, which it tries for without blocking
-    the loop, again after sleeps of 0.1, 0.2, 0.4 ... 1 ms (another process's write holds it
-    about a millisecond), for at most :data:`LOOP_PATIENCE_S`; then it goes to a thread."""
+    writer with its turn in the writers' queue, taken at once if it is free, else waited for
+    in a thread (the kernel wakes it when the holder lets go) before the route runs here."""
     if db.get_bind().dialect.name != "sqlite":
         return False
     turn = _turn(db)
-    if turn is None:
-        return True
-    loop = asyncio.get_running_loop()
-    deadline, pause = loop.time() + LOOP_PATIENCE_S, 1e-4
-    while not turn.try_take():
-        if loop.time() > deadline:
-            return False
-        await asyncio.sleep(pause)
-        pause = min(2 * pause, 1e-3)
+    if turn is not None and not turn.try_take():
+        await run_in_threadpool(turn.take)  # given back by get_session if cancelled meanwhile
     return True
 
 

@@ -69,7 +69,7 @@ def test_a_request_takes_one_worker_thread(client, monkeypatch):
 
 def test_a_short_write_whose_turn_is_taken_waits_in_a_thread(client, monkeypatch):
     """A touch-up finding the SQLite writers' queue held (here by a thread of the test) does
-    not wait on the event loop: it goes to a thread, waits there, and then runs."""
+    not block the event loop: it waits for its turn in a thread, then runs."""
     if client.app.state.engine.dialect.name != "sqlite":
         return  # PostgreSQL: short routes always run in a thread (nothing to check here)
     url = open_session(client, "tool.xyz_4point", 1)
@@ -90,7 +90,7 @@ def test_a_short_write_whose_turn_is_taken_waits_in_a_thread(client, monkeypatch
     r = client.post(f"{url}/touch-up", json={"step": 0})
     t.join(10)
     assert r.status_code == 200 and r.json()["steps"][0]["filled"]
-    assert go.is_set() and len(hops) == 1 and "touch_up" in hops[0]  # waited, in a thread
+    assert go.is_set() and len(hops) == 1 and "WriterTurn.take" in hops[0]  # waited in a thread
 
 
 def test_a_failed_write_gives_up_its_turn(client):
