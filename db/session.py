@@ -31,6 +31,7 @@ from sqlalchemy.orm import Session, sessionmaker
 
 DB_DIR = Path(__file__).resolve().parent
 WRITE = {"sqlite_begin": "BEGIN IMMEDIATE"}  # execution options of a writing session
+BUSY_TIMEOUT_MS = 30000  # how long a SQLite statement waits for a lock held by another writer
 MIGRATION_LOCK_ID = 0x70656E64  # "pend": the pg_advisory_lock key of the schema step
 
 
@@ -48,7 +49,7 @@ def make_engine(url: str) -> Engine:
             cur.execute("PRAGMA journal_mode=WAL")
             cur.execute("PRAGMA synchronous=NORMAL")
             cur.execute("PRAGMA foreign_keys=ON")
-            cur.execute("PRAGMA busy_timeout=30000")
+            cur.execute(f"PRAGMA busy_timeout={BUSY_TIMEOUT_MS}")
             cur.close()
 
         @event.listens_for(engine, "begin")
@@ -60,7 +61,17 @@ def make_engine(url: str) -> Engine:
             turn = TURN_AT_BEGIN.get()
             if turn is not None and begin != "BEGIN":
                 turn.take()
-            conn.exec_driver_sql(begin)
+            if begin == "BEGIN" or not NO_WAIT_AT_BEGIN.get():
+                conn.exec_driver_sql(begin)
+                return
+            # on the event loop (server.deps.short): fail at once ("database is locked") if a
+            # writer outside the queue (a job worker, the CLI) holds the lock, never wait
+            raw = conn.connection.dbapi_connection
+            raw.execute("PRAGMA busy_timeout=0")
+            try:
+                conn.exec_driver_sql(begin)
+            finally:
+                raw.execute(f"PRAGMA busy_timeout={BUSY_TIMEOUT_MS}")
     return engine
 
 
@@ -158,6 +169,8 @@ class WriterTurn:
 
 TURN_AT_BEGIN: contextvars.ContextVar[WriterTurn | None] = contextvars.ContextVar(
     "pendant_turn_at_begin", default=None)  # the turn of the writer running in this thread
+NO_WAIT_AT_BEGIN: contextvars.ContextVar[bool] = contextvars.ContextVar(
+    "pendant_no_wait_at_begin", default=False)  # BEGIN IMMEDIATE fails rather than waits
 _QUEUES: dict[str, WriterQueue] = {}
 _QUEUES_LOCK = threading.Lock()
 

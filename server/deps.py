@@ -44,11 +44,13 @@ from fastapi.datastructures import DefaultPlaceholder
 from fastapi.routing import APIRoute
 from pydantic import BaseModel, TypeAdapter
 from sqlalchemy import event
+from sqlalchemy.exc import OperationalError
 from sqlalchemy.orm import Session, sessionmaker
 from starlette.concurrency import run_in_threadpool
 
 from db import crud
-from db.session import TURN_AT_BEGIN, WriterTurn, write_session, writer_queue
+from db.session import (NO_WAIT_AT_BEGIN, TURN_AT_BEGIN, WriterTurn, write_session,
+                        writer_queue)
 from server import idempotency
 
 READ_METHODS = ("GET", "HEAD", "OPTIONS")
@@ -259,12 +261,25 @@ def short(endpoint: Callable[..., Any]) -> Callable[..., Any]:
 async def _on_loop(db: Session) -> bool:
     """Whether a :func:`short` route may run on the event loop (see there): a read at once; a
     writer with its turn in the writers' queue, taken at once if it is free, else waited for
-    in a thread (the kernel wakes it when the holder lets go) before the route runs here."""
+    in a thread (the kernel wakes it when the holder lets go), and its transaction begun here
+    without waiting. A writer that does not queue (a job worker, the events dispatcher, the
+    CLI) may hold SQLite's lock: then ``BEGIN IMMEDIATE`` fails at once and the route runs in
+    a thread, whose ``BEGIN`` waits there, never on the loop."""
     if db.get_bind().dialect.name != "sqlite":
         return False
     turn = _turn(db)
-    if turn is not None and not turn.try_take():
+    if turn is None:
+        return True
+    if not turn.try_take():
         await run_in_threadpool(turn.take)  # given back by get_session if cancelled meanwhile
+    no_wait = NO_WAIT_AT_BEGIN.set(True)
+    try:
+        db.connection()  # BEGIN IMMEDIATE, or "database is locked" at once
+    except OperationalError:
+        db.rollback()
+        return False
+    finally:
+        NO_WAIT_AT_BEGIN.reset(no_wait)
     return True
 
 
@@ -296,8 +311,7 @@ def add_routes(app: FastAPI, router: Any) -> None:
     does). A router added here needs nothing else to get :func:`one_thread`.
     """
     for route in router.routes:
-        if isinstance(route, APIRoute):
-            app.router.add_api_route(route.path, one_thread(route.endpoint, route),
-                                     **{k: getattr(route, k) for k in ROUTE_FIELDS})
-        else:
-            app.router.routes.append(route)
+        if not isinstance(route, APIRoute):  # a websocket or a mount would skip the app's auth
+            raise TypeError(f"add_routes serves HTTP routes only, got {route!r}")
+        app.router.add_api_route(route.path, one_thread(route.endpoint, route),
+                                 **{k: getattr(route, k) for k in ROUTE_FIELDS})

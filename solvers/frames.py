@@ -22,7 +22,10 @@ from scipy.spatial.transform import Rotation
 
 from solvers.validate import FloatArray, as_array
 
-ASSUME_VALID = "assume_valid" in inspect.signature(Rotation.from_matrix).parameters
+try:  # SciPy >= 1.15 (a Cython build may carry no signature: then it is not used)
+    ASSUME_VALID = "assume_valid" in inspect.signature(Rotation.from_matrix).parameters
+except (TypeError, ValueError):
+    ASSUME_VALID = False
 
 KUKA_EULER = "ZYX"  # intrinsic Z, Y', X'' with angles [A, B, C]
 FANUC_EULER = "xyz"  # extrinsic x, y, z with angles [W, P, R]

@@ -4,9 +4,11 @@ queued without polling, a remembered token. Behaviour only: the speed itself is 
 
 from __future__ import annotations
 
+import sqlite3
 import subprocess
 import sys
 import threading
+import time
 
 import anyio.to_thread
 
@@ -122,3 +124,29 @@ def test_sqlite_writers_queue_in_the_process_and_across_processes(tmp_path):
     assert got.wait(30)
     t.join()
     assert subprocess.run([sys.executable, "-c", LOCK_PROBE, path]).returncode == 0
+
+
+def test_a_writer_outside_the_queue_does_not_stall_the_event_loop(client):
+    """SQLite's write lock held by a writer that does not queue (a job worker, the CLI): a
+    touch-up, a short route, does not wait for it on the event loop (it waits in a thread),
+    so a read answers meanwhile, and the touch-up lands once the lock is free."""
+    engine = client.app.state.engine
+    if engine.dialect.name != "sqlite":
+        return  # PostgreSQL: short routes always run in a thread
+    url = open_session(client, "tool.xyz_4point", 1)
+    other = sqlite3.connect(engine.url.database, isolation_level=None)
+    other.execute("BEGIN IMMEDIATE")  # as a job worker's write transaction
+    answers: dict = {}
+    writer = threading.Thread(
+        target=lambda: answers.update(touch=client.post(f"{url}/touch-up", json={"step": 0})))
+    writer.start()
+    time.sleep(0.3)  # the touch-up is waiting for the lock by now
+    t0 = time.perf_counter()
+    read = client.get(f"{C}/tools/1")
+    waited_s = time.perf_counter() - t0
+    assert "touch" not in answers  # still waiting for the lock
+    other.execute("ROLLBACK")
+    other.close()
+    writer.join(30)
+    assert read.status_code == 200 and waited_s < 2.0, waited_s
+    assert answers["touch"].status_code == 200 and answers["touch"].json()["steps"][0]["filled"]
