@@ -124,11 +124,18 @@ def delete_controller(db: Session, controller: Controller) -> None:
 
 # -------------------------------------------------------------------------------- entries
 
-def get_entry(db: Session, controller_id: int, table: str, number: int) -> FrameEntry:
+def check_slot_address(db: Session | Connection, controller_id: int, table: str,
+                       number: int) -> None:
+    """404 naming the path parameter for a slot number out of the table's range, or a
+    controller id no row of this backend can have."""
     if not 1 <= number <= SLOTS[table]:
         raise NotFound(("number",), f"{table} slots are numbered 1..{SLOTS[table]}, got {number}")
     if _row_id(controller_id, db) is None:
         raise NotFound(("controller_id",), f"no controller {controller_id}")
+
+
+def get_entry(db: Session, controller_id: int, table: str, number: int) -> FrameEntry:
+    check_slot_address(db, controller_id, table, number)
     e = db.scalar(ENTRY, {"controller_id": controller_id, "table": table, "number": number})
     if e is None:
         raise NotFound(("number",), f"no {table} {number} on controller {controller_id}")

@@ -18,9 +18,9 @@ from typing import Any
 
 from sqlalchemy import Connection, bindparam, select
 
-from db.crud import SLOTS, NotFound
+from db.crud import NotFound, check_slot_address
 from db.crud import _row_id as row_id
-from db.models import CalibSession, Controller, FrameEntry, TaughtPoint
+from db.models import CalibSession, Controller, FrameEntry, PoseColumns, TaughtPoint
 
 C, S, P, E = (Controller.__table__, CalibSession.__table__, TaughtPoint.__table__,
               FrameEntry.__table__)
@@ -55,8 +55,7 @@ class ControllerRow(Row):
 
 
 class PoseRow(Row):
-    def pose_values(self) -> tuple[float, float, float, float, float, float]:
-        return (self.x_mm, self.y_mm, self.z_mm, self.a_deg, self.b_deg, self.c_deg)
+    pose_values = PoseColumns.pose_values  # the models' own: (x, y, z, a, b, c)
 
 
 class EntryRow(PoseRow):
@@ -71,10 +70,7 @@ class SessionRow(Row):
     """A ``calib_session`` row and its points by step (``points``)."""
 
     points: list[PointRow]
-
-    def result_values(self) -> tuple[float, ...] | None:
-        v = tuple(getattr(self, k) for k in RESULT_COLUMNS)
-        return None if v[0] is None else tuple(float(x) for x in v)
+    result_values = CalibSession.result_values  # the model's own
 
 
 def controller(conn: Connection, controller_id: int, lock: bool = False) -> ControllerRow:
@@ -108,10 +104,7 @@ def session(conn: Connection, controller_id: int, session_id: int) -> SessionRow
 
 def entry(conn: Connection, controller_id: int, table: str, number: int) -> EntryRow:
     """One slot (as ``crud.get_entry``, with its 404s)."""
-    if not 1 <= number <= SLOTS[table]:
-        raise NotFound(("number",), f"{table} slots are numbered 1..{SLOTS[table]}, got {number}")
-    if row_id(controller_id, conn) is None:
-        raise NotFound(("controller_id",), f"no controller {controller_id}")
+    check_slot_address(conn, controller_id, table, number)
     row = conn.execute(ENTRY, {"b_cid": controller_id, "b_table": table,
                                "b_number": number}).first()
     if row is None:

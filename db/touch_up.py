@@ -25,7 +25,8 @@ from sqlalchemy import Connection, bindparam
 
 from db.crud import StateConflict, require_open
 from db.models import utcnow
-from db.rows import C, P, RESULT_COLUMNS, S, ControllerRow, PointRow, Row, SessionRow
+from db.rows import (POSE_COLUMNS, RESULT_COLUMNS, C, P, S, ControllerRow, PointRow, Row,
+                     SessionRow)
 
 POINT_VALUES = ("source", "joints_deg", "beam_id", "edge", "t_s", "motion_sign",
                 "external_axes", "x_mm", "y_mm", "z_mm", "a_deg", "b_deg", "c_deg", "vx_mm_s",
@@ -67,8 +68,7 @@ def put_point(conn: Connection, s: SessionRow, step: int, source: str,
         "motion_sign": None if motion_sign is None else [float(v) for v in motion_sign],
         "external_axes": None if not external_axes else {k: float(v)
                                                          for k, v in external_axes.items()},
-        **dict(zip(("x_mm", "y_mm", "z_mm", "a_deg", "b_deg", "c_deg"),
-                   (float(x) for x in pose_values))),
+        **dict(zip(POSE_COLUMNS, (float(x) for x in pose_values))),
         "vx_mm_s": None, "vy_mm_s": None, "vz_mm_s": None, "created_at": now}
     p = next((p for p in s.points if p.step == step), None)
     if p is None:

@@ -292,7 +292,6 @@ def install(app: FastAPI) -> None:
         event.listen(maker, "after_begin", _lock_at_begin)
 
 
-
 ROUTE_FIELDS = ("response_model", "status_code", "tags", "dependencies", "summary", "description",
                 "response_description", "responses", "deprecated", "methods", "operation_id",
                 "response_model_include", "response_model_exclude", "response_model_by_alias",

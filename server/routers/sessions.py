@@ -6,7 +6,6 @@ restart of the service loses nothing; a failed compute changes nothing.
 
 from __future__ import annotations
 
-from types import SimpleNamespace
 from typing import Any
 
 import numpy as np
@@ -100,24 +99,6 @@ def get_session(controller_id: int, session_id: int, db: SessionDep,
     return session_out(s)
 
 
-ARMS: dict[int, tuple[str | None, dict | None]] = {}  # the arm each controller last had here
-
-
-def _early_pose(controller_id: int, body: TouchUpIn) -> tuple[tuple, Pose] | None:
-    """The flange pose of recorded ``joints_deg`` on the arm this controller had at its last
-    touch-up in this process, computed before the write lock (a third of the route's work):
-    the route uses it only if the controller, read under the lock, still has that arm, and
-    computes it there otherwise (and any refusal there, in the usual order)."""
-    arm = ARMS.get(controller_id)
-    if arm is None or body.joints_deg is None or body.flange_pose is not None:
-        return None
-    try:
-        return arm, flange_pose_of(SimpleNamespace(robot_key=arm[0], custom_robot=arm[1]),
-                                   body.joints_deg)  # type: ignore[arg-type]
-    except CalibrationError:
-        return None
-
-
 @router.post(PREFIX + "/{session_id}/touch-up")
 @short
 def touch_up(controller_id: int, session_id: int, db: SessionDep, response: Response,
@@ -128,7 +109,6 @@ def touch_up(controller_id: int, session_id: int, db: SessionDep, response: Resp
     The rows are read and written with Core statements (``db.rows``, ``db.touch_up``: the
     hot path of every menu) in the request's transaction, under its row lock."""
     body = body or TouchUpIn()
-    early = _early_pose(controller_id, body)  # before the write lock, if it can be
     lock = deps.lock_here(db)  # the controller's row is locked by the read below (PostgreSQL)
     conn = db.connection()  # the transaction begins (SQLite: BEGIN IMMEDIATE)
     c = rows.controller(conn, controller_id, lock=lock)
@@ -145,10 +125,7 @@ def touch_up(controller_id: int, session_id: int, db: SessionDep, response: Resp
     else:
         joints = c.joints_deg if body.joints_deg is None else body.joints_deg
         source = "touch_up" if body.joints_deg is None else "joints"
-        arm = (c.robot_key, c.custom_robot)
-        pose = early[1] if early is not None and early[0] == arm else \
-            flange_pose_of(c, joints)  # type: ignore[arg-type]
-        ARMS[controller_id] = arm
+        pose = flange_pose_of(c, joints)  # type: ignore[arg-type]
     sign = c.motion_sign if source == "touch_up" else None  # the emulated arm's flanks
     ext_axes = c.external_axes if source == "touch_up" else body.external_axes
     touch.put_point(conn, s, step, source, pose.as_array(), joints, t_s=float(c.clock_s or 0.0),
