@@ -18,7 +18,6 @@ import contextvars
 import fcntl
 import functools
 import os
-import threading
 from collections.abc import Iterator
 from pathlib import Path
 
@@ -28,6 +27,8 @@ from alembic.runtime.migration import MigrationContext
 from alembic.script import ScriptDirectory
 from sqlalchemy import Engine, create_engine, event, text
 from sqlalchemy.orm import Session, sessionmaker
+
+from db.writers import TURN_AT_BEGIN
 
 DB_DIR = Path(__file__).resolve().parent
 WRITE = {"sqlite_begin": "BEGIN IMMEDIATE"}  # execution options of a writing session
@@ -89,104 +90,8 @@ def write_session(maker: sessionmaker[Session]) -> Session:
     return maker(bind=_write_bind(maker.kw["bind"]))
 
 
-class WriterQueue:
-    """Where the writers of one SQLite database wait their turn in this process: a thread lock,
-    then an exclusive ``flock`` on ``<db>.writer.lock`` (so the processes of one host queue too).
-
-    A waiting writer sleeps until the holder's turn ends and then goes at once: without the
-    queue, a writer that finds the database locked polls in SQLite's busy handler (sleeps of 1,
-    2, 5, ... 100 ms), which is most of a p99 under load. The queue orders writers and protects
-    nothing: the data stays guarded by ``BEGIN IMMEDIATE``, so a writer that does not queue (a
-    job worker, the CLI) is still correct, it only polls. The kernel drops a ``flock`` with the
-    process that held it (kill -9 included).
-    """
-
-    def __init__(self, path: str | None) -> None:
-        self.path = path
-        self._lock = threading.Lock()
-        self._fd: int | None = None
-
-    def acquire(self) -> None:
-        self._lock.acquire()
-        try:
-            if self.path is not None:
-                if self._fd is None:
-                    self._fd = os.open(self.path, os.O_RDWR | os.O_CREAT, 0o600)
-                fcntl.flock(self._fd, fcntl.LOCK_EX)
-        except BaseException:
-            self._lock.release()
-            raise
-
-    def try_acquire(self) -> bool:
-        """:meth:`acquire` if no one holds the turn (no wait); False if someone does."""
-        if not self._lock.acquire(blocking=False):
-            return False
-        try:
-            if self.path is not None:
-                if self._fd is None:
-                    self._fd = os.open(self.path, os.O_RDWR | os.O_CREAT, 0o600)
-                fcntl.flock(self._fd, fcntl.LOCK_EX | fcntl.LOCK_NB)
-            return True
-        except BlockingIOError:
-            self._lock.release()
-            return False
-        except BaseException:
-            self._lock.release()
-            raise
-
-    def release(self) -> None:
-        try:
-            if self._fd is not None:
-                fcntl.flock(self._fd, fcntl.LOCK_UN)
-        finally:
-            self._lock.release()
-
-
-class WriterTurn:
-    """One request's turn in its database's :class:`WriterQueue` (taken at most once): taken
-    just before its ``BEGIN IMMEDIATE`` when set as :data:`TURN_AT_BEGIN` (so what a route
-    computes before its first query does not hold up the other writers), or explicitly."""
-
-    def __init__(self, queue: WriterQueue) -> None:
-        self.queue, self.held = queue, False
-
-    def take(self) -> None:
-        if not self.held:
-            self.queue.acquire()
-            self.held = True
-
-    def try_take(self) -> bool:
-        """Take the turn if it is free now (True), else leave it (False)."""
-        if not self.held:
-            self.held = self.queue.try_acquire()
-        return self.held
-
-    def give(self) -> None:
-        if self.held:
-            self.held = False
-            self.queue.release()
-
-
-TURN_AT_BEGIN: contextvars.ContextVar[WriterTurn | None] = contextvars.ContextVar(
-    "pendant_turn_at_begin", default=None)  # the turn of the writer running in this thread
 NO_WAIT_AT_BEGIN: contextvars.ContextVar[bool] = contextvars.ContextVar(
     "pendant_no_wait_at_begin", default=False)  # BEGIN IMMEDIATE fails rather than waits
-_QUEUES: dict[str, WriterQueue] = {}
-_QUEUES_LOCK = threading.Lock()
-
-
-def writer_queue(engine: Engine) -> WriterQueue | None:
-    """The :class:`WriterQueue` of a SQLite ``engine`` in this process (None for PostgreSQL,
-    whose writers lock rows, not the database)."""
-    if engine.dialect.name != "sqlite":
-        return None
-    path = engine.url.database
-    on_disk = bool(path) and path != ":memory:" and not path.startswith("file:")
-    key = os.path.abspath(path) if on_disk else f"memory:{id(engine.pool)}"
-    with _QUEUES_LOCK:
-        if key not in _QUEUES:
-            _QUEUES[key] = WriterQueue(f"{key}.writer.lock" if on_disk else None)
-        return _QUEUES[key]
 
 
 def is_postgres(db: Session | Engine) -> bool:

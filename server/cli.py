@@ -567,6 +567,7 @@ def serve(args: argparse.Namespace) -> int:
             if args.opcua_port else None)
     try:
         if args.workers == 1:
+            application.state.freeze_gc = True  # a service process (server.app.lifespan)
             _serve(application, args.host, args.port)
         else:
             # each worker builds server.app:app from the environment (server.settings)

@@ -49,13 +49,14 @@ from sqlalchemy.orm import Session, sessionmaker
 from starlette.concurrency import run_in_threadpool
 
 from db import crud
-from db.session import (NO_WAIT_AT_BEGIN, TURN_AT_BEGIN, WriterTurn, write_session,
-                        writer_queue)
+from db.session import NO_WAIT_AT_BEGIN, write_session
+from db.writers import TURN_AT_BEGIN, WriterTurn, writer_queue
 from server import idempotency
 
 READ_METHODS = ("GET", "HEAD", "OPTIONS")
 LOCK_ON_BEGIN = "pendant_lock_controller"  # Session.info: the controller to lock at BEGIN
 TURN = "pendant_writer_turn"  # Session.info: the request's db.session.WriterTurn (SQLite)
+PLAN = "pendant_plan"  # Session.info: what a short route's plan returned (see short)
 WRITER_SLOTS = {"sqlite": 4}  # threads of one process waiting in SQLite's writer queue; PG: 8
 
 
@@ -207,33 +208,52 @@ def one_thread(endpoint: Callable[..., Any], route: APIRoute | None = None) -> C
         return endpoint
 
     @functools.wraps(endpoint)
-    def run(*args: Any, **kwargs: Any) -> Any:
+    def locked(*args: Any, **kwargs: Any) -> Any:
+        """The route and its commit (an answer built after the commit stays to be built)."""
         db = next((v for v in kwargs.values() if isinstance(v, Session)), None)
         if db is None:
+            return endpoint(*args, **kwargs)
+        _make_plan(endpoint, db, kwargs)
+        # a SQLite writer takes its turn just before its BEGIN IMMEDIATE (db.session), and
+        # waits there rather than polling in SQLite's busy handler
+        at_begin = TURN_AT_BEGIN.set(_turn(db))
+        try:
             result = endpoint(*args, **kwargs)
-        else:
-            # a SQLite writer takes its turn just before its BEGIN IMMEDIATE (db.session), and
-            # waits there rather than polling in SQLite's busy handler
-            at_begin = TURN_AT_BEGIN.set(_turn(db))
-            try:
-                result = endpoint(*args, **kwargs)
-                db.commit()
-            except BaseException:
-                _end(db, db.rollback)
-                raise
-            finally:
-                TURN_AT_BEGIN.reset(at_begin)
-            _give_turn(db)
+            db.commit()
+        except BaseException:
+            _end(db, db.rollback)
+            raise
+        finally:
+            TURN_AT_BEGIN.reset(at_begin)
+        _give_turn(db)
+        return result
+
+    def answer(result: Any, kwargs: dict[str, Any]) -> Any:
+        if isinstance(result, Later):
+            result = result.build()
         return result if route is None else _answer(result, route, kwargs)
+
+    @functools.wraps(endpoint)
+    def run(*args: Any, **kwargs: Any) -> Any:
+        return answer(locked(*args, **kwargs), kwargs)
 
     served: Callable[..., Any] = run
     if getattr(endpoint, "_short", False):
         @functools.wraps(endpoint)
         async def served(*args: Any, **kwargs: Any) -> Any:
             db = next((v for v in kwargs.values() if isinstance(v, Session)), None)
-            if db is not None and await _on_loop(db):
+            if db is None or db.get_bind().dialect.name != "sqlite":
+                return await run_in_threadpool(run, *args, **kwargs)
+            _make_plan(endpoint, db, kwargs)  # a read: on the loop, without the turn
+            turn = db.info.pop(TURN, None)
+            if turn is None:  # a read: at once
                 return run(*args, **kwargs)
-            return await run_in_threadpool(run, *args, **kwargs)
+            result = await turn.queue.batch().run(functools.partial(_begun, locked, db, args,
+                                                                    kwargs))
+            if result is _IN_A_THREAD:
+                db.info[TURN] = turn
+                return await run_in_threadpool(run, *args, **kwargs)
+            return answer(result, kwargs)
 
         del served.__wrapped__  # FastAPI would unwrap it and take the sync route for the call
 
@@ -245,42 +265,81 @@ def one_thread(endpoint: Callable[..., Any], route: APIRoute | None = None) -> C
     return served
 
 
-def short(endpoint: Callable[..., Any]) -> Callable[..., Any]:
+def short(endpoint: Callable[..., Any] | None = None, *,
+          plan: Callable[..., Any] | None = None) -> Any:
     """Mark a sync route whose work is a millisecond or two (a touch-up, the reads of a slot or
     a controller): on SQLite, :func:`one_thread` runs it on the event loop when it needs no
-    wait (a read, or a writer whose turn is free now), else in a thread as usual.
+    wait (a read, or a writer once its turn came), else in a thread as usual.
 
     A thread cost such a route more than its work: the hop, and with 2 workers a writer in a
     thread held SQLite's write lock 2–2.5 ms for about 1 ms of work, winning the GIL back from
     the event loop after each database call. PostgreSQL routes keep their threads (their
-    database calls wait on the network)."""
-    endpoint._short = True  # type: ignore[attr-defined]
-    return endpoint
+    database calls wait on the network).
+
+    ``plan`` (a writer's): a function of a read connection and the route's own arguments, run
+    before the writer's turn is taken and its transaction begun, in a read transaction of its
+    own. What it returns is the route's :func:`plan_of`: the work that needs no lock (reads,
+    checks, kinematics) is done there, and the route, under the lock, only checks that what
+    the plan read has not changed (else it works it out again) and writes. The writers' lock
+    is held for less than the route's work: with one database lock for every writer, that is
+    the touch-ups' throughput."""
+    def mark(fn: Callable[..., Any]) -> Callable[..., Any]:
+        fn._short = True  # type: ignore[attr-defined]
+        fn._plan = plan  # type: ignore[attr-defined]
+        return fn
+
+    return mark if endpoint is None else mark(endpoint)
 
 
-async def _on_loop(db: Session) -> bool:
-    """Whether a :func:`short` route may run on the event loop (see there): a read at once; a
-    writer with its turn in the writers' queue, taken at once if it is free, else waited for
-    in a thread (the kernel wakes it when the holder lets go), and its transaction begun here
-    without waiting. A writer that does not queue (a job worker, the events dispatcher, the
-    CLI) may hold SQLite's lock: then ``BEGIN IMMEDIATE`` fails at once and the route runs in
-    a thread, whose ``BEGIN`` waits there, never on the loop."""
-    if db.get_bind().dialect.name != "sqlite":
-        return False
-    turn = _turn(db)
-    if turn is None:
-        return True
-    if not turn.try_take():
-        await run_in_threadpool(turn.take)  # given back by get_session if cancelled meanwhile
+def plan_of(db: Session) -> Any:
+    """What the route's ``plan`` returned (see :func:`short`), or None."""
+    return db.info.pop(PLAN, None)
+
+
+@functools.lru_cache(maxsize=64)
+def _read_bind(bind: Any) -> Any:
+    return bind.execution_options(sqlite_begin="BEGIN")  # a reader's BEGIN, not IMMEDIATE
+
+
+def _make_plan(endpoint: Callable[..., Any], db: Session | None, kwargs: dict[str, Any]) -> None:
+    plan = getattr(endpoint, "_plan", None)
+    if plan is None or db is None or PLAN in db.info or db.in_transaction():
+        return
+    with _read_bind(db.get_bind()).connect() as conn:
+        db.info[PLAN] = plan(conn, **kwargs)
+
+
+_IN_A_THREAD = object()  # _begun's answer when SQLite's lock is held outside the queue
+
+
+def _begun(locked: Callable[..., Any], db: Session, args: tuple, kwargs: dict[str, Any]) -> Any:
+    """A :func:`short` writer in its batch of the writers' queue (``db.writers.WriterBatch``),
+    on the event loop: its transaction begun without waiting, then the route. A writer that
+    does not queue (a job worker, the events dispatcher, the CLI) may hold SQLite's lock: then
+    ``BEGIN IMMEDIATE`` fails at once and the route is sent to a thread (:data:`_IN_A_THREAD`),
+    whose ``BEGIN`` waits there, never on the loop."""
     no_wait = NO_WAIT_AT_BEGIN.set(True)
     try:
         db.connection()  # BEGIN IMMEDIATE, or "database is locked" at once
     except OperationalError:
         db.rollback()
-        return False
+        return _IN_A_THREAD
     finally:
         NO_WAIT_AT_BEGIN.reset(no_wait)
-    return True
+    return locked(*args, **kwargs)
+
+
+class Later:
+    """A route's answer built after its commit, without the writers' lock (:func:`later`)."""
+
+    def __init__(self, build: Callable[[], Any]) -> None:
+        self.build = build
+
+
+def later(build: Callable[[], Any]) -> Any:
+    """Return this from a route to have its answer, ``build()``, built after the commit: a
+    :func:`short` writer's batch holds SQLite's lock until its last writer committed."""
+    return Later(build)
 
 
 def install(app: FastAPI) -> None:

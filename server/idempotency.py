@@ -29,7 +29,8 @@ from sqlalchemy.orm import Session
 from starlette.types import ASGIApp, Message, Receive, Scope, Send
 
 from db.models import IdempotencyKey, utcnow
-from db.session import WriterQueue, WriterTurn, write_session
+from db.session import write_session
+from db.writers import WriterQueue, WriterTurn
 
 HEADER = "idempotency-key"
 KEEP = timedelta(hours=24)

@@ -4,6 +4,7 @@ queued without polling, a remembered token. Behaviour only: the speed itself is 
 
 from __future__ import annotations
 
+import gc
 import sqlite3
 import subprocess
 import sys
@@ -13,8 +14,8 @@ import time
 import anyio.to_thread
 
 from api_helpers import *  # noqa: F403
-from api_helpers import C, ok, open_session
-from db.session import WriterQueue
+from api_helpers import C, make_client, ok, open_session
+from db.writers import WriterQueue
 
 LOCK_PROBE = ("import fcntl, os, sys\n"
               "fd = os.open(sys.argv[1], os.O_RDWR)\n"
@@ -69,30 +70,28 @@ def test_a_request_takes_one_worker_thread(client, monkeypatch):
     assert created.status_code == 201 and created.headers["etag"] == '"1"'
 
 
-def test_a_short_write_whose_turn_is_taken_waits_in_a_thread(client, monkeypatch):
-    """A touch-up finding the SQLite writers' queue held (here by a thread of the test) does
-    not block the event loop: it waits for its turn in a thread, then runs."""
+def test_a_short_write_whose_turn_is_taken_waits_without_a_thread_or_the_loop(client,
+                                                                             monkeypatch):
+    """A touch-up finding the SQLite writers' queue held (here by a thread of the test) waits
+    for its turn as a future on the event loop: no thread is taken, and a read answers
+    meanwhile; the touch-up lands when the holder lets go."""
     if client.app.state.engine.dialect.name != "sqlite":
         return  # PostgreSQL: short routes always run in a thread (nothing to check here)
     url = open_session(client, "tool.xyz_4point", 1)
     queue = client.app.state.writer_queue
     hops = count_hops(monkeypatch)
-    held, go = threading.Event(), threading.Event()
-
-    def holder() -> None:
-        queue.acquire()
-        held.set()
-        go.wait(10)
-        queue.release()
-
-    t = threading.Thread(target=holder)
-    t.start()
-    held.wait(10)
-    threading.Timer(0.3, go.set).start()
-    r = client.post(f"{url}/touch-up", json={"step": 0})
-    t.join(10)
-    assert r.status_code == 200 and r.json()["steps"][0]["filled"]
-    assert go.is_set() and len(hops) == 1 and "WriterTurn.take" in hops[0]  # waited in a thread
+    queue.acquire()  # as a jog in a worker thread holding its turn
+    answers: dict = {}
+    writer = threading.Thread(
+        target=lambda: answers.update(touch=client.post(f"{url}/touch-up", json={"step": 0})))
+    writer.start()
+    time.sleep(0.3)  # the touch-up is waiting for its turn by now
+    read = client.get(f"{C}/tools/1")
+    assert read.status_code == 200 and "touch" not in answers  # answered; still waiting
+    queue.release()
+    writer.join(30)
+    assert answers["touch"].status_code == 200 and answers["touch"].json()["steps"][0]["filled"]
+    assert hops == []  # neither waited nor ran in a thread
 
 
 def test_a_failed_write_gives_up_its_turn(client):
@@ -150,3 +149,25 @@ def test_a_writer_outside_the_queue_does_not_stall_the_event_loop(client):
     writer.join(30)
     assert read.status_code == 200 and waited_s < 2.0, waited_s
     assert answers["touch"].status_code == 200 and answers["touch"].json()["steps"][0]["filled"]
+
+
+def test_a_service_process_freezes_its_start_out_of_the_garbage_collectors_walks(db_url):
+    """``server.app:app`` (uvicorn's worker) and ``pendant serve`` set ``freeze_gc``: the app's
+    start-up objects go to the collector's permanent generation, so a full collection does
+    not walk them (80-170 ms per collection otherwise: benchmarks/README.md). An app of a
+    test (no ``freeze_gc``) freezes nothing: what it leaves must stay collectable."""
+    from fastapi.testclient import TestClient
+
+    from api_helpers import app_settings
+    from server.app import create_app
+
+    gc.unfreeze()
+    with make_client(db_url) as c:
+        assert c.get(f"{C}/tools/1").status_code == 200 and gc.get_freeze_count() == 0
+    app = create_app(app_settings(db_url))
+    app.state.freeze_gc = True
+    try:
+        with TestClient(app):
+            assert gc.get_freeze_count() > 10_000
+    finally:
+        gc.unfreeze()

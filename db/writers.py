@@ -1,0 +1,275 @@
+"""The SQLite writers' queue: whose turn it is to take the database's write lock.
+
+SQLite has one write lock per database file (``BEGIN IMMEDIATE``, across processes). A writer
+that finds it taken polls in SQLite's busy handler (sleeps of 1, 2, 5, ... 100 ms), which is
+most of a p99 under load. So the writers of one database queue for it instead, and the next
+goes as soon as the holder lets go:
+
+- **in the process**, a first-come first-served hand-over: the holder hands its turn straight
+  to the next waiter, a thread (woken through its own lock) or an event-loop task (woken
+  through its future, without a thread);
+- **across the processes of a host**, an exclusive ``flock`` on ``<db>.writer.lock``, taken at
+  the start of each turn and let go at its end. Keeping it for a run of a process's writers
+  (fewer hand-overs between processes) was slower: a process's writers run one after another
+  on its event loop, so the other process idled meanwhile (4 turns in a row: 290-446 req/s of
+  touch-ups against 572-858 for one, ``benchmarks/README.md``).
+
+A writer on the event loop waits for a writer of its own process as a future (no thread), and
+for another process in a thread (``flock`` blocks).
+
+The queue orders writers and protects nothing: the data stays guarded by ``BEGIN IMMEDIATE``,
+so a writer that does not queue (a job worker, the CLI) is still correct, it only polls. The
+kernel drops a ``flock`` with the process that held it (kill -9 included).
+"""
+
+from __future__ import annotations
+
+import asyncio
+import contextvars
+import fcntl
+import os
+import threading
+import weakref
+from collections import deque
+from collections.abc import Callable
+from typing import Any
+
+import anyio.to_thread
+from sqlalchemy import Engine
+
+
+
+class WriterQueue:
+    """The writers of one SQLite database in this process (see the module's docstring)."""
+
+    def __init__(self, path: str | None) -> None:
+        self.path = path
+        self._mutex = threading.Lock()  # guards the fields below, held for microseconds
+        self._held = False  # a writer of this process has the turn
+        self._waiters: deque[Any] = deque()  # threading.Lock or (loop, future), first first
+        self._flocked = False  # the turn's holder has the flock (only the holder changes it)
+        self._fd: int | None = None
+        self._batches: weakref.WeakKeyDictionary = weakref.WeakKeyDictionary()  # loop: batch
+
+    # ---------------------------------------------------------------- the turn in the process
+    def _enter(self, waiter: Any) -> bool:
+        """Take the turn if it is free (True), else queue ``waiter`` (False)."""
+        with self._mutex:
+            if not self._held:
+                self._held = True
+                return True
+            self._waiters.append(waiter)
+            return False
+
+    def release(self) -> None:
+        """End the holder's turn (the flock is let go): hand it to the next waiter of this
+        process, or free it."""
+        with self._mutex:
+            if self._flocked:
+                fcntl.flock(self._fd, fcntl.LOCK_UN)  # type: ignore[arg-type]
+                self._flocked = False
+            nxt = self._waiters.popleft() if self._waiters else None
+            if nxt is None:
+                self._held = False
+                return
+        if not isinstance(nxt, tuple):
+            nxt.release()
+            return
+        loop, future = nxt
+        try:
+            if asyncio._get_running_loop() is loop:
+                loop.call_soon(_wake, future)
+            else:
+                loop.call_soon_threadsafe(_wake, future)
+        except RuntimeError:  # its loop is closed: pass the turn on
+            self.release()
+
+    # ---------------------------------------------------------------- the flock of the host
+    def _fileno(self) -> int:
+        if self._fd is None:
+            self._fd = os.open(self.path, os.O_RDWR | os.O_CREAT, 0o600)  # type: ignore[arg-type]
+        return self._fd
+
+    def _try_flock(self) -> bool:
+        if self.path is None or self._flocked:
+            return True
+        try:
+            fcntl.flock(self._fileno(), fcntl.LOCK_EX | fcntl.LOCK_NB)
+        except BlockingIOError:
+            return False
+        self._flocked = True
+        return True
+
+    def _flock(self) -> None:
+        if self.path is not None and not self._flocked:
+            fcntl.flock(self._fileno(), fcntl.LOCK_EX)
+            self._flocked = True
+
+    # ---------------------------------------------------------------- taking a turn
+    def acquire(self) -> None:
+        """Wait for the turn in this thread."""
+        waiter = threading.Lock()
+        waiter.acquire()
+        if not self._enter(waiter):
+            waiter.acquire()  # released by the holder: the turn is ours
+        try:
+            self._flock()
+        except BaseException:
+            self.release()
+            raise
+
+    def try_acquire(self) -> bool:
+        """Take the turn if no one holds it and no other process has the flock (no wait)."""
+        with self._mutex:
+            if self._held:
+                return False
+            self._held = True
+        try:
+            if self._try_flock():
+                return True
+        except BaseException:
+            self.release()
+            raise
+        self.release()  # not ours after all: give it back (to a writer that queued since)
+        return False
+
+    async def acquire_async(self) -> None:
+        """Wait for the turn on the event loop: behind this process's writers as a future (no
+        thread), for another process's flock in a thread."""
+        loop = asyncio.get_running_loop()
+        future = loop.create_future()
+        if not self._enter((loop, future)):
+            try:
+                await future
+            except asyncio.CancelledError:
+                with self._mutex:
+                    queued = (loop, future) in self._waiters
+                    if queued:
+                        self._waiters.remove((loop, future))
+                if not queued:  # handed to us as we were cancelled: pass it on
+                    self.release()
+                raise
+        try:
+            if not self._try_flock():
+                await anyio.to_thread.run_sync(self._flock)
+        except BaseException:
+            self.release()
+            raise
+
+
+    def batch(self) -> WriterBatch:
+        """The :class:`WriterBatch` of the running event loop on this queue."""
+        loop = asyncio.get_running_loop()
+        batch = self._batches.get(loop)
+        if batch is None:
+            batch = self._batches[loop] = WriterBatch(self)
+        return batch
+
+
+class WriterBatch:
+    """The writers of one event loop that run on it (``server.deps.short``), taking their turn
+    together.
+
+    The first writer to find no batch forming starts one: a task waits for the turn (behind
+    this process's threads as a future, for another process's ``flock`` in a thread) while the
+    writers that come meanwhile join it; then it runs them one after another in one callback,
+    each its own transaction, and lets the turn go. The database's lock is held for their
+    work only: a writer handed its turn alone would hold it while the loop served whatever
+    else was ready first (requests to parse, answers to send), and each turn handed between
+    processes costs a wake-up on the other side (``benchmarks/README.md``).
+    """
+
+    def __init__(self, queue: WriterQueue) -> None:
+        self.queue = queue
+        self._jobs: deque[tuple[Callable[[], Any], asyncio.Future]] = deque()
+        self._leader: asyncio.Task | None = None
+
+    async def run(self, job: Callable[[], Any]) -> Any:
+        """``job()`` (sync, on the loop) in the next batch, with the turn; its result."""
+        loop = asyncio.get_running_loop()
+        future = loop.create_future()
+        self._jobs.append((job, future))
+        if self._leader is None:
+            self._leader = loop.create_task(self._lead())
+        return await future  # cancelled (the client left) before its batch ran: skipped
+
+    async def _lead(self) -> None:
+        try:
+            while self._jobs:
+                await self.queue.acquire_async()
+                try:
+                    jobs, self._jobs = self._jobs, deque()
+                    for job, future in jobs:
+                        if future.done():
+                            continue
+                        try:
+                            result = job()
+                        except Exception as exc:  # the request's own error (a 4xx, a 500)
+                            future.set_exception(exc)
+                        else:
+                            future.set_result(result)
+                finally:
+                    self.queue.release()
+        except BaseException as exc:  # the loop is shutting down: the waiting writers fail
+            for _, future in self._jobs:
+                if not future.done():
+                    future.set_exception(RuntimeError(f"the writers' batch ended: {exc!r}"))
+            raise
+        finally:
+            self._leader = None
+
+
+def _wake(future: asyncio.Future) -> None:
+    if not future.done():  # cancelled: its task passes the turn on (acquire_async)
+        future.set_result(None)
+
+
+class WriterTurn:
+    """One request's turn in its database's :class:`WriterQueue` (taken at most once): taken
+    just before its ``BEGIN IMMEDIATE`` when set as :data:`TURN_AT_BEGIN` (so what a route
+    computes before its first query does not hold up the other writers), or explicitly."""
+
+    def __init__(self, queue: WriterQueue) -> None:
+        self.queue, self.held = queue, False
+
+    def take(self) -> None:
+        if not self.held:
+            self.queue.acquire()
+            self.held = True
+
+    def try_take(self) -> bool:
+        """Take the turn if it is free now (True), else leave it (False)."""
+        if not self.held:
+            self.held = self.queue.try_acquire()
+        return self.held
+
+    async def take_async(self) -> None:
+        """:meth:`take` on the event loop (:meth:`WriterQueue.acquire_async`)."""
+        if not self.held:
+            await self.queue.acquire_async()
+            self.held = True
+
+    def give(self) -> None:
+        if self.held:
+            self.held = False
+            self.queue.release()
+
+
+TURN_AT_BEGIN: contextvars.ContextVar[WriterTurn | None] = contextvars.ContextVar(
+    "pendant_turn_at_begin", default=None)  # the turn of the writer running in this thread
+_QUEUES: dict[str, WriterQueue] = {}
+_QUEUES_LOCK = threading.Lock()
+
+
+def writer_queue(engine: Engine) -> WriterQueue | None:
+    """The :class:`WriterQueue` of a SQLite ``engine`` in this process (None for PostgreSQL,
+    whose writers lock rows, not the database)."""
+    if engine.dialect.name != "sqlite":
+        return None
+    path = engine.url.database
+    on_disk = bool(path) and path != ":memory:" and not path.startswith("file:")
+    key = os.path.abspath(path) if on_disk else f"memory:{id(engine.pool)}"
+    with _QUEUES_LOCK:
+        if key not in _QUEUES:
+            _QUEUES[key] = WriterQueue(f"{key}.writer.lock" if on_disk else None)
+        return _QUEUES[key]

@@ -1,0 +1,172 @@
+"""The SQLite writers' queue (db.writers): turns handed on in order, to threads and to event-loop
+tasks alike, never lost to a cancelled waiter, and batches of the loop's writers run together
+under one turn."""
+
+from __future__ import annotations
+
+import asyncio
+import subprocess
+import sys
+import threading
+
+import pytest
+
+from db.writers import WriterQueue
+
+LOCK_PROBE = ("import fcntl, os, sys\n"
+              "fd = os.open(sys.argv[1], os.O_RDWR)\n"
+              "fcntl.flock(fd, fcntl.LOCK_EX | fcntl.LOCK_NB)\n")
+
+
+def other_process_can_lock(path: str) -> bool:
+    return subprocess.run([sys.executable, "-c", LOCK_PROBE, path],
+                          capture_output=True).returncode == 0
+
+
+@pytest.fixture()
+def queue(tmp_path) -> WriterQueue:  # noqa: ANN001
+    return WriterQueue(str(tmp_path / "pendant.db.writer.lock"))
+
+
+def test_a_loop_writer_waits_behind_a_thread_and_gets_the_turn_with_the_flock(queue):
+    order: list[str] = []
+
+    async def main() -> None:
+        queue.acquire()  # a thread's turn (this one)
+        waiter = asyncio.create_task(queue.acquire_async())
+        await asyncio.sleep(0.05)
+        assert not waiter.done()  # waits its turn
+        order.append("thread done")
+        queue.release()
+        await asyncio.wait_for(waiter, 5)
+        order.append("loop writer")
+        assert not other_process_can_lock(queue.path)  # its turn holds the host's flock
+        queue.release()
+
+    asyncio.run(main())
+    assert order == ["thread done", "loop writer"]
+    assert other_process_can_lock(queue.path)  # let go with the last turn
+
+
+def test_turns_go_first_come_first_served_to_threads_and_tasks(queue):
+    order: list[str] = []
+
+    def thread_writer(name: str, queued: threading.Event) -> None:
+        queued.set()
+        queue.acquire()
+        order.append(name)
+        queue.release()
+
+    async def task_writer(name: str) -> None:
+        await queue.acquire_async()
+        order.append(name)
+        queue.release()
+
+    async def main() -> None:
+        queue.acquire()
+        tasks, threads = [], []
+        for k in range(3):
+            tasks.append(asyncio.create_task(task_writer(f"task{k}")))
+            await asyncio.sleep(0.02)
+            queued = threading.Event()
+            t = threading.Thread(target=thread_writer, args=(f"thread{k}", queued))
+            t.start()
+            threads.append(t)
+            queued.wait(5)
+            await asyncio.sleep(0.05)  # the thread is queued by now
+        queue.release()
+        await asyncio.wait_for(asyncio.gather(*tasks), 10)
+        for t in threads:
+            await asyncio.to_thread(t.join, 10)
+
+    asyncio.run(main())
+    assert order == ["task0", "thread0", "task1", "thread1", "task2", "thread2"]
+
+
+def test_a_cancelled_waiter_does_not_keep_or_lose_the_turn(queue):
+    async def main() -> None:
+        queue.acquire()
+        gone = asyncio.create_task(queue.acquire_async())
+        await asyncio.sleep(0.02)
+        gone.cancel()  # a client that left while waiting
+        with pytest.raises(asyncio.CancelledError):
+            await gone
+        queue.release()
+        await asyncio.wait_for(queue.acquire_async(), 5)  # the turn is free again
+        queue.release()
+
+        # handed the turn just as it is cancelled: it passes the turn on
+        queue.acquire()
+        late = asyncio.create_task(queue.acquire_async())
+        nxt = asyncio.create_task(queue.acquire_async())
+        await asyncio.sleep(0.02)
+        queue.release()  # hands the turn to `late` (its wake-up is scheduled, not run)
+        late.cancel()
+        with pytest.raises(asyncio.CancelledError):
+            await late
+        await asyncio.wait_for(nxt, 5)  # so the next one got it
+        queue.release()
+
+    asyncio.run(main())
+    assert other_process_can_lock(queue.path)
+
+
+def test_try_acquire_refuses_while_another_process_holds_the_flock(queue):
+    open(queue.path, "w").close()
+    holder = subprocess.Popen([sys.executable, "-c",
+                               LOCK_PROBE + "print('held', flush=True)\nsys.stdin.read()\n",
+                               queue.path], stdin=subprocess.PIPE, stdout=subprocess.PIPE,
+                              text=True)
+    try:
+        assert holder.stdout.readline().strip() == "held"
+        assert queue.try_acquire() is False
+    finally:
+        holder.communicate("", timeout=10)
+    assert queue.try_acquire() is True
+    queue.release()
+
+
+def test_the_loops_writers_that_wait_run_as_one_batch_in_order(queue):
+    ran: list[str] = []
+
+    def job(name: str, fail: bool = False):  # noqa: ANN202
+        def run() -> str:
+            assert not other_process_can_lock(queue.path)  # under the turn and its flock
+            ran.append(name)
+            if fail:
+                raise ValueError(f"{name} refused")
+            return name.upper()
+        return run
+
+    async def main() -> list:
+        queue.acquire()  # a thread holds the turn: the writers gather meanwhile
+        batch = queue.batch()
+        futures = [asyncio.ensure_future(batch.run(job(n, fail=n == "b")))
+                   for n in ("a", "b", "c")]
+        await asyncio.sleep(0.05)
+        assert ran == []
+        queue.release()
+        return await asyncio.wait_for(asyncio.gather(*futures, return_exceptions=True), 5)
+
+    results = asyncio.run(main())
+    assert ran == ["a", "b", "c"]
+    assert results[0] == "A" and results[2] == "C"  # one writer's refusal is its own
+    assert isinstance(results[1], ValueError) and "b refused" in str(results[1])
+    assert other_process_can_lock(queue.path)
+
+
+def test_a_writer_whose_client_left_before_its_batch_ran_is_skipped(queue):
+    ran: list[str] = []
+
+    async def main() -> None:
+        queue.acquire()
+        batch = queue.batch()
+        gone = asyncio.ensure_future(batch.run(lambda: ran.append("gone")))
+        stays = asyncio.ensure_future(batch.run(lambda: ran.append("stays")))
+        await asyncio.sleep(0.02)
+        gone.cancel()
+        queue.release()
+        await asyncio.wait_for(stays, 5)
+
+    asyncio.run(main())
+    assert ran == ["stays"]
