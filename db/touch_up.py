@@ -53,37 +53,14 @@ def _bump(conn: Connection, stmt: Any, row: Row, what: str, **values: Any) -> No
     row.version += 1
 
 
-def bump_session(conn: Connection, s: SessionRow) -> bool:
-    """Bump ``s`` at the version it was read at, as :func:`put_point` does (a result computed
-    before is dropped); False, changing nothing, if another writer changed it since (every
-    change of a session or of its points bumps its version). ``s`` is updated."""
-    now = utcnow()
-    computed = s.state == "computed"
-    stmt = REOPEN_SESSION if computed else BUMP_SESSION
-    params = {"b_id": s.id, "b_v": s.version, "b_nv": s.version + 1, "b_now": now}
-    if conn.execute(stmt, params).rowcount != 1:
-        return False
-    s.version += 1
-    _reopened(s, now, computed)
-    return True
-
-
-def _reopened(s: SessionRow, now: Any, computed: bool) -> None:
-    s.updated_at = now
-    if computed:
-        s.state, s.report = "open", None
-        s.__dict__.update(dict.fromkeys(RESULT_COLUMNS))
-
-
 def put_point(conn: Connection, s: SessionRow, step: int, source: str,
               pose_values: Sequence[float], joints_deg: Sequence[float] | None = None,
               t_s: float | None = None, motion_sign: Sequence[float] | None = None,
-              external_axes: dict[str, float] | None = None, bumped: bool = False) -> PointRow:
+              external_axes: dict[str, float] | None = None) -> PointRow:
     """Fill (or re-teach in place) one step of ``s``; a result computed before is dropped, as
-    ``crud.put_point`` does. ``s`` is updated to what was written. ``bumped``: the session's
-    bump was done already (:func:`bump_session`)."""
+    ``crud.put_point`` does. ``s`` is updated to what was written."""
     require_open(s)  # type: ignore[arg-type]
-    now = s.updated_at if bumped else utcnow()
+    now = utcnow()
     values: dict[str, Any] = {
         "source": source,
         "joints_deg": None if joints_deg is None else [float(q) for q in joints_deg],
@@ -102,11 +79,12 @@ def put_point(conn: Connection, s: SessionRow, step: int, source: str,
     else:
         conn.execute(UPDATE_POINT, {"b_id": p.id, **{f"b_{k}": v for k, v in values.items()}})
         p.__dict__.update(values)
-    if not bumped:
-        computed = s.state == "computed"
-        _bump(conn, REOPEN_SESSION if computed else BUMP_SESSION, s, f"session {s.id}",
-              b_now=now)
-        _reopened(s, now, computed)
+    computed = s.state == "computed"
+    _bump(conn, REOPEN_SESSION if computed else BUMP_SESSION, s, f"session {s.id}", b_now=now)
+    s.updated_at = now
+    if computed:
+        s.state, s.report = "open", None
+        s.__dict__.update(dict.fromkeys(RESULT_COLUMNS))
     return p
 
 

@@ -213,11 +213,11 @@ def one_thread(endpoint: Callable[..., Any], route: APIRoute | None = None) -> C
         db = next((v for v in kwargs.values() if isinstance(v, Session)), None)
         if db is None:
             return endpoint(*args, **kwargs)
-        _make_plan(endpoint, db, kwargs)
         # a SQLite writer takes its turn just before its BEGIN IMMEDIATE (db.session), and
         # waits there rather than polling in SQLite's busy handler
         at_begin = TURN_AT_BEGIN.set(_turn(db))
         try:
+            _make_plan(endpoint, db, kwargs)
             result = endpoint(*args, **kwargs)
             db.commit()
         except BaseException:
@@ -244,7 +244,7 @@ def one_thread(endpoint: Callable[..., Any], route: APIRoute | None = None) -> C
             db = next((v for v in kwargs.values() if isinstance(v, Session)), None)
             if db is None or db.get_bind().dialect.name != "sqlite":
                 return await run_in_threadpool(run, *args, **kwargs)
-            _make_plan(endpoint, db, kwargs)  # a read: on the loop, without the turn
+            _make_plan(endpoint, db, kwargs)  # on the loop, before the writers' lock
             turn = db.info.pop(TURN, None)
             if turn is None:  # a read: at once
                 return run(*args, **kwargs)
@@ -276,13 +276,11 @@ def short(endpoint: Callable[..., Any] | None = None, *,
     the event loop after each database call. PostgreSQL routes keep their threads (their
     database calls wait on the network).
 
-    ``plan`` (a writer's): a function of a read connection and the route's own arguments, run
-    before the writer's turn is taken and its transaction begun, in a read transaction of its
-    own. What it returns is the route's :func:`plan_of`: the work that needs no lock (reads,
-    checks, kinematics) is done there, and the route, under the lock, only checks that what
-    the plan read has not changed (else it works it out again) and writes. The writers' lock
-    is held for less than the route's work: with one database lock for every writer, that is
-    the touch-ups' throughput."""
+    ``plan`` (a writer's): a function of the route's own arguments run before the writer's
+    lock is taken, without the database, for work that can be done ahead (a touch-up's
+    kinematics); what it returns is the route's :func:`plan_of`, for the route to check under
+    the lock and use. SQLite has one write lock for every writer: the time a writer holds it
+    bounds how many write per second."""
     def mark(fn: Callable[..., Any]) -> Callable[..., Any]:
         fn._short = True  # type: ignore[attr-defined]
         fn._plan = plan  # type: ignore[attr-defined]
@@ -296,17 +294,10 @@ def plan_of(db: Session) -> Any:
     return db.info.pop(PLAN, None)
 
 
-@functools.lru_cache(maxsize=64)
-def _read_bind(bind: Any) -> Any:
-    return bind.execution_options(sqlite_begin="BEGIN")  # a reader's BEGIN, not IMMEDIATE
-
-
 def _make_plan(endpoint: Callable[..., Any], db: Session | None, kwargs: dict[str, Any]) -> None:
     plan = getattr(endpoint, "_plan", None)
-    if plan is None or db is None or PLAN in db.info or db.in_transaction():
-        return
-    with _read_bind(db.get_bind()).connect() as conn:
-        db.info[PLAN] = plan(conn, **kwargs)
+    if plan is not None and db is not None and PLAN not in db.info:
+        db.info[PLAN] = plan(**kwargs)
 
 
 _IN_A_THREAD = object()  # _begun's answer when SQLite's lock is held outside the queue

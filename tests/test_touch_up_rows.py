@@ -75,60 +75,39 @@ def test_touch_up_refusals_name_the_field(client):
         assert r.status_code == 404, (path, r.text)
 
 
-# ------------------------------------------------------- planned before the lock, checked under it
+# ------------------------------------------- planned before the lock, checked under it
 
 def _between_plan_and_lock(monkeypatch, change) -> None:  # noqa: ANN001
-    """Run ``change(sessionmaker)`` after the touch-up's plan (reads, checks, kinematics, done
-    without the writers' lock) and before its locked part: as another writer would."""
+    """Run ``change(bind)`` after the touch-up's plan (done before the writers' lock) and before
+    its locked part: as another writer would."""
     from server.routers import sessions
 
     plan = sessions.touch_up._plan
 
-    def planned_then_changed(conn, **kwargs):  # noqa: ANN001, ANN202
-        made = plan(conn, **kwargs)
+    def planned_then_changed(**kwargs):  # noqa: ANN003, ANN202
+        made = plan(**kwargs)
         change(kwargs["db"].get_bind())
         return made
 
     monkeypatch.setattr(sessions.touch_up, "_plan", planned_then_changed)
 
 
-def _write(bind, sql: str, **params) -> None:  # noqa: ANN001, ANN003
+def test_an_arm_moved_after_the_plan_is_touched_up_where_it_stands(client, monkeypatch):
+    """The emulated robot moved (a jog by another writer) after the touch-up was planned and
+    before its lock: the point is the arm's joints as they are under the lock."""
     from sqlalchemy import text
 
-    with bind.connect() as conn:
-        conn.execute(text(sql), params)
-        conn.commit()
-
-
-def test_a_session_changed_after_the_plan_is_touched_up_as_it_is_now(client, monkeypatch):
-    """Another writer re-taught step 1 between the touch-up's plan and its lock: the touch-up
-    of step 0 is worked out again under the lock, so its answer (and ETag) hold both."""
-    url = open_session(client, "tool.xyz_4point", 1)
-    q = approach(client, "reference_tip", tilt_deg=0, around_deg=0, spin_deg=0)["joints_deg"]
-    ok(client.post(f"{url}/touch-up", json={"step": 1, "joints_deg": q}))
-    sid = int(url.rsplit("/", 1)[1])
-    _between_plan_and_lock(monkeypatch, lambda bind: _write(
-        bind, "UPDATE taught_point SET x_mm = 1234.5 WHERE session_id = :s AND step = 1; ",
-        s=sid) or _write(bind, "UPDATE calib_session SET version = version + 1 WHERE id = :s",
-                         s=sid))
-    before = _etag(client.get(url))
-    r = client.post(f"{url}/touch-up", json={"step": 0, "joints_deg": q})
-    monkeypatch.undo()
-    steps = ok(r)["steps"]
-    assert steps[0]["filled"] and steps[1]["point"]["flange_pose"]["x"] == 1234.5
-    assert _etag(r) == before + 2  # the other writer's bump, then this one's
-    assert ok(client.get(url)) == ok(r) and _etag(client.get(url)) == _etag(r)
-
-
-def test_an_arm_moved_after_the_plan_is_touched_up_where_it_stands(client, monkeypatch):
-    """The emulated robot moved (a jog by another writer) between the touch-up's plan and its
-    lock: the point is the arm's joints as they are under the lock, not as planned."""
     url = open_session(client, "tool.xyz_4point", 1)
     q = approach(client, "reference_tip", tilt_deg=0, around_deg=0, spin_deg=0)["joints_deg"]
     moved = [q[0] + 1.5, *q[1:]]
-    _between_plan_and_lock(monkeypatch, lambda bind: _write(
-        bind, "UPDATE controller SET joints_deg = :j, version = version + 1 WHERE id = 1",
-        j=json.dumps(moved)))
+
+    def jog(bind) -> None:  # noqa: ANN001
+        with bind.connect() as conn:
+            conn.execute(text("UPDATE controller SET joints_deg = :j, version = version + 1 "
+                              "WHERE id = 1"), {"j": json.dumps(moved)})
+            conn.commit()
+
+    _between_plan_and_lock(monkeypatch, jog)
     r = client.post(f"{url}/touch-up", json={"step": 0})
     monkeypatch.undo()
     point = ok(r)["steps"][0]["point"]
@@ -136,18 +115,18 @@ def test_an_arm_moved_after_the_plan_is_touched_up_where_it_stands(client, monke
     assert ok(client.get(url))["steps"][0]["point"] == point
 
 
-def test_a_stale_if_match_is_refused_before_the_writers_turn(client):
-    """The plan checks If-Match, so a 412 comes without waiting for the writers' lock (here held
-    by a thread of the test on SQLite)."""
+def test_recorded_joints_planned_on_another_arm_are_worked_out_on_the_controllers(client):
+    """The plan works the flange pose out on the arm this process last saw on the controller;
+    under the lock the touch-up checks that arm is still the controller's, and if not, works
+    the pose out again on the controller's arm (here the arm seen was a UR10's)."""
+    from server.routers import sessions
+    from solvers.robots import ROBOTS
+
     url = open_session(client, "tool.xyz_4point", 1)
-    stale = _etag(client.get(url))
-    walk(client, url)
-    queue = client.app.state.writer_queue
-    if queue is not None:
-        queue.acquire()
-    try:
-        r = client.post(f"{url}/touch-up", json={"step": 0}, headers={"If-Match": f'"{stale}"'})
-    finally:
-        if queue is not None:
-            queue.release()
-    assert r.status_code == 412
+    q = approach(client, "reference_tip", tilt_deg=0, around_deg=0, spin_deg=0)["joints_deg"]
+    right = ok(client.post(f"{url}/touch-up", json={"step": 0, "joints_deg": q}))
+    assert sessions.ARMS[1][0] == ("kuka_kr6_r900_sixx", None)  # seen under the lock
+    sessions.ARMS[1] = ("ur10", None), ROBOTS["ur10"]
+    again = ok(client.post(f"{url}/touch-up", json={"step": 0, "joints_deg": q}))
+    assert again["steps"][0]["point"]["flange_pose"] == right["steps"][0]["point"]["flange_pose"]
+    assert sessions.ARMS[1][0] == ("kuka_kr6_r900_sixx", None)

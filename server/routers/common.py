@@ -59,7 +59,11 @@ def active_frames(db: Session, c: Controller) -> tuple[np.ndarray, np.ndarray]:
 
 def flange_pose_of(c: Controller, joints_deg: list[float]) -> Pose:
     """T_base_flange of joint values on this controller's arm (checked: count, limits)."""
-    robot = robot_of(c)
+    return flange_pose_on(robot_of(c), joints_deg)
+
+
+def flange_pose_on(robot: RobotModel, joints_deg: list[float]) -> Pose:
+    """T_base_flange of joint values on ``robot`` (checked: count, limits)."""
     if len(joints_deg) != robot.dof:
         raise CalibrationError(("joints_deg",),
                                f"has {len(joints_deg)} values; the robot has {robot.dof} joints")
