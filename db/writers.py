@@ -27,6 +27,7 @@ from __future__ import annotations
 import asyncio
 import contextvars
 import fcntl
+import functools
 import os
 import threading
 import weakref
@@ -185,10 +186,11 @@ class WriterBatch:
         self._leader: asyncio.Task | None = None
 
     async def run(self, job: Callable[[], Any]) -> Any:
-        """``job()`` (sync, on the loop) in the next batch, with the turn; its result."""
+        """``job()`` (sync, on the loop) in the next batch, with the turn; its result. It runs
+        in the caller's context (its context variables: the request's actor for the audit)."""
         loop = asyncio.get_running_loop()
         future = loop.create_future()
-        self._jobs.append((job, future))
+        self._jobs.append((functools.partial(contextvars.copy_context().run, job), future))
         if self._leader is None:
             self._leader = loop.create_task(self._lead())
         return await future  # cancelled (the client left) before its batch ran: skipped
@@ -199,7 +201,8 @@ class WriterBatch:
                 await self.queue.acquire_async()
                 try:
                     jobs, self._jobs = self._jobs, deque()
-                    for job, future in jobs:
+                    while jobs:
+                        job, future = jobs.popleft()
                         if future.done():
                             continue
                         try:
@@ -210,6 +213,7 @@ class WriterBatch:
                             future.set_result(result)
                 finally:
                     self.queue.release()
+                    self._jobs.extendleft(reversed(jobs))  # what a BaseException left undone
         except BaseException as exc:  # the loop is shutting down: the waiting writers fail
             for _, future in self._jobs:
                 if not future.done():

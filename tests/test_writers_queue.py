@@ -170,3 +170,24 @@ def test_a_writer_whose_client_left_before_its_batch_ran_is_skipped(queue):
 
     asyncio.run(main())
     assert ran == ["stays"]
+
+
+def test_a_batched_writer_runs_in_its_own_requests_context(queue):
+    """Each writer of a batch sees its own request's context variables (the actor the audit
+    records, the request id), not those of whoever started the batch."""
+    import contextvars
+
+    who: contextvars.ContextVar[str] = contextvars.ContextVar("who", default="nobody")
+
+    async def request(name: str) -> str:
+        who.set(name)
+        return await queue.batch().run(who.get)
+
+    async def main() -> list:
+        queue.acquire()
+        tasks = [asyncio.ensure_future(request(n)) for n in ("alice", "bob")]
+        await asyncio.sleep(0.05)
+        queue.release()
+        return await asyncio.wait_for(asyncio.gather(*tasks), 5)
+
+    assert asyncio.run(main()) == ["alice", "bob"]
