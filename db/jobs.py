@@ -129,9 +129,13 @@ def finish(db: Session, job_id: int, worker: str, state: str,
     """End ``worker``'s running job as ``state``; False if it is no longer that worker's.
 
     The caller's own writes (e.g. the stored analysis report) go in the same transaction:
-    the job is done exactly when its result is stored.
+    the job is done exactly when its result is stored. Outside such a transaction it begins
+    as a writer: a deferred one that read the job and then found another writer's commit (the
+    supervisor renewing leases) would fail its UPDATE at once with "database is locked" (WAL:
+    a read snapshot cannot become a write), SQLite's busy timeout unused.
     """
     assert state in FINAL, state
+    _begin_immediate(db)
     job = db.scalars(select(Job).where(Job.id == job_id).with_for_update()).first()
     if job is None or job.state != "running" or job.worker != worker:
         db.rollback()

@@ -253,3 +253,43 @@ def test_a_job_whose_worker_died_is_claimed_again_then_given_up(tmp_path):
         assert jobs.claim(db, "b", now=now) is None
         job = db.get(Job, job_id)
         assert job.state == "failed" and "died 3 times" in job.error["detail"][0]["msg"]
+
+
+def test_a_failure_is_written_even_if_a_lease_renewal_commits_while_it_is(tmp_path):
+    """The job process writes its failure (a 413 at the memory cap) in a transaction of its own
+    while the supervisor renews leases. Deferred, that transaction read the job, the renewal
+    committed, and its UPDATE failed at once with "database is locked" (busy timeout unused):
+    the job became a 500 'exit code 1' (seen about once in 15 runs of the memory-limit test
+    under load). :func:`jobs.finish` begins as a writer, so the renewal waits instead."""
+    import sqlite3
+
+    from sqlalchemy import event
+
+    url = f"sqlite:///{tmp_path / 'q.db'}"
+    with make_client(url):
+        pass  # migrated
+    engine = make_engine(url)
+    sm = make_sessionmaker(engine)
+    with sm() as db:
+        job_id = jobs.enqueue(db, "analysis", {"recording_id": 1}).id
+        assert jobs.claim(db, "w").id == job_id
+    renewals = []
+
+    @event.listens_for(engine, "after_cursor_execute")
+    def _renew_after_the_read(conn, cursor, statement, *_) -> None:  # noqa: ANN001
+        if statement.lstrip().startswith("SELECT") and not renewals:
+            other = sqlite3.connect(tmp_path / "q.db", timeout=0.2, isolation_level=None)
+            try:
+                other.execute("UPDATE job SET lease_until = datetime('now', '+30 seconds') "
+                              "WHERE id = ?", (job_id,))
+                renewals.append("committed")
+            except sqlite3.OperationalError as exc:  # the finish holds the write lock
+                renewals.append(str(exc))
+            finally:
+                other.close()
+
+    with sm() as db:
+        assert jobs.fail(db, job_id, "w", 413, "over --job-memory-mb")
+    assert renewals == ["database is locked"]
+    with sm() as db:
+        assert db.get(Job, job_id).error["status"] == 413
