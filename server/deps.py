@@ -281,7 +281,9 @@ def one_thread(endpoint: Callable[..., Any], route: APIRoute | None = None) -> C
                 return await run_in_threadpool(run, *args, **kwargs)
             _make_plan(endpoint, db, kwargs)  # on the loop, before the writers' lock
             turn = db.info.pop(TURN, None)
-            if turn is None:  # a read: at once
+            if turn is None or turn.held:  # a read, or begun with its turn (Idempotency-Key)
+                if turn is not None:
+                    db.info[TURN] = turn
                 return run(*args, **kwargs)
             result = await turn.queue.batch().run(functools.partial(_begun, locked, db, args,
                                                                     kwargs))

@@ -130,3 +130,15 @@ def test_recorded_joints_planned_on_another_arm_are_worked_out_on_the_controller
     again = ok(client.post(f"{url}/touch-up", json={"step": 0, "joints_deg": q}))
     assert again["steps"][0]["point"]["flange_pose"] == right["steps"][0]["point"]["flange_pose"]
     assert sessions.ARMS[1][0] == ("kuka_kr6_r900_sixx", None)
+
+
+def test_a_touch_up_with_an_idempotency_key_runs_once_and_replays(client):
+    """The key is claimed in the touch-up's own transaction (taken, with the writers' turn,
+    before the route): the touch-up still runs, and a retry gets the stored answer."""
+    url = open_session(client, "tool.xyz_4point", 1)
+    headers = {"Idempotency-Key": "touch-up-step-0-take-1"}
+    first = client.post(f"{url}/touch-up", json={"step": 0}, headers=headers)
+    assert first.status_code == 200 and first.json()["steps"][0]["filled"]
+    again = client.post(f"{url}/touch-up", json={"step": 0}, headers=headers)
+    assert again.status_code == 200 and again.json() == first.json()
+    assert again.headers["etag"] == first.headers["etag"] == client.get(url).headers["etag"]
