@@ -112,7 +112,16 @@ class WriterQueue:
         waiter = threading.Lock()
         waiter.acquire()
         if not self._enter(waiter):
-            waiter.acquire()  # released by the holder: the turn is ours
+            try:
+                waiter.acquire()  # released by the holder: the turn is ours
+            except BaseException:  # interrupted (a signal handler raising): leave the queue
+                with self._mutex:
+                    queued = waiter in self._waiters
+                    if queued:
+                        self._waiters.remove(waiter)
+                if not queued:  # handed to us as we were interrupted: pass it on
+                    self.release()
+                raise
         try:
             self._flock()
         except BaseException:
@@ -151,10 +160,20 @@ class WriterQueue:
                     self.release()
                 raise
         try:
-            if not self._try_flock():
-                await anyio.to_thread.run_sync(self._flock)
+            flocked_now = self._try_flock()
         except BaseException:
             self.release()
+            raise
+        if flocked_now:
+            return
+        flocked = loop.run_in_executor(None, self._flock)  # not abandoned if we are cancelled
+        try:
+            await asyncio.shield(flocked)
+        except BaseException:
+            if flocked.done():
+                self.release()
+            else:  # the thread still waits for the flock: give the turn back once it has it
+                flocked.add_done_callback(lambda _: self.release())
             raise
 
 
@@ -209,6 +228,10 @@ class WriterBatch:
                             result = job()
                         except Exception as exc:  # the request's own error (a 4xx, a 500)
                             future.set_exception(exc)
+                        except BaseException as exc:  # answered too, then the batch ends
+                            future.set_exception(
+                                RuntimeError(f"the writers' batch ended: {exc!r}"))
+                            raise
                         else:
                             future.set_result(result)
                 finally:
