@@ -35,7 +35,6 @@ from collections import deque
 from collections.abc import Callable
 from typing import Any
 
-import anyio.to_thread
 from sqlalchemy import Engine
 
 
@@ -128,21 +127,6 @@ class WriterQueue:
             self.release()
             raise
 
-    def try_acquire(self) -> bool:
-        """Take the turn if no one holds it and no other process has the flock (no wait)."""
-        with self._mutex:
-            if self._held:
-                return False
-            self._held = True
-        try:
-            if self._try_flock():
-                return True
-        except BaseException:
-            self.release()
-            raise
-        self.release()  # not ours after all: give it back (to a writer that queued since)
-        return False
-
     async def acquire_async(self) -> None:
         """Wait for the turn on the event loop: behind this process's writers as a future (no
         thread), for another process's flock in a thread."""
@@ -175,7 +159,6 @@ class WriterQueue:
             else:  # the thread still waits for the flock: give the turn back once it has it
                 flocked.add_done_callback(lambda _: self.release())
             raise
-
 
     def batch(self) -> WriterBatch:
         """The :class:`WriterBatch` of the running event loop on this queue."""
@@ -211,7 +194,8 @@ class WriterBatch:
         future = loop.create_future()
         self._jobs.append((functools.partial(contextvars.copy_context().run, job), future))
         if self._leader is None:
-            self._leader = loop.create_task(self._lead())
+            # its own context, not the first writer's (each job runs in its writer's context)
+            self._leader = loop.create_task(self._lead(), context=contextvars.Context())
         return await future  # cancelled (the client left) before its batch ran: skipped
 
     async def _lead(self) -> None:
@@ -262,18 +246,6 @@ class WriterTurn:
     def take(self) -> None:
         if not self.held:
             self.queue.acquire()
-            self.held = True
-
-    def try_take(self) -> bool:
-        """Take the turn if it is free now (True), else leave it (False)."""
-        if not self.held:
-            self.held = self.queue.try_acquire()
-        return self.held
-
-    async def take_async(self) -> None:
-        """:meth:`take` on the event loop (:meth:`WriterQueue.acquire_async`)."""
-        if not self.held:
-            await self.queue.acquire_async()
             self.held = True
 
     def give(self) -> None:

@@ -140,8 +140,9 @@ async def get_session(request: Request) -> AsyncIterator[Session]:
             if turn is not None:
                 turn.release()
             raise
-    db: Session = write_session(maker) if writes else maker()
+    db: Session | None = None
     try:
+        db = write_session(maker) if writes else maker()
         if writes:
             if cid is not None:
                 db.info[LOCK_ON_BEGIN] = cid
@@ -155,12 +156,13 @@ async def get_session(request: Request) -> AsyncIterator[Session]:
         if db.in_transaction():
             await run_in_threadpool(_end, db, db.commit)
     except BaseException:
-        if db.in_transaction():
+        if db is not None and db.in_transaction():
             await run_in_threadpool(_end, db, db.rollback)
         raise
     finally:
-        _give_turn(db)  # a turn taken by a route that never ended its transaction
-        db.close()
+        if db is not None:
+            _give_turn(db)  # a turn taken by a route that never ended its transaction
+            db.close()
         if slots is not None:
             slots.release()
         if turn is not None:
@@ -366,7 +368,9 @@ class Later:
 
 def later(build: Callable[[], Any]) -> Any:
     """Return this from a route to have its answer, ``build()``, built after the commit: a
-    :func:`short` writer's batch holds SQLite's lock until its last writer committed."""
+    :func:`short` writer's batch holds SQLite's lock until its last writer committed.
+    ``build`` must not use the database (it would begin a transaction of its own, after the
+    commit and outside the writers' queue): it builds from what the route read."""
     return Later(build)
 
 

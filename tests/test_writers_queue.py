@@ -5,6 +5,7 @@ under one turn."""
 from __future__ import annotations
 
 import asyncio
+import signal
 import subprocess
 import sys
 import threading
@@ -111,21 +112,6 @@ def test_a_cancelled_waiter_does_not_keep_or_lose_the_turn(queue):
     assert other_process_can_lock(queue.path)
 
 
-def test_try_acquire_refuses_while_another_process_holds_the_flock(queue):
-    open(queue.path, "w").close()
-    holder = subprocess.Popen([sys.executable, "-c",
-                               LOCK_PROBE + "print('held', flush=True)\nsys.stdin.read()\n",
-                               queue.path], stdin=subprocess.PIPE, stdout=subprocess.PIPE,
-                              text=True)
-    try:
-        assert holder.stdout.readline().strip() == "held"
-        assert queue.try_acquire() is False
-    finally:
-        holder.communicate("", timeout=10)
-    assert queue.try_acquire() is True
-    queue.release()
-
-
 def test_the_loops_writers_that_wait_run_as_one_batch_in_order(queue):
     ran: list[str] = []
 
@@ -191,3 +177,83 @@ def test_a_batched_writer_runs_in_its_own_requests_context(queue):
         return await asyncio.wait_for(asyncio.gather(*tasks), 5)
 
     assert asyncio.run(main()) == ["alice", "bob"]
+
+
+def test_a_batched_writer_whose_job_raises_a_base_exception_is_answered_too(queue):
+    """A job raising a BaseException (not a request's own error) ends the batch: its writer
+    and the writers after it are answered with an error, none waits forever."""
+
+    class Boom(BaseException):
+        pass
+
+    def boom() -> None:
+        raise Boom()
+
+    async def main() -> tuple[bool, bool]:
+        batch = queue.batch()
+        first = asyncio.ensure_future(batch.run(boom))
+        second = asyncio.ensure_future(batch.run(lambda: "x"))
+        await asyncio.wait([first, second], timeout=1)
+        return first.done(), second.done()
+
+    first_done, second_done = asyncio.run(main())
+    assert second_done  # the writer it left is failed (RuntimeError), as c7ecf27 says
+    assert first_done, "the writer whose job raised the BaseException is never answered"
+
+
+def test_an_interrupted_thread_waiter_does_not_swallow_the_next_turn(queue):
+    """A thread interrupted while it waits (a signal handler raising in the main thread:
+    Ctrl-C in a CLI or a script) leaves the queue; the turn is not handed to it and lost."""
+    assert threading.current_thread() is threading.main_thread()
+
+    class Interrupted(Exception):
+        pass
+
+    def handler(*_):  # noqa: ANN002, ANN202
+        raise Interrupted()
+
+    old = signal.signal(signal.SIGUSR1, handler)
+    try:
+        queue.acquire()  # a holder
+        main = threading.main_thread().ident
+        threading.Timer(0.2, signal.pthread_kill, (main, signal.SIGUSR1)).start()
+        with pytest.raises(Interrupted):
+            queue.acquire()  # waits; interrupted
+    finally:
+        signal.signal(signal.SIGUSR1, old)
+    queue.release()  # the holder is done
+    got = threading.Event()
+    t = threading.Thread(target=lambda: (queue.acquire(), got.set(), queue.release()))
+    t.start()
+    assert got.wait(5), "the turn went to the interrupted waiter and is lost"
+    t.join(5)
+
+
+def test_a_cancelled_wait_for_another_processs_flock_leaves_no_flock_behind(queue):
+    """A loop writer cancelled (the batch leader at the loop's shutdown) while its thread
+    waits for another process's flock: once the thread has the flock, it is let go with the
+    turn; the other processes are not locked out."""
+    open(queue.path, "w").close()
+    holder = subprocess.Popen([sys.executable, "-c",
+                               LOCK_PROBE + "print('held', flush=True)\nsys.stdin.read()\n",
+                               queue.path], stdin=subprocess.PIPE, stdout=subprocess.PIPE,
+                              text=True)
+    assert holder.stdout.readline().strip() == "held"
+
+    async def main() -> None:
+        waiter = asyncio.ensure_future(queue.acquire_async())
+        await asyncio.sleep(0.3)  # in its thread, in flock()
+        waiter.cancel()
+        with pytest.raises(asyncio.CancelledError):
+            await waiter
+        holder.communicate("", timeout=10)  # the other process lets go
+        await asyncio.sleep(0.5)  # the abandoned thread takes the flock meanwhile
+
+    try:
+        asyncio.run(main())
+    finally:
+        if holder.poll() is None:
+            holder.kill()
+    assert not queue._held  # no turn in this process
+    assert other_process_can_lock(queue.path), (
+        f"flock leaked with no turn held (_flocked={queue._flocked})")
