@@ -91,7 +91,9 @@ def test_a_short_write_whose_turn_is_taken_waits_without_a_thread_or_the_loop(cl
     queue.release()
     writer.join(30)
     assert answers["touch"].status_code == 200 and answers["touch"].json()["steps"][0]["filled"]
-    assert hops == []  # neither waited nor ran in a thread
+    # neither waited nor ran in a thread (the token, older than its one-second cache by now on
+    # a slow machine, may be verified again in one: that is auth's hop, not the writer's)
+    assert [h for h in hops if "_bearer_actor" not in h] == []
 
 
 def test_a_failed_write_gives_up_its_turn(client):
