@@ -12,7 +12,8 @@ phases with ``wrk`` (C, two threads, ``--connections`` 20):
 
 It prints requests/s, wrk's latency percentiles, any non-2xx answer, the service's CPU time
 per request (user + system of the uvicorn processes over the phase, from /proc: unlike req/s it
-hardly moves with what else runs on the machine) and the load average, per phase. Then, with
+hardly moves with what else runs on the machine), wrk's own CPU time per request (it shares the
+cores) and the load average, per phase. Then, with
 PostgreSQL (Debian's ``pg_virtualenv`` makes a throw-away cluster; ``--no-pg`` skips it), the
 touch-up phase again at the best worker count. The last line is
 ``rps=<touch-up req/s, SQLite, best worker count> p99_ms=<its p99> pg_rps=<touch-up req/s on
@@ -29,6 +30,7 @@ import argparse
 import json
 import os
 import re
+import resource
 import shutil
 import socket
 import subprocess
@@ -157,8 +159,13 @@ def wrk(url: str, connections: int, seconds: float, script: Path | None = None) 
            "-H", f"Authorization: {HEADERS['Authorization']}"]
     if script is not None:
         cmd += ["-s", str(script)]
+    before = resource.getrusage(resource.RUSAGE_CHILDREN)
     out = subprocess.run(cmd + [url], check=True, capture_output=True, text=True).stdout
-    return parse_wrk(out)
+    after = resource.getrusage(resource.RUSAGE_CHILDREN)  # wrk's own CPU (it has been waited for)
+    res = parse_wrk(out)
+    used = (after.ru_utime - before.ru_utime) + (after.ru_stime - before.ru_stime)
+    res["wrk_cpu_ms"] = used * 1e3 / max(res["requests"], 1)
+    return res
 
 
 def touch_script(base: str, n_sessions: int, joints: list[list[float]], tmp: Path) -> Path:
@@ -232,11 +239,11 @@ def pg_touch_rps(workers: int, args: argparse.Namespace) -> str:
 def show(title: str, rows: dict[str, dict]) -> None:
     print(title)
     print(f"  {'phase':12s} {'requests':>9s} {'non2xx':>7s} {'req/s':>8s} {'p50_ms':>7s} "
-          f"{'p90_ms':>7s} {'p99_ms':>7s} {'cpu_ms/req':>10s} {'load':>5s}")
+          f"{'p90_ms':>7s} {'p99_ms':>7s} {'cpu_ms/req':>10s} {'wrk_ms/req':>10s} {'load':>5s}")
     for name, r in rows.items():
         print(f"  {name:12s} {r['requests']:9.0f} {r['non2xx']:7.0f} {r['rps']:8.1f} "
               f"{r['p50_ms']:7.1f} {r['p90_ms']:7.1f} {r['p99_ms']:7.1f} {r['cpu_ms']:10.2f} "
-              f"{r['load']:5.2f}  {r['socket_errors']}")
+              f"{r['wrk_cpu_ms']:10.3f} {r['load']:5.2f}  {r['socket_errors']}")
 
 
 def main() -> int:
