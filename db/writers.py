@@ -12,10 +12,7 @@ goes as soon as the holder lets go:
   the start of each turn and let go at its end. Keeping it for a run of a process's writers
   (fewer hand-overs between processes) was slower: a process's writers run one after another
   on its event loop, so the other process idled meanwhile (4 turns in a row: 290-446 req/s of
-  touch-ups against 572-858 for one, ``benchmarks/README.md``).
-
-A writer on the event loop waits for a writer of its own process as a future (no thread), and
-for another process in a thread (``flock`` blocks).
+  touch-ups against 474-858 for one, ``benchmarks/README.md``).
 
 The queue orders writers and protects nothing: the data stays guarded by ``BEGIN IMMEDIATE``,
 so a writer that does not queue (a job worker, the CLI) is still correct, it only polls. The
@@ -36,7 +33,6 @@ from collections.abc import Callable
 from typing import Any
 
 from sqlalchemy import Engine
-
 
 
 class WriterQueue:
@@ -60,6 +56,16 @@ class WriterQueue:
                 return True
             self._waiters.append(waiter)
             return False
+
+    def _leave(self, waiter: Any) -> None:
+        """A waiter that stops waiting (interrupted, cancelled): out of the queue, or, if the
+        turn was handed to it meanwhile, the turn passed on."""
+        with self._mutex:
+            queued = waiter in self._waiters
+            if queued:
+                self._waiters.remove(waiter)
+        if not queued:
+            self.release()
 
     def release(self) -> None:
         """End the holder's turn (the flock is let go): hand it to the next waiter of this
@@ -90,20 +96,17 @@ class WriterQueue:
             self._fd = os.open(self.path, os.O_RDWR | os.O_CREAT, 0o600)  # type: ignore[arg-type]
         return self._fd
 
-    def _try_flock(self) -> bool:
+    def _flock(self, wait: bool = True) -> bool:
+        """Take the host's flock (the turn's holder only): waiting for it, or not (False if
+        another process has it)."""
         if self.path is None or self._flocked:
             return True
         try:
-            fcntl.flock(self._fileno(), fcntl.LOCK_EX | fcntl.LOCK_NB)
+            fcntl.flock(self._fileno(), fcntl.LOCK_EX if wait else fcntl.LOCK_EX | fcntl.LOCK_NB)
         except BlockingIOError:
             return False
         self._flocked = True
         return True
-
-    def _flock(self) -> None:
-        if self.path is not None and not self._flocked:
-            fcntl.flock(self._fileno(), fcntl.LOCK_EX)
-            self._flocked = True
 
     # ---------------------------------------------------------------- taking a turn
     def acquire(self) -> None:
@@ -113,13 +116,8 @@ class WriterQueue:
         if not self._enter(waiter):
             try:
                 waiter.acquire()  # released by the holder: the turn is ours
-            except BaseException:  # interrupted (a signal handler raising): leave the queue
-                with self._mutex:
-                    queued = waiter in self._waiters
-                    if queued:
-                        self._waiters.remove(waiter)
-                if not queued:  # handed to us as we were interrupted: pass it on
-                    self.release()
+            except BaseException:  # interrupted (a signal handler raising)
+                self._leave(waiter)
                 raise
         try:
             self._flock()
@@ -136,15 +134,10 @@ class WriterQueue:
             try:
                 await future
             except asyncio.CancelledError:
-                with self._mutex:
-                    queued = (loop, future) in self._waiters
-                    if queued:
-                        self._waiters.remove((loop, future))
-                if not queued:  # handed to us as we were cancelled: pass it on
-                    self.release()
+                self._leave((loop, future))
                 raise
         try:
-            flocked_now = self._try_flock()
+            flocked_now = self._flock(wait=False)
         except BaseException:
             self.release()
             raise

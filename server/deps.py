@@ -177,8 +177,9 @@ def _controller_turn(app: FastAPI, controller_id: int) -> asyncio.Lock:
     server process; they contended for the GIL and the row lock together. Queued here on the
     event loop instead, a process sends one writer of a controller at a time: touch-ups with
     2 workers went from 259-284 to 415-508 req/s, p99 202-222 -> 68-89 ms, CPU 3.7-4.1 ->
-    2.7-3.3 ms each (``benchmarks/api.py``, alternating runs). Writers of other controllers are not held up. It orders writers
-    and guards nothing: the row lock does, across processes and hosts.
+    2.7-3.3 ms each (``benchmarks/api.py``, alternating runs). Writers of other controllers
+    are not held up. It orders writers and guards nothing: the row lock does, across
+    processes and hosts.
     """
     turns = app.state.controller_turns
     turn = turns.get(controller_id)
@@ -282,11 +283,10 @@ def one_thread(endpoint: Callable[..., Any], route: APIRoute | None = None) -> C
             if db is None or db.get_bind().dialect.name != "sqlite":
                 return await run_in_threadpool(run, *args, **kwargs)
             _make_plan(endpoint, db, kwargs)  # on the loop, before the writers' lock
-            turn = db.info.pop(TURN, None)
+            turn = _turn(db)
             if turn is None or turn.held:  # a read, or begun with its turn (Idempotency-Key)
-                if turn is not None:
-                    db.info[TURN] = turn
                 return run(*args, **kwargs)
+            del db.info[TURN]  # its batch takes the turn for it
             result = await turn.queue.batch().run(functools.partial(_begun, locked, db, args,
                                                                     kwargs))
             if result is _IN_A_THREAD:
@@ -319,7 +319,7 @@ def short(endpoint: Callable[..., Any] | None = None, *,
     lock is taken, without the database, for work that can be done ahead (a touch-up's
     kinematics); what it returns is the route's :func:`plan_of`, for the route to check under
     the lock and use. SQLite has one write lock for every writer: the time a writer holds it
-    bounds how many write per second."""
+    bounds how many writes a second get through."""
     def mark(fn: Callable[..., Any]) -> Callable[..., Any]:
         fn._short = True  # type: ignore[attr-defined]
         fn._plan = plan  # type: ignore[attr-defined]
@@ -333,9 +333,9 @@ def plan_of(db: Session) -> Any:
     return db.info.pop(PLAN, None)
 
 
-def _make_plan(endpoint: Callable[..., Any], db: Session | None, kwargs: dict[str, Any]) -> None:
+def _make_plan(endpoint: Callable[..., Any], db: Session, kwargs: dict[str, Any]) -> None:
     plan = getattr(endpoint, "_plan", None)
-    if plan is not None and db is not None and PLAN not in db.info:
+    if plan is not None and PLAN not in db.info:
         db.info[PLAN] = plan(**kwargs)
 
 

@@ -16,10 +16,8 @@ import anyio.to_thread
 from api_helpers import *  # noqa: F403
 from api_helpers import C, make_client, ok, open_session
 from db.writers import WriterQueue
+from test_writers_queue import LOCK_PROBE
 
-LOCK_PROBE = ("import fcntl, os, sys\n"
-              "fd = os.open(sys.argv[1], os.O_RDWR)\n"
-              "fcntl.flock(fd, fcntl.LOCK_EX | fcntl.LOCK_NB)\n")
 
 
 def count_hops(monkeypatch) -> list[str]:  # noqa: ANN001
