@@ -16,6 +16,7 @@ import anyio.to_thread
 from api_helpers import *  # noqa: F403
 from api_helpers import C, make_client, ok, open_session
 from db.writers import WriterQueue
+from server.auth import tokens
 from test_writers_queue import LOCK_PROBE
 
 
@@ -41,6 +42,7 @@ def test_a_request_takes_one_worker_thread(client, monkeypatch):
     without a second hop between the event loop and the threadpool; a short route
     (``deps.short``: a touch-up, the reads of a slot, a controller, a session) takes none on
     SQLite when it need not wait."""
+    monkeypatch.setattr(tokens.CACHE, "ttl_s", 600.0)  # a slow machine takes over 1 s here
     url = open_session(client, "tool.xyz_4point", 1)
     ok(client.post(f"{url}/touch-up", json={"step": 0}))  # the token is now verified
     hops = count_hops(monkeypatch)
