@@ -73,11 +73,39 @@ class SessionRow(Row):
     result_values = CalibSession.result_values  # the model's own
 
 
+class Locked:
+    """What a batch of writers holding a controller's row lock in its one transaction
+    (``db.batch``) has read and will write, kept in ``Connection.info`` under :data:`LOCKED`
+    while the batch runs.
+
+    - ``row``: the controller, read once; its writers read it from here (no round trip) and
+      change it in place (``db.touch_up.store_state``);
+    - ``sessions``: each session as the batch's last writer of it left it (a later writer
+      of the same session reads a copy, so each writer's answer shows its own change);
+    - ``pending``: the writes of its writers, ``(table, statement, params)`` in order, sent
+      together before the commit (``db.touch_up.write_locked``: one round trip per run of
+      one statement). No other writer can change these rows meanwhile: every writer of a
+      controller's rows holds its row lock first.
+    """
+
+    def __init__(self, row: ControllerRow) -> None:
+        self.row, self.version, self.changed = row, row.version, False
+        self.sessions: dict[int, SessionRow] = {}
+        self.pending: list[tuple[Any, Any, dict[str, Any]]] = []
+
+
+LOCKED = "pendant_locked_controller"  # Connection.info: the batch's Locked controller
+
+
 def controller(conn: Connection, controller_id: int, lock: bool = False) -> ControllerRow:
     """The controller (404 naming ``controller_id`` when there is none); ``lock``: with its
     row locked until commit (``SELECT ... FOR UPDATE`` on PostgreSQL, as ``crud.lock_controller``;
-    a SQLite writer holds the database's lock already)."""
+    a SQLite writer holds the database's lock already). In a batch (:class:`Locked`) the
+    batch's controller, locked already, as its earlier writers left it."""
     rid = row_id(controller_id, conn)
+    locked = conn.info.get(LOCKED)
+    if locked is not None and rid == locked.row.id:
+        return locked.row
     stmt = CONTROLLER_LOCKED if lock else CONTROLLER
     row = None if rid is None else conn.execute(stmt, {"b_id": rid}).first()
     if row is None:
@@ -89,9 +117,20 @@ def controllers(conn: Connection) -> list[ControllerRow]:
     return [ControllerRow(r._mapping) for r in conn.execute(CONTROLLERS)]
 
 
+def _copy(s: SessionRow) -> SessionRow:
+    copy = SessionRow(s.__dict__)
+    copy.points = [PointRow(p.__dict__) for p in s.points]
+    return copy
+
+
 def session(conn: Connection, controller_id: int, session_id: int) -> SessionRow:
-    """The session with its taught points (as ``crud.get_session``)."""
+    """The session with its taught points (as ``crud.get_session``); in a batch
+    (:class:`Locked`), as the batch's last writer of it left it."""
     rid = row_id(session_id, conn)
+    locked = conn.info.get(LOCKED)
+    if locked is not None and rid in locked.sessions:
+        if locked.sessions[rid].controller_id == controller_id:
+            return _copy(locked.sessions[rid])
     found = [] if rid is None else conn.execute(SESSION_POINTS, {"b_id": rid}).all()
     if not found or found[0].s_controller_id != controller_id:
         raise NotFound(("session_id",), f"no session {session_id} on controller {controller_id}")
@@ -99,6 +138,8 @@ def session(conn: Connection, controller_id: int, session_id: int) -> SessionRow
     s = SessionRow({name: first[label] for label, name in S_KEYS})
     s.points = [PointRow({name: m[label] for label, name in P_KEYS})
                 for m in (r._mapping for r in found) if m["p_id"] is not None]
+    if locked is not None:
+        locked.sessions[s.id] = s
     return s
 
 

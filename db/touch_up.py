@@ -18,6 +18,7 @@ code, ``session_out``, ``next_step``, ``flange_pose_of``, reads them as it reads
 
 from __future__ import annotations
 
+import itertools
 from collections.abc import Sequence
 from typing import Any
 
@@ -25,8 +26,8 @@ from sqlalchemy import Connection, bindparam
 
 from db.crud import StateConflict, require_open
 from db.models import utcnow
-from db.rows import (POSE_COLUMNS, RESULT_COLUMNS, C, P, S, ControllerRow, PointRow, Row,
-                     SessionRow)
+from db.rows import (LOCKED, POSE_COLUMNS, RESULT_COLUMNS, C, P, S, ControllerRow, Locked,
+                     PointRow, Row, SessionRow)
 
 POINT_VALUES = ("source", "joints_deg", "beam_id", "edge", "t_s", "motion_sign",
                 "external_axes", "x_mm", "y_mm", "z_mm", "a_deg", "b_deg", "c_deg", "vx_mm_s",
@@ -44,12 +45,21 @@ STORE_STATE = C.update().where(C.c.id == bindparam("b_id"), C.c.version == bindp
     .values(version=bindparam("b_nv"), **{k: bindparam(f"b_{k}") for k in STATE_VALUES})
 
 
-def _bump(conn: Connection, stmt: Any, row: Row, what: str, **values: Any) -> None:
-    """``UPDATE`` ``row`` at its version, and bump it (409 if another writer got there first:
-    under the request's row lock that cannot happen, as with the ORM's version counter)."""
-    params = {"b_id": row.id, "b_v": row.version, "b_nv": row.version + 1, **values}
-    if conn.execute(stmt, params).rowcount != 1:
+def _write(conn: Connection, stmt: Any, params: dict[str, Any], what: str) -> None:
+    """``stmt`` with ``params``, changing one row (409 if it changed none: another writer got
+    there first; under the request's row lock that cannot happen, as with the ORM's version
+    counter). In a batch (``db.rows.Locked``) it is sent with the batch's writes."""
+    locked = conn.info.get(LOCKED)
+    if locked is not None:
+        locked.pending.append((stmt.table, stmt, params))
+    elif conn.execute(stmt, params).rowcount != 1:
         raise StateConflict(("path",), f"{what} changed while this request ran; try again")
+
+
+def _bump(conn: Connection, stmt: Any, row: Row, what: str, **values: Any) -> None:
+    """``UPDATE`` ``row`` at its version, and bump it (see :func:`_write`)."""
+    _write(conn, stmt, {"b_id": row.id, "b_v": row.version, "b_nv": row.version + 1, **values},
+           what)
     row.version += 1
 
 
@@ -77,7 +87,8 @@ def put_point(conn: Connection, s: SessionRow, step: int, source: str,
         p = PointRow({"id": pid, "session_id": s.id, "step": step, **values})
         s.points = sorted([*s.points, p], key=lambda q: q.step)
     else:
-        conn.execute(UPDATE_POINT, {"b_id": p.id, **{f"b_{k}": v for k, v in values.items()}})
+        _write(conn, UPDATE_POINT, {"b_id": p.id, **{f"b_{k}": v for k, v in values.items()}},
+               f"point {p.id}")
         p.__dict__.update(values)
     computed = s.state == "computed"
     _bump(conn, REOPEN_SESSION if computed else BUMP_SESSION, s, f"session {s.id}", b_now=now)
@@ -85,14 +96,50 @@ def put_point(conn: Connection, s: SessionRow, step: int, source: str,
     if computed:
         s.state, s.report = "open", None
         s.__dict__.update(dict.fromkeys(RESULT_COLUMNS))
+    locked = conn.info.get(LOCKED)
+    if locked is not None:
+        locked.sessions[s.id] = s  # what the batch's next writer of s reads (a copy)
     return p
 
 
 def store_state(conn: Connection, c: ControllerRow, state: Any) -> None:
-    """Save the emulated controller's state (``emulator.ControllerState``) into its row."""
+    """Save the emulated controller's state (``emulator.ControllerState``) into its row; in a
+    batch that holds ``c`` locked (``db.rows.Locked``), into ``c`` only, for
+    :func:`write_locked` to write once for the whole batch."""
     values = {"joints_deg": list(state.joints_deg), "clock_s": state.clock_s,
               "motion_sign": None if state.motion_sign is None else list(state.motion_sign),
               "motion_count": state.motion_count}
-    _bump(conn, STORE_STATE, c, f"controller {c.id}",
-          **{f"b_{k}": v for k, v in values.items()})
+    locked = conn.info.get(LOCKED)
+    if locked is not None and locked.row is c:
+        c.version += 1
+        locked.changed = True
+    else:
+        _bump(conn, STORE_STATE, c, f"controller {c.id}",
+              **{f"b_{k}": v for k, v in values.items()})
     c.__dict__.update(values)
+
+
+def write_locked(conn: Connection, locked: Locked) -> None:
+    """Send a batch's writes (``db.rows.Locked``): each table's in their order, a run of one
+    statement as one ``executemany`` (psycopg pipelines it: one round trip), then the
+    controller as its writers left it (``UPDATE`` at the version it was locked at, to the
+    version they bumped it to)."""
+    tables: dict[Any, list[tuple[Any, dict[str, Any]]]] = {}
+    for table, stmt, params in locked.pending:
+        tables.setdefault(table, []).append((stmt, params))
+    locked.pending = []
+    for writes in tables.values():
+        for _, run in itertools.groupby(writes, key=lambda w: id(w[0])):
+            stmts, params = zip(*run)
+            if conn.execute(stmts[0], list(params)).rowcount != len(params):
+                raise StateConflict(("path",), f"{stmts[0].table.name} rows changed while "
+                                    "this request ran; try again")
+    if not locked.changed:
+        return
+    c = locked.row
+    params = {"b_id": c.id, "b_v": locked.version, "b_nv": c.version,
+              **{f"b_{k}": getattr(c, k) for k in STATE_VALUES}}
+    if conn.execute(STORE_STATE, params).rowcount != 1:
+        raise StateConflict(("path",), f"controller {c.id} changed while this request ran; "
+                            "try again")
+    locked.version, locked.changed = c.version, False

@@ -162,27 +162,20 @@ class WriterQueue:
         return batch
 
 
-class WriterBatch:
-    """The writers of one event loop that run on it (``server.deps.short``), taking their turn
-    together.
+class Batch:
+    """Writers that wait for one turn together, then run together (``server.deps.short``): the
+    first writer to find no batch forming starts one, a task that takes the turn while the
+    writers that come meanwhile join, runs them (:meth:`_run`) and lets the turn go. What
+    the turn is and how the writers run is the subclass's: :class:`WriterBatch` (SQLite),
+    ``db.batch.ControllerBatch`` (PostgreSQL)."""
 
-    The first writer to find no batch forming starts one: a task waits for the turn (behind
-    this process's threads as a future, for another process's ``flock`` in a thread) while the
-    writers that come meanwhile join it; then it runs them one after another in one callback,
-    each its own transaction, and lets the turn go. The database's lock is held for their
-    work only: a writer handed its turn alone would hold it while the loop served whatever
-    else was ready first (requests to parse, answers to send), and each turn handed between
-    processes costs a wake-up on the other side (``benchmarks/README.md``).
-    """
-
-    def __init__(self, queue: WriterQueue) -> None:
-        self.queue = queue
-        self._jobs: deque[tuple[Callable[[], Any], asyncio.Future]] = deque()
+    def __init__(self) -> None:
+        self._jobs: deque[tuple[Callable[..., Any], asyncio.Future]] = deque()
         self._leader: asyncio.Task | None = None
 
-    async def run(self, job: Callable[[], Any]) -> Any:
-        """``job()`` (sync, on the loop) in the next batch, with the turn; its result. It runs
-        in the caller's context (its context variables: the request's actor for the audit)."""
+    async def run(self, job: Callable[..., Any]) -> Any:
+        """``job`` in the next batch, with the turn; its result. It runs in the caller's
+        context (its context variables: the request's actor for the audit)."""
         loop = asyncio.get_running_loop()
         future = loop.create_future()
         self._jobs.append((functools.partial(contextvars.copy_context().run, job), future))
@@ -191,28 +184,27 @@ class WriterBatch:
             self._leader = loop.create_task(self._lead(), context=contextvars.Context())
         return await future  # cancelled (the client left) before its batch ran: skipped
 
+    async def _take(self) -> None:
+        raise NotImplementedError
+
+    def _give(self) -> None:
+        raise NotImplementedError
+
+    async def _run(self, jobs: deque[tuple[Callable[..., Any], asyncio.Future]]) -> None:
+        """Run ``jobs`` with the turn, settling each one's future; a job left in ``jobs`` when
+        this raises goes to the next batch."""
+        raise NotImplementedError
+
     async def _lead(self) -> None:
+        jobs: deque = deque()
         try:
             while self._jobs:
-                await self.queue.acquire_async()
+                await self._take()
                 try:
                     jobs, self._jobs = self._jobs, deque()
-                    while jobs:
-                        job, future = jobs.popleft()
-                        if future.done():
-                            continue
-                        try:
-                            result = job()
-                        except Exception as exc:  # the request's own error (a 4xx, a 500)
-                            future.set_exception(exc)
-                        except BaseException as exc:  # answered too, then the batch ends
-                            future.set_exception(
-                                RuntimeError(f"the writers' batch ended: {exc!r}"))
-                            raise
-                        else:
-                            future.set_result(result)
+                    await self._run(jobs)
                 finally:
-                    self.queue.release()
+                    self._give()
                     self._jobs.extendleft(reversed(jobs))  # what a BaseException left undone
         except BaseException as exc:  # the loop is shutting down: the waiting writers fail
             for _, future in self._jobs:
@@ -221,6 +213,43 @@ class WriterBatch:
             raise
         finally:
             self._leader = None
+
+
+class WriterBatch(Batch):
+    """The writers of one event loop that run on it, taking their SQLite turn together.
+
+    The leader waits for the turn (behind this process's threads as a future, for another
+    process's ``flock`` in a thread), then runs its writers one after another in one callback,
+    each its own transaction, and lets the turn go. The database's lock is held for their
+    work only: a writer handed its turn alone would hold it while the loop served whatever
+    else was ready first (requests to parse, answers to send), and each turn handed between
+    processes costs a wake-up on the other side (``benchmarks/README.md``).
+    """
+
+    def __init__(self, queue: WriterQueue) -> None:
+        super().__init__()
+        self.queue = queue
+
+    async def _take(self) -> None:
+        await self.queue.acquire_async()
+
+    def _give(self) -> None:
+        self.queue.release()
+
+    async def _run(self, jobs: deque[tuple[Callable[..., Any], asyncio.Future]]) -> None:
+        while jobs:
+            job, future = jobs.popleft()
+            if future.done():
+                continue
+            try:
+                result = job()
+            except Exception as exc:  # the request's own error (a 4xx, a 500)
+                future.set_exception(exc)
+            except BaseException as exc:  # answered too, then the batch ends
+                future.set_exception(RuntimeError(f"the writers' batch ended: {exc!r}"))
+                raise
+            else:
+                future.set_result(result)
 
 
 def _wake(future: asyncio.Future) -> None:

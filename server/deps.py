@@ -27,7 +27,9 @@ in its process's batch of writers (``db.writers.WriterBatch``).
 
 **PostgreSQL: one writer of a controller at a time per process.** The writers of a controller
 queue on the event loop (:func:`_controller_turn`) before they take a thread and a connection:
-they would wait for its row lock in the server anyway.
+they would wait for its row lock in the server anyway. Its short writers (the touch-up) wait
+without a thread and run as a batch, in one thread and one transaction under one row lock
+(``db.batch``).
 
 In the process, writers pass a bulkhead first (``app.state.writers``, an ``asyncio.Semaphore``
 of :func:`writer_slots`): a request waiting for a database lock holds a thread of the
@@ -49,12 +51,13 @@ from fastapi import Depends, FastAPI, Request, Response
 from fastapi.datastructures import DefaultPlaceholder
 from fastapi.routing import APIRoute
 from pydantic import BaseModel, TypeAdapter
-from sqlalchemy import event
+from sqlalchemy import Connection, event
 from sqlalchemy.exc import OperationalError
 from sqlalchemy.orm import Session, sessionmaker
 from starlette.concurrency import run_in_threadpool
 
 from db import crud
+from db.batch import ControllerBatch
 from db.session import NO_WAIT_AT_BEGIN, write_session
 from db.writers import TURN_AT_BEGIN, WriterTurn, writer_queue
 from server import idempotency
@@ -63,6 +66,7 @@ READ_METHODS = ("GET", "HEAD", "OPTIONS")
 LOCK_ON_BEGIN = "pendant_lock_controller"  # Session.info: the controller to lock at BEGIN
 TURN = "pendant_writer_turn"  # Session.info: the request's db.session.WriterTurn (SQLite)
 PLAN = "pendant_plan"  # Session.info: what a short route's plan returned (see short)
+BATCH = "pendant_batch"  # Session.info: (db.batch.ControllerBatch, sessionmaker) of a PG writer
 WRITER_SLOTS = {"sqlite": 4}  # threads of one process waiting in SQLite's writer queue; PG: 8
 
 
@@ -127,10 +131,11 @@ async def get_session(request: Request) -> AsyncIterator[Session]:
     """
     maker = request.app.state.sessionmaker
     writes = request.method not in READ_METHODS
-    slots = request.app.state.writers if writes else None
     cid = _controller_id(request) if writes else None
+    batch = _controller_batch(request, cid) if cid is not None else None
+    slots = request.app.state.writers if writes and batch is None else None
     turn = None
-    if cid is not None and request.app.state.writer_queue is None:  # PostgreSQL
+    if cid is not None and batch is None and request.app.state.writer_queue is None:  # PG
         turn = _controller_turn(request.app, cid)
         await turn.acquire()
     if slots is not None:
@@ -146,6 +151,8 @@ async def get_session(request: Request) -> AsyncIterator[Session]:
         if writes:
             if cid is not None:
                 db.info[LOCK_ON_BEGIN] = cid
+            if batch is not None:
+                db.info[BATCH] = batch, maker
             queue = request.app.state.writer_queue
             if queue is not None:
                 db.info[TURN] = WriterTurn(queue)
@@ -186,6 +193,23 @@ def _controller_turn(app: FastAPI, controller_id: int) -> asyncio.Lock:
     if turn is None:
         turn = turns[controller_id] = asyncio.Lock()
     return turn
+
+
+def _controller_batch(request: Request, controller_id: int) -> ControllerBatch | None:
+    """PostgreSQL: the batch a :func:`short` writer of ``controller_id`` joins (``db.batch``),
+    or None (SQLite, another route, or a request whose Idempotency-Key is claimed in its own
+    transaction)."""
+    app = request.app
+    endpoint = getattr(request.scope.get("route"), "endpoint", None)
+    if (app.state.writer_queue is not None or not getattr(endpoint, "_short", False)
+            or idempotency.has_key(request)):
+        return None
+    batches = app.state.controller_batches
+    batch = batches.get(controller_id)
+    if batch is None:
+        batch = batches[controller_id] = ControllerBatch(
+            app.state.engine, controller_id, _controller_turn(app, controller_id))
+    return batch
 
 
 def _end(db: Session, finish: Callable[[], None]) -> None:
@@ -280,6 +304,11 @@ def one_thread(endpoint: Callable[..., Any], route: APIRoute | None = None) -> C
         @functools.wraps(endpoint)
         async def served(*args: Any, **kwargs: Any) -> Any:
             db = next((v for v in kwargs.values() if isinstance(v, Session)), None)
+            if db is not None and BATCH in db.info:  # PostgreSQL: the controller's batch
+                _make_plan(endpoint, db, kwargs)  # on the loop, before the row lock
+                batch, maker = db.info.pop(BATCH)
+                job = functools.partial(_in_batch, endpoint, maker, db, args, kwargs)
+                return answer(await batch.run(job), kwargs)
             if db is None or db.get_bind().dialect.name != "sqlite":
                 return await run_in_threadpool(run, *args, **kwargs)
             _make_plan(endpoint, db, kwargs)  # on the loop, before the writers' lock
@@ -359,6 +388,23 @@ def _begun(locked: Callable[..., Any], db: Session, args: tuple, kwargs: dict[st
     return locked(*args, **kwargs)
 
 
+def _in_batch(endpoint: Callable[..., Any], maker: sessionmaker, db: Session, args: tuple,
+              kwargs: dict[str, Any], conn: Connection) -> Any:
+    """A :func:`short` writer in its controller's batch (``db.batch``, PostgreSQL): the route
+    on a session of the batch's connection, in the batch's transaction, which the batch
+    commits (the session commits nothing of it, ``join_transaction_mode="rollback_only"``,
+    and rolls nothing back: the batch does)."""
+    joined = maker(bind=conn, join_transaction_mode="rollback_only")
+    joined.info.update(db.info)
+    kwargs.update({k: joined for k, v in kwargs.items() if v is db})
+    try:
+        result = endpoint(*args, **kwargs)
+        joined.flush()
+        return result
+    finally:
+        joined.close()
+
+
 class Later:
     """A route's answer built after its commit, without the writers' lock (:func:`later`)."""
 
@@ -379,6 +425,7 @@ def install(app: FastAPI) -> None:
     app.state.writers = asyncio.Semaphore(writer_slots(app.state.engine.dialect.name))
     app.state.writer_queue = writer_queue(app.state.engine)
     app.state.controller_turns = weakref.WeakValueDictionary()  # PostgreSQL: see get_session
+    app.state.controller_batches = weakref.WeakValueDictionary()  # PostgreSQL: db.batch
     maker: sessionmaker = app.state.sessionmaker
     if not event.contains(maker, "after_begin", _lock_at_begin):
         event.listen(maker, "after_begin", _lock_at_begin)

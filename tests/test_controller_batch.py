@@ -1,0 +1,110 @@
+"""A batch of touch-ups in one transaction under the controller's row lock (db.batch: what
+PostgreSQL's short writers run in): each writer's rows as if it had run alone, a failed
+writer's rows never committed, and each answer showing its own change.
+
+``in_one_transaction`` is plain SQLAlchemy, so these run on both backends; the HTTP walk at
+the end goes through the batches of whichever backend the suite runs on."""
+
+from __future__ import annotations
+
+import threading
+
+import emulator
+from api_helpers import *  # noqa: F403
+from api_helpers import C, ok, open_session
+from db import rows
+from db import touch_up as touch
+from db.batch import in_one_transaction
+from db.models import CalibSession, Controller
+from server.routers.common import state_of
+from solvers.errors import CalibrationError
+
+POSE = (400.0, 10.0, 300.0, 0.0, 90.0, 0.0)
+
+
+def _teach(session_id: int, step: int, fail: str | None = None):  # noqa: ANN202
+    """A touch-up of ``step`` as the route does it, as a job of the batch; ``fail`` = "before"
+    (refused before it writes, like a wrong step) or "after" (fails after its writes)."""
+    def job(conn):  # noqa: ANN001, ANN202
+        c = rows.controller(conn, 1, lock=True)
+        s = rows.session(conn, 1, session_id)
+        if fail == "before":
+            raise CalibrationError(("step",), "refused before writing")
+        touch.put_point(conn, s, step, "joints", POSE, [0.0] * 6, t_s=float(c.clock_s))
+        touch.store_state(conn, c, emulator.touched_up(state_of(c)))
+        if fail == "after":
+            raise RuntimeError("failed after writing")
+        clock = c.clock_s
+        return lambda: (s.version, [p.step for p in s.points], clock)  # built after the commit
+    return job
+
+
+def _session_id(client) -> int:  # noqa: ANN001
+    return int(open_session(client, "tool.xyz_4point", 1).rsplit("/", 1)[1])
+
+
+def _state(client, sid: int) -> tuple:  # noqa: ANN001
+    with client.app.state.sessionmaker() as db:
+        s, c = db.get(CalibSession, sid), db.get(Controller, 1)
+        return s.version, sorted(p.step for p in s.points), c.clock_s, c.version
+
+
+def test_a_batch_commits_its_writers_and_drops_a_failed_one(client):
+    a, b = _session_id(client), _session_id(client)
+    va, _, clock0, cv0 = _state(client, a)
+    vb = _state(client, b)[0]
+    outcomes = in_one_transaction(client.app.state.engine, 1, [
+        _teach(a, 0), _teach(b, 0, fail="before"), _teach(a, 1), _teach(b, 1, fail="after"),
+        _teach(b, 2)])
+    assert [ok_ for ok_, _ in outcomes] == [True, False, True, False, True]
+    assert isinstance(outcomes[1][1], CalibrationError)
+    assert str(outcomes[3][1]) == "failed after writing"
+    tick = emulator.TOUCH_UP_S
+    # each answer (built after the commit, as deps.later) is its own writer's: session a at
+    # +1 then +2, the clock one tick each
+    assert outcomes[0][1]() == (va + 1, [0], clock0 + tick)
+    assert outcomes[2][1]() == (va + 2, [0, 1], clock0 + 2 * tick)
+    assert outcomes[4][1]() == (vb + 1, [2], clock0 + 3 * tick)
+    # in the database: the three that succeeded, not the one that failed after writing
+    assert _state(client, a)[:2] == (va + 2, [0, 1])
+    assert _state(client, b)[:2] == (vb + 1, [2])
+    _, _, clock, cv = _state(client, a)
+    assert abs(clock - (clock0 + 3 * tick)) < 1e-9 and cv == cv0 + 3
+
+
+def test_a_batch_of_an_unknown_controller_answers_each_writer(client):
+    outcomes = in_one_transaction(client.app.state.engine, 999, [_teach(1, 0), _teach(1, 1)])
+    assert [ok_ for ok_, _ in outcomes] == [False, False]
+    assert all("controller" in str(exc) for _, exc in outcomes)
+
+
+def test_concurrent_touch_ups_each_answer_their_own_change(client):
+    """Touch-ups of 8 sessions from 8 threads at once (they meet in batches), with a wrong
+    step among them: every answer's ETag is its session's version and its body that version's
+    steps; no clock tick is lost and no refused touch-up wrote."""
+    urls = [open_session(client, "tool.xyz_4point", 1) for _ in range(8)]
+    clock0 = ok(client.get(f"{C}/cell/clock"))["clock_s"]
+    answers: dict[int, list] = {k: [] for k in range(len(urls))}
+
+    def teach(k: int) -> None:
+        for step in (0, 1, 99, 2, 0):
+            answers[k].append(client.post(f"{urls[k]}/touch-up", json={"step": step}))
+
+    threads = [threading.Thread(target=teach, args=(k,)) for k in range(len(urls))]
+    for t in threads:
+        t.start()
+    for t in threads:
+        t.join(60)
+    for k, url in enumerate(urls):
+        codes = [r.status_code for r in answers[k]]
+        assert codes == [200, 200, 422, 200, 200], codes
+        versions = [int(r.headers["ETag"].strip('"')) for r in answers[k] if r.status_code == 200]
+        assert versions == list(range(versions[0], versions[0] + 4))
+        filled = [[s["filled"] for s in r.json()["steps"]] for r in answers[k]
+                  if r.status_code == 200]
+        assert filled[:3] == [[True, False, False, False], [True, True, False, False],
+                              [True, True, True, False]]
+        final = client.get(url)
+        assert final.headers["ETag"] == answers[k][-1].headers["ETag"]
+    clock = ok(client.get(f"{C}/cell/clock"))["clock_s"]
+    assert abs(clock - (clock0 + 4 * len(urls) * emulator.TOUCH_UP_S)) < 1e-6
