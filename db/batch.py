@@ -1,26 +1,30 @@
-"""PostgreSQL: the short writers of one controller, in one transaction under its row lock.
+"""Short writers in batches: one transaction, one lock and one commit for all that waited.
 
-Every writer of a controller locks the controller's row (``SELECT ... FOR UPDATE``), so the
-writers of one controller run one after another, across processes and hosts: how many a
-second get through is one over the time each holds the lock. One touch-up on its own held it
-for five of its eight round trips (pool ping, ``BEGIN``, the locked read, the session, three
-writes, the commit) in a thread that had to win the GIL back from the event loop after
-each one.
+A touch-up's own work is a few tenths of a millisecond; what it cost around that was its
+transaction: a thread, a pooled connection, ``BEGIN``, the lock, each statement's round trip
+and the commit. Every writer of a controller takes the same lock (PostgreSQL: the
+controller's row; SQLite: the database), so how many a second get through is one over the
+time each holds it. So the short writers that wait together (``server.deps.short``: the
+touch-up) run as a batch:
 
-So the short writers of a controller (``server.deps.short``: the touch-up) that wait in this
-process run as a batch (:class:`ControllerBatch`): one thread, one pooled connection, one
-transaction, one row lock and one commit for all of them. The controller is read once
-(:class:`db.rows.Locked`), each writer reads it from there and changes it in place, and it is
-written once, before the commit (``db.touch_up.write_locked``). What each writer writes of its
-own (its session, its point) it writes as it runs.
+- :class:`SQLiteBatch`: the writers of the process, on its event loop, with the writers'
+  turn (``db.writers.WriterQueue``), in one ``BEGIN IMMEDIATE`` transaction;
+- :class:`ControllerBatch`: PostgreSQL, the writers of one controller, in one thread, in one
+  transaction that locks the controller's row first.
+
+In the batch's transaction each controller is read once (``db.rows.Locked``); its writers read
+it from there and change it in place, and it is written once, before the commit
+(``db.touch_up.write_locked``). Each writer's own rows (its session, its point) are set aside
+as it runs and sent together before the commit, a run of one statement as one
+``executemany`` (one round trip on PostgreSQL: psycopg pipelines it).
 
 A writer that fails without having written (a 4xx: a wrong step, a stale ``If-Match``) leaves
 the transaction as it was: the batch goes on. One that fails after a write rolls the whole
 transaction back, and the batch runs again without it (:func:`in_one_transaction`): nothing
 a failed writer wrote is committed, and no answer leaves before the commit.
 
-It orders writers and guards nothing that the row lock does not: a writer outside the batch
-(another process, host, or route) waits for the same row lock.
+A batch orders writers and guards nothing that the database's lock does not: a writer
+outside it (another process, host, or route) waits for the same lock.
 """
 
 from __future__ import annotations
@@ -32,11 +36,13 @@ from typing import Any
 
 import anyio.to_thread
 from sqlalchemy import Connection, Engine, event
+from sqlalchemy.exc import OperationalError
 
 from db import rows
 from db.crud import NotFound
+from db.session import NO_WAIT_AT_BEGIN
 from db.touch_up import write_locked
-from db.writers import Batch
+from db.writers import Batch, WriterQueue
 
 Outcome = tuple[bool, Any]  # (True, result) or (False, the exception it raised)
 
@@ -57,22 +63,24 @@ def _count_writes(conn: Connection) -> list[int]:
     return count
 
 
-def _written(writes: list[int], locked: rows.Locked | None) -> int:
+def _written(writes: list[int], locked: rows.Locked) -> int:
     """How many writes the batch has sent or set aside so far."""
-    return writes[0] + (0 if locked is None else len(locked.pending))
+    return writes[0] + len(locked.pending)
 
 
-def _one_pass(engine: Engine, controller_id: int, jobs: Sequence[Callable[[Connection], Any]],
-              todo: list[int], outcomes: list[Outcome | None]) -> None:
+def _one_pass(engine: Engine, controller_id: int | None,
+              jobs: Sequence[Callable[[Connection], Any]], todo: list[int],
+              outcomes: list[Outcome | None]) -> None:
     with engine.connect() as conn:
         writes = _count_writes(conn)
         with conn.begin():  # committed as the block ends, rolled back if it raises
+            locked = conn.info[rows.LOCKED] = rows.Locked()
             try:
-                locked = rows.Locked(rows.controller(conn, controller_id, lock=True))
-            except NotFound:
-                locked = None  # each writer says so itself
-            conn.info[rows.LOCKED] = locked
-            try:
+                if controller_id is not None:
+                    try:
+                        rows.controller(conn, controller_id, lock=True)
+                    except NotFound:
+                        pass  # each writer says so itself
                 for i in todo:
                     before = _written(writes, locked)
                     try:
@@ -81,16 +89,16 @@ def _one_pass(engine: Engine, controller_id: int, jobs: Sequence[Callable[[Conne
                         outcomes[i] = (False, exc)
                         if _written(writes, locked) != before:
                             raise _Undo from exc
-                if locked is not None:
-                    write_locked(conn, locked)
+                write_locked(conn, locked)
             finally:
                 conn.info.pop(rows.LOCKED, None)
 
 
-def in_one_transaction(engine: Engine, controller_id: int,
+def in_one_transaction(engine: Engine, controller_id: int | None,
                        jobs: Sequence[Callable[[Connection], Any]]) -> list[Outcome]:
     """Run ``jobs`` (each a function of the connection) one after another in one transaction
-    that first locks controller ``controller_id``'s row, and commit: each one's outcome.
+    of ``engine`` (that first locks controller ``controller_id``'s row, if given), and commit:
+    each one's outcome.
 
     A job that raises after it wrote rolls the transaction back; the others run again in a
     new one (each pass drops one such job, so this ends). An error of the commit itself
@@ -105,28 +113,18 @@ def in_one_transaction(engine: Engine, controller_id: int,
         return outcomes  # type: ignore[return-value]
 
 
-class ControllerBatch(Batch):
-    """The short writers of one controller in this process (see the module's docstring): the
-    leader takes the controller's turn (``turn``, the ``asyncio.Lock`` its other writers of
-    this process queue on), runs the waiting writers in a thread with
-    :func:`in_one_transaction`, and settles their futures after the commit."""
+class OneTransaction(Batch):
+    """A :class:`db.writers.Batch` whose writers (functions of the connection) run in one
+    transaction (:func:`in_one_transaction`); :meth:`_outcomes` says where."""
 
-    def __init__(self, engine: Engine, controller_id: int, turn: asyncio.Lock) -> None:
-        super().__init__()
-        self.engine, self.controller_id, self.turn = engine, controller_id, turn
-
-    async def _take(self) -> None:
-        await self.turn.acquire()
-
-    def _give(self) -> None:
-        self.turn.release()
+    async def _outcomes(self, jobs: list[Callable[[Connection], Any]]) -> list[Outcome]:
+        raise NotImplementedError
 
     async def _run(self, jobs: deque[tuple[Callable[..., Any], asyncio.Future]]) -> None:
         live = [(job, future) for job, future in jobs if not future.done()]
         jobs.clear()
-        try:  # the thread is waited for even if this task is cancelled (anyio's default)
-            outcomes = await anyio.to_thread.run_sync(
-                in_one_transaction, self.engine, self.controller_id, [job for job, _ in live])
+        try:
+            outcomes = await self._outcomes([job for job, _ in live])
         except BaseException as exc:
             for _, future in live:
                 if not future.done():
@@ -141,3 +139,61 @@ class ControllerBatch(Batch):
                     future.set_result(value)
                 else:
                     future.set_exception(value)
+
+
+class ControllerBatch(OneTransaction):
+    """PostgreSQL: the short writers of one controller in this process (see the module's
+    docstring): the leader takes the controller's turn (``turn``, the ``asyncio.Lock`` its
+    other writers of this process queue on) and runs the waiting writers in a thread, in one
+    transaction that locks the controller's row first."""
+
+    def __init__(self, engine: Engine, controller_id: int, turn: asyncio.Lock) -> None:
+        super().__init__()
+        self.engine, self.controller_id, self.turn = engine, controller_id, turn
+
+    async def _take(self) -> None:
+        await self.turn.acquire()
+
+    def _give(self) -> None:
+        self.turn.release()
+
+    async def _outcomes(self, jobs: list[Callable[[Connection], Any]]) -> list[Outcome]:
+        # the thread is waited for even if this task is cancelled (anyio's default)
+        return await anyio.to_thread.run_sync(in_one_transaction, self.engine,
+                                              self.controller_id, jobs)
+
+
+IN_A_THREAD = object()  # a SQLiteBatch writer's result when SQLite's lock is held elsewhere
+
+
+class SQLiteBatch(OneTransaction):
+    """SQLite: the short writers of this process's event loop. The leader takes the writers'
+    turn (``db.writers.WriterQueue``: first in the process, then the host's ``flock``) and
+    runs them on the event loop, in one transaction of ``engine`` (a writer's:
+    ``BEGIN IMMEDIATE``), so the database's lock is held for their work only.
+
+    ``BEGIN IMMEDIATE`` does not wait there: a writer that does not queue (a job worker, the
+    events dispatcher, the CLI) may hold SQLite's lock, and then each writer's result is
+    :data:`IN_A_THREAD` (it runs again on its own, in a thread, where its ``BEGIN`` may
+    wait), never a wait on the loop."""
+
+    def __init__(self, queue: WriterQueue, engine: Engine) -> None:
+        super().__init__()
+        self.queue, self.engine = queue, engine
+
+    async def _take(self) -> None:
+        await self.queue.acquire_async()
+
+    def _give(self) -> None:
+        self.queue.release()
+
+    async def _outcomes(self, jobs: list[Callable[[Connection], Any]]) -> list[Outcome]:
+        no_wait = NO_WAIT_AT_BEGIN.set(True)
+        try:
+            return in_one_transaction(self.engine, None, jobs)
+        except OperationalError as exc:
+            if "locked" not in str(exc.orig):
+                raise
+            return [(True, IN_A_THREAD)] * len(jobs)  # nothing was committed
+        finally:
+            NO_WAIT_AT_BEGIN.reset(no_wait)

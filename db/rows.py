@@ -74,43 +74,50 @@ class SessionRow(Row):
 
 
 class Locked:
-    """What a batch of writers holding a controller's row lock in its one transaction
-    (``db.batch``) has read and will write, kept in ``Connection.info`` under :data:`LOCKED`
-    while the batch runs.
+    """What a batch of writers in one transaction (``db.batch``) has read and will write, kept
+    in ``Connection.info`` under :data:`LOCKED` while the batch runs. The batch holds the
+    rows' lock (PostgreSQL: its controller's row; SQLite: the database), so no other writer
+    can change them meanwhile.
 
-    - ``row``: the controller, read once; its writers read it from here (no round trip) and
-      change it in place (``db.touch_up.store_state``);
+    - ``controllers``: each controller read once; the batch's writers read it from here (no
+      round trip) and change it in place (``db.touch_up.store_state``); it is written once
+      (``versions``: each one's version as read);
     - ``sessions``: each session as the batch's last writer of it left it (a later writer
       of the same session reads a copy, so each writer's answer shows its own change);
     - ``pending``: the writes of its writers, ``(table, statement, params)`` in order, sent
       together before the commit (``db.touch_up.write_locked``: one round trip per run of
-      one statement). No other writer can change these rows meanwhile: every writer of a
-      controller's rows holds its row lock first.
+      one statement).
     """
 
-    def __init__(self, row: ControllerRow) -> None:
-        self.row, self.version, self.changed = row, row.version, False
+    def __init__(self) -> None:
+        self.controllers: dict[int, ControllerRow] = {}
+        self.versions: dict[int, int] = {}
         self.sessions: dict[int, SessionRow] = {}
         self.pending: list[tuple[Any, Any, dict[str, Any]]] = []
 
+    def keep(self, c: ControllerRow) -> ControllerRow:
+        self.controllers[c.id], self.versions[c.id] = c, c.version
+        return c
 
-LOCKED = "pendant_locked_controller"  # Connection.info: the batch's Locked controller
+
+LOCKED = "pendant_batch_rows"  # Connection.info: the running batch's Locked rows
 
 
 def controller(conn: Connection, controller_id: int, lock: bool = False) -> ControllerRow:
     """The controller (404 naming ``controller_id`` when there is none); ``lock``: with its
     row locked until commit (``SELECT ... FOR UPDATE`` on PostgreSQL, as ``crud.lock_controller``;
-    a SQLite writer holds the database's lock already). In a batch (:class:`Locked`) the
-    batch's controller, locked already, as its earlier writers left it."""
+    a SQLite writer holds the database's lock already). In a batch (:class:`Locked`), as the
+    batch's earlier writers left it."""
     rid = row_id(controller_id, conn)
     locked = conn.info.get(LOCKED)
-    if locked is not None and rid == locked.row.id:
-        return locked.row
+    if locked is not None and rid in locked.controllers:
+        return locked.controllers[rid]
     stmt = CONTROLLER_LOCKED if lock else CONTROLLER
     row = None if rid is None else conn.execute(stmt, {"b_id": rid}).first()
     if row is None:
         raise NotFound(("controller_id",), f"no controller {controller_id}")
-    return ControllerRow(row._mapping)
+    c = ControllerRow(row._mapping)
+    return c if locked is None else locked.keep(c)
 
 
 def controllers(conn: Connection) -> list[ControllerRow]:

@@ -81,13 +81,14 @@ def make_sessionmaker(engine: Engine) -> sessionmaker[Session]:
 
 
 @functools.lru_cache(maxsize=64)
-def _write_bind(engine: Engine) -> Engine:
+def write_engine(engine: Engine) -> Engine:
+    """``engine`` whose transactions are a writer's (``BEGIN IMMEDIATE`` on SQLite)."""
     return engine.execution_options(**WRITE)
 
 
 def write_session(maker: sessionmaker[Session]) -> Session:
     """A session whose transaction is a writer's: ``BEGIN IMMEDIATE`` on SQLite."""
-    return maker(bind=_write_bind(maker.kw["bind"]))
+    return maker(bind=write_engine(maker.kw["bind"]))
 
 
 NO_WAIT_AT_BEGIN: contextvars.ContextVar[bool] = contextvars.ContextVar(

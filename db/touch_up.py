@@ -104,15 +104,14 @@ def put_point(conn: Connection, s: SessionRow, step: int, source: str,
 
 def store_state(conn: Connection, c: ControllerRow, state: Any) -> None:
     """Save the emulated controller's state (``emulator.ControllerState``) into its row; in a
-    batch that holds ``c`` locked (``db.rows.Locked``), into ``c`` only, for
-    :func:`write_locked` to write once for the whole batch."""
+    batch that read ``c`` (``db.rows.Locked``), into ``c`` only, for :func:`write_locked` to
+    write once for the whole batch."""
     values = {"joints_deg": list(state.joints_deg), "clock_s": state.clock_s,
               "motion_sign": None if state.motion_sign is None else list(state.motion_sign),
               "motion_count": state.motion_count}
     locked = conn.info.get(LOCKED)
-    if locked is not None and locked.row is c:
+    if locked is not None and locked.controllers.get(c.id) is c:
         c.version += 1
-        locked.changed = True
     else:
         _bump(conn, STORE_STATE, c, f"controller {c.id}",
               **{f"b_{k}": v for k, v in values.items()})
@@ -122,7 +121,7 @@ def store_state(conn: Connection, c: ControllerRow, state: Any) -> None:
 def write_locked(conn: Connection, locked: Locked) -> None:
     """Send a batch's writes (``db.rows.Locked``): each table's in their order, a run of one
     statement as one ``executemany`` (psycopg pipelines it: one round trip), then the
-    controller as its writers left it (``UPDATE`` at the version it was locked at, to the
+    controllers as its writers left them (``UPDATE`` at the version each was read at, to the
     version they bumped it to)."""
     tables: dict[Any, list[tuple[Any, dict[str, Any]]]] = {}
     for table, stmt, params in locked.pending:
@@ -134,12 +133,12 @@ def write_locked(conn: Connection, locked: Locked) -> None:
             if conn.execute(stmts[0], list(params)).rowcount != len(params):
                 raise StateConflict(("path",), f"{stmts[0].table.name} rows changed while "
                                     "this request ran; try again")
-    if not locked.changed:
-        return
-    c = locked.row
-    params = {"b_id": c.id, "b_v": locked.version, "b_nv": c.version,
-              **{f"b_{k}": getattr(c, k) for k in STATE_VALUES}}
-    if conn.execute(STORE_STATE, params).rowcount != 1:
-        raise StateConflict(("path",), f"controller {c.id} changed while this request ran; "
-                            "try again")
-    locked.version, locked.changed = c.version, False
+    for cid, c in locked.controllers.items():
+        if c.version == locked.versions[cid]:
+            continue
+        params = {"b_id": cid, "b_v": locked.versions[cid], "b_nv": c.version,
+                  **{f"b_{k}": getattr(c, k) for k in STATE_VALUES}}
+        if conn.execute(STORE_STATE, params).rowcount != 1:
+            raise StateConflict(("path",), f"controller {cid} changed while this request ran; "
+                                "try again")
+        locked.versions[cid] = c.version

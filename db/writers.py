@@ -45,7 +45,6 @@ class WriterQueue:
         self._waiters: deque[Any] = deque()  # threading.Lock or (loop, future), first first
         self._flocked = False  # the turn's holder has the flock (only the holder changes it)
         self._fd: int | None = None
-        self._batches: weakref.WeakKeyDictionary = weakref.WeakKeyDictionary()  # loop: batch
 
     # ---------------------------------------------------------------- the turn in the process
     def _enter(self, waiter: Any) -> bool:
@@ -153,21 +152,12 @@ class WriterQueue:
                 flocked.add_done_callback(lambda _: self.release())
             raise
 
-    def batch(self) -> WriterBatch:
-        """The :class:`WriterBatch` of the running event loop on this queue."""
-        loop = asyncio.get_running_loop()
-        batch = self._batches.get(loop)
-        if batch is None:
-            batch = self._batches[loop] = WriterBatch(self)
-        return batch
-
 
 class Batch:
     """Writers that wait for one turn together, then run together (``server.deps.short``): the
     first writer to find no batch forming starts one, a task that takes the turn while the
     writers that come meanwhile join, runs them (:meth:`_run`) and lets the turn go. What
-    the turn is and how the writers run is the subclass's: :class:`WriterBatch` (SQLite),
-    ``db.batch.ControllerBatch`` (PostgreSQL)."""
+    the turn is and how the writers run is the subclass's (``db.batch``)."""
 
     def __init__(self) -> None:
         self._jobs: deque[tuple[Callable[..., Any], asyncio.Future]] = deque()
@@ -213,43 +203,6 @@ class Batch:
             raise
         finally:
             self._leader = None
-
-
-class WriterBatch(Batch):
-    """The writers of one event loop that run on it, taking their SQLite turn together.
-
-    The leader waits for the turn (behind this process's threads as a future, for another
-    process's ``flock`` in a thread), then runs its writers one after another in one callback,
-    each its own transaction, and lets the turn go. The database's lock is held for their
-    work only: a writer handed its turn alone would hold it while the loop served whatever
-    else was ready first (requests to parse, answers to send), and each turn handed between
-    processes costs a wake-up on the other side (``benchmarks/README.md``).
-    """
-
-    def __init__(self, queue: WriterQueue) -> None:
-        super().__init__()
-        self.queue = queue
-
-    async def _take(self) -> None:
-        await self.queue.acquire_async()
-
-    def _give(self) -> None:
-        self.queue.release()
-
-    async def _run(self, jobs: deque[tuple[Callable[..., Any], asyncio.Future]]) -> None:
-        while jobs:
-            job, future = jobs.popleft()
-            if future.done():
-                continue
-            try:
-                result = job()
-            except Exception as exc:  # the request's own error (a 4xx, a 500)
-                future.set_exception(exc)
-            except BaseException as exc:  # answered too, then the batch ends
-                future.set_exception(RuntimeError(f"the writers' batch ended: {exc!r}"))
-                raise
-            else:
-                future.set_result(result)
 
 
 def _wake(future: asyncio.Future) -> None:

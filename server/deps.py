@@ -21,15 +21,15 @@ host) in the route's thread, just before its ``BEGIN IMMEDIATE``, and gives it u
 commit: the next writer goes at once, instead of polling in SQLite's busy handler. It orders
 writers and guards nothing (``BEGIN IMMEDIATE`` does).
 
-**Short routes** (:func:`short`: a touch-up, the reads of a slot, a controller, a session) run
-on the event loop on SQLite, without a thread; a short writer waits for its turn there and runs
-in its process's batch of writers (``db.writers.WriterBatch``).
+**Short routes** (:func:`short`: a touch-up, the reads of a slot, a controller, a session).
+On SQLite a short read runs on the event loop, without a thread. A short writer waits for
+its turn without a thread and runs in a batch with the writers that waited with it, in one
+transaction (``db.batch``): on SQLite the writers of the process, on the event loop; on
+PostgreSQL those of its controller, in one thread under one row lock.
 
 **PostgreSQL: one writer of a controller at a time per process.** The writers of a controller
 queue on the event loop (:func:`_controller_turn`) before they take a thread and a connection:
-they would wait for its row lock in the server anyway. Its short writers (the touch-up) wait
-without a thread and run as a batch, in one thread and one transaction under one row lock
-(``db.batch``).
+they would wait for its row lock in the server anyway.
 
 In the process, writers pass a bulkhead first (``app.state.writers``, an ``asyncio.Semaphore``
 of :func:`writer_slots`): a request waiting for a database lock holds a thread of the
@@ -52,13 +52,12 @@ from fastapi.datastructures import DefaultPlaceholder
 from fastapi.routing import APIRoute
 from pydantic import BaseModel, TypeAdapter
 from sqlalchemy import Connection, event
-from sqlalchemy.exc import OperationalError
 from sqlalchemy.orm import Session, sessionmaker
 from starlette.concurrency import run_in_threadpool
 
 from db import crud
-from db.batch import ControllerBatch
-from db.session import NO_WAIT_AT_BEGIN, write_session
+from db.batch import IN_A_THREAD, ControllerBatch, OneTransaction, SQLiteBatch
+from db.session import write_engine, write_session
 from db.writers import TURN_AT_BEGIN, WriterTurn, writer_queue
 from server import idempotency
 
@@ -132,7 +131,7 @@ async def get_session(request: Request) -> AsyncIterator[Session]:
     maker = request.app.state.sessionmaker
     writes = request.method not in READ_METHODS
     cid = _controller_id(request) if writes else None
-    batch = _controller_batch(request, cid) if cid is not None else None
+    batch = _batch_of(request, cid) if writes else None
     slots = request.app.state.writers if writes and batch is None else None
     turn = None
     if cid is not None and batch is None and request.app.state.writer_queue is None:  # PG
@@ -195,20 +194,24 @@ def _controller_turn(app: FastAPI, controller_id: int) -> asyncio.Lock:
     return turn
 
 
-def _controller_batch(request: Request, controller_id: int) -> ControllerBatch | None:
-    """PostgreSQL: the batch a :func:`short` writer of ``controller_id`` joins (``db.batch``),
-    or None (SQLite, another route, or a request whose Idempotency-Key is claimed in its own
-    transaction)."""
+def _batch_of(request: Request, controller_id: int | None) -> OneTransaction | None:
+    """The batch a :func:`short` writer joins (``db.batch``: SQLite, the writers of this
+    process; PostgreSQL, those of its controller), or None (another route, or a request whose
+    Idempotency-Key is claimed in its own transaction)."""
     app = request.app
     endpoint = getattr(request.scope.get("route"), "endpoint", None)
-    if (app.state.writer_queue is not None or not getattr(endpoint, "_short", False)
-            or idempotency.has_key(request)):
+    queue = app.state.writer_queue
+    if (not getattr(endpoint, "_short", False) or idempotency.has_key(request)
+            or (queue is None and controller_id is None)):
         return None
-    batches = app.state.controller_batches
-    batch = batches.get(controller_id)
+    key = controller_id if queue is None else None
+    batches = app.state.batches.setdefault(asyncio.get_running_loop(), {})
+    batch = batches.get(key)
     if batch is None:
-        batch = batches[controller_id] = ControllerBatch(
-            app.state.engine, controller_id, _controller_turn(app, controller_id))
+        engine = app.state.engine
+        batch = batches[key] = (
+            ControllerBatch(engine, key, _controller_turn(app, key)) if queue is None  # type: ignore[arg-type]
+            else SQLiteBatch(queue, write_engine(engine)))
     return batch
 
 
@@ -304,24 +307,18 @@ def one_thread(endpoint: Callable[..., Any], route: APIRoute | None = None) -> C
         @functools.wraps(endpoint)
         async def served(*args: Any, **kwargs: Any) -> Any:
             db = next((v for v in kwargs.values() if isinstance(v, Session)), None)
-            if db is not None and BATCH in db.info:  # PostgreSQL: the controller's batch
-                _make_plan(endpoint, db, kwargs)  # on the loop, before the row lock
+            if db is not None and BATCH in db.info:  # a writer: its batch (db.batch)
+                _make_plan(endpoint, db, kwargs)  # on the loop, before the lock
                 batch, maker = db.info.pop(BATCH)
                 job = functools.partial(_in_batch, endpoint, maker, db, args, kwargs)
-                return answer(await batch.run(job), kwargs)
-            if db is None or db.get_bind().dialect.name != "sqlite":
-                return await run_in_threadpool(run, *args, **kwargs)
-            _make_plan(endpoint, db, kwargs)  # on the loop, before the writers' lock
-            turn = _turn(db)
-            if turn is None or turn.held:  # a read, or begun with its turn (Idempotency-Key)
-                return run(*args, **kwargs)
-            del db.info[TURN]  # its batch takes the turn for it
-            result = await turn.queue.batch().run(functools.partial(_begun, locked, db, args,
-                                                                    kwargs))
-            if result is _IN_A_THREAD:
-                db.info[TURN] = turn
-                return await run_in_threadpool(run, *args, **kwargs)
-            return answer(result, kwargs)
+                result = await batch.run(job)
+                if result is IN_A_THREAD:  # SQLite's lock is held outside the queue
+                    return await run_in_threadpool(run, *args, **kwargs)
+                return answer(result, kwargs)
+            sqlite = db is not None and db.get_bind().dialect.name == "sqlite"
+            if sqlite and (_turn(db) is None or _turn(db).held):  # type: ignore[union-attr]
+                return run(*args, **kwargs)  # a read, or a writer begun with its turn
+            return await run_in_threadpool(run, *args, **kwargs)
 
         del served.__wrapped__  # FastAPI would unwrap it and take the sync route for the call
 
@@ -336,13 +333,14 @@ def one_thread(endpoint: Callable[..., Any], route: APIRoute | None = None) -> C
 def short(endpoint: Callable[..., Any] | None = None, *,
           plan: Callable[..., Any] | None = None) -> Any:
     """Mark a sync route whose work is a millisecond or two (a touch-up, the reads of a slot or
-    a controller): on SQLite, :func:`one_thread` runs it on the event loop when it needs no
-    wait (a read, or a writer once its turn came), else in a thread as usual.
+    a controller): :func:`one_thread` runs a short read on the event loop (SQLite), and a
+    short writer in a batch of writers in one transaction (``db.batch``; a writer with an
+    Idempotency-Key runs alone, its key claimed in its own transaction).
 
     A thread cost such a route more than its work: the hop, and with 2 workers a writer in a
     thread held SQLite's write lock 2–2.5 ms for about 1 ms of work, winning the GIL back from
-    the event loop after each database call. PostgreSQL routes keep their threads (their
-    database calls wait on the network).
+    the event loop after each database call. A short writer reads its controller and session
+    with ``db.rows`` and writes with ``db.touch_up``, which know the batch (``db.rows.Locked``).
 
     ``plan`` (a writer's): a function of the route's own arguments run before the writer's
     lock is taken, without the database, for work that can be done ahead (a touch-up's
@@ -368,30 +366,10 @@ def _make_plan(endpoint: Callable[..., Any], db: Session, kwargs: dict[str, Any]
         db.info[PLAN] = plan(**kwargs)
 
 
-_IN_A_THREAD = object()  # _begun's answer when SQLite's lock is held outside the queue
-
-
-def _begun(locked: Callable[..., Any], db: Session, args: tuple, kwargs: dict[str, Any]) -> Any:
-    """A :func:`short` writer in its batch of the writers' queue (``db.writers.WriterBatch``),
-    on the event loop: its transaction begun without waiting, then the route. A writer that
-    does not queue (a job worker, the events dispatcher, the CLI) may hold SQLite's lock: then
-    ``BEGIN IMMEDIATE`` fails at once and the route is sent to a thread (:data:`_IN_A_THREAD`),
-    whose ``BEGIN`` waits there, never on the loop."""
-    no_wait = NO_WAIT_AT_BEGIN.set(True)
-    try:
-        db.connection()  # BEGIN IMMEDIATE, or "database is locked" at once
-    except OperationalError:
-        db.rollback()
-        return _IN_A_THREAD
-    finally:
-        NO_WAIT_AT_BEGIN.reset(no_wait)
-    return locked(*args, **kwargs)
-
-
 def _in_batch(endpoint: Callable[..., Any], maker: sessionmaker, db: Session, args: tuple,
               kwargs: dict[str, Any], conn: Connection) -> Any:
-    """A :func:`short` writer in its controller's batch (``db.batch``, PostgreSQL): the route
-    on a session of the batch's connection, in the batch's transaction, which the batch
+    """A :func:`short` writer in its batch (``db.batch``): the route on a session of the
+    batch's connection, in the batch's transaction, which the batch
     commits (the session commits nothing of it, ``join_transaction_mode="rollback_only"``,
     and rolls nothing back: the batch does)."""
     joined = maker(bind=conn, join_transaction_mode="rollback_only")
@@ -425,7 +403,7 @@ def install(app: FastAPI) -> None:
     app.state.writers = asyncio.Semaphore(writer_slots(app.state.engine.dialect.name))
     app.state.writer_queue = writer_queue(app.state.engine)
     app.state.controller_turns = weakref.WeakValueDictionary()  # PostgreSQL: see get_session
-    app.state.controller_batches = weakref.WeakValueDictionary()  # PostgreSQL: db.batch
+    app.state.batches = weakref.WeakKeyDictionary()  # event loop: {controller id or None: batch}
     maker: sessionmaker = app.state.sessionmaker
     if not event.contains(maker, "after_begin", _lock_at_begin):
         event.listen(maker, "after_begin", _lock_at_begin)

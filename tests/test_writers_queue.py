@@ -1,6 +1,6 @@
 """The SQLite writers' queue (db.writers): turns handed on in order, to threads and to event-loop
 tasks alike, never lost to a cancelled waiter, and batches of the loop's writers run together
-under one turn."""
+under one turn, in one transaction (db.batch.SQLiteBatch)."""
 
 from __future__ import annotations
 
@@ -12,6 +12,8 @@ import threading
 
 import pytest
 
+from db.batch import SQLiteBatch
+from db.session import make_engine, write_engine
 from db.writers import WriterQueue
 
 LOCK_PROBE = ("import fcntl, os, sys\n"
@@ -27,6 +29,14 @@ def other_process_can_lock(path: str) -> bool:
 @pytest.fixture()
 def queue(tmp_path) -> WriterQueue:  # noqa: ANN001
     return WriterQueue(str(tmp_path / "pendant.db.writer.lock"))
+
+
+@pytest.fixture()
+def batch(queue, tmp_path) -> SQLiteBatch:  # noqa: ANN001
+    """The loop's batch of writers on ``queue``, in one transaction of a SQLite file."""
+    engine = make_engine(f"sqlite:///{tmp_path / 'pendant.db'}")
+    yield SQLiteBatch(queue, write_engine(engine))
+    engine.dispose()
 
 
 def test_a_loop_writer_waits_behind_a_thread_and_gets_the_turn_with_the_flock(queue):
@@ -112,12 +122,15 @@ def test_a_cancelled_waiter_does_not_keep_or_lose_the_turn(queue):
     assert other_process_can_lock(queue.path)
 
 
-def test_the_loops_writers_that_wait_run_as_one_batch_in_order(queue):
+def test_the_loops_writers_that_wait_run_as_one_batch_in_order(queue, batch):
     ran: list[str] = []
+    connections: set[int] = set()
 
     def job(name: str, fail: bool = False):  # noqa: ANN202
-        def run() -> str:
+        def run(conn) -> str:  # noqa: ANN001
             assert not other_process_can_lock(queue.path)  # under the turn and its flock
+            assert conn.in_transaction()
+            connections.add(id(conn))
             ran.append(name)
             if fail:
                 raise ValueError(f"{name} refused")
@@ -126,7 +139,6 @@ def test_the_loops_writers_that_wait_run_as_one_batch_in_order(queue):
 
     async def main() -> list:
         queue.acquire()  # a thread holds the turn: the writers gather meanwhile
-        batch = queue.batch()
         futures = [asyncio.ensure_future(batch.run(job(n, fail=n == "b")))
                    for n in ("a", "b", "c")]
         await asyncio.sleep(0.05)
@@ -138,17 +150,17 @@ def test_the_loops_writers_that_wait_run_as_one_batch_in_order(queue):
     assert ran == ["a", "b", "c"]
     assert results[0] == "A" and results[2] == "C"  # one writer's refusal is its own
     assert isinstance(results[1], ValueError) and "b refused" in str(results[1])
+    assert len(connections) == 1  # one transaction for the batch
     assert other_process_can_lock(queue.path)
 
 
-def test_a_writer_whose_client_left_before_its_batch_ran_is_skipped(queue):
+def test_a_writer_whose_client_left_before_its_batch_ran_is_skipped(queue, batch):
     ran: list[str] = []
 
     async def main() -> None:
         queue.acquire()
-        batch = queue.batch()
-        gone = asyncio.ensure_future(batch.run(lambda: ran.append("gone")))
-        stays = asyncio.ensure_future(batch.run(lambda: ran.append("stays")))
+        gone = asyncio.ensure_future(batch.run(lambda _conn: ran.append("gone")))
+        stays = asyncio.ensure_future(batch.run(lambda _conn: ran.append("stays")))
         await asyncio.sleep(0.02)
         gone.cancel()
         queue.release()
@@ -158,7 +170,7 @@ def test_a_writer_whose_client_left_before_its_batch_ran_is_skipped(queue):
     assert ran == ["stays"]
 
 
-def test_a_batched_writer_runs_in_its_own_requests_context(queue):
+def test_a_batched_writer_runs_in_its_own_requests_context(queue, batch):
     """Each writer of a batch sees its own request's context variables (the actor the audit
     records, the request id), not those of whoever started the batch."""
     import contextvars
@@ -167,7 +179,7 @@ def test_a_batched_writer_runs_in_its_own_requests_context(queue):
 
     async def request(name: str) -> str:
         who.set(name)
-        return await queue.batch().run(who.get)
+        return await batch.run(lambda _conn: who.get())
 
     async def main() -> list:
         queue.acquire()
@@ -179,20 +191,19 @@ def test_a_batched_writer_runs_in_its_own_requests_context(queue):
     assert asyncio.run(main()) == ["alice", "bob"]
 
 
-def test_a_batched_writer_whose_job_raises_a_base_exception_is_answered_too(queue):
+def test_a_batched_writer_whose_job_raises_a_base_exception_is_answered_too(batch):
     """A job raising a BaseException (not a request's own error) ends the batch: its writer
     and the writers after it are answered with an error, none waits forever."""
 
     class Boom(BaseException):
         pass
 
-    def boom() -> None:
+    def boom(_conn) -> None:  # noqa: ANN001
         raise Boom()
 
     async def main() -> tuple[bool, bool]:
-        batch = queue.batch()
         first = asyncio.ensure_future(batch.run(boom))
-        second = asyncio.ensure_future(batch.run(lambda: "x"))
+        second = asyncio.ensure_future(batch.run(lambda _conn: "x"))
         await asyncio.wait([first, second], timeout=1)
         return first.done(), second.done()
 
