@@ -373,10 +373,9 @@ def _in_batch(endpoint: Callable[..., Any], maker: sessionmaker, db: Session, ar
     commits (the session commits nothing of it, ``join_transaction_mode="rollback_only"``,
     and rolls nothing back: the batch does)."""
     joined = maker(bind=conn, join_transaction_mode="rollback_only")
-    joined.info.update(db.info)
-    kwargs.update({k: joined for k, v in kwargs.items() if v is db})
+    joined.info.update(db.info)  # db.info itself is kept for a run again (a batch undone)
     try:
-        result = endpoint(*args, **kwargs)
+        result = endpoint(*args, **{k: joined if v is db else v for k, v in kwargs.items()})
         joined.flush()
         return result
     finally:

@@ -108,3 +108,36 @@ def test_concurrent_touch_ups_each_answer_their_own_change(client):
         assert final.headers["ETag"] == answers[k][-1].headers["ETag"]
     clock = ok(client.get(f"{C}/cell/clock"))["clock_s"]
     assert abs(clock - (clock0 + 4 * len(urls) * emulator.TOUCH_UP_S)) < 1e-6
+
+
+def test_a_route_run_again_after_an_undone_batch_gets_a_fresh_session(client):
+    """The routes of a batch (``deps._in_batch``): when a later writer fails after writing,
+    the batch runs again without it, and the earlier writer's route runs again on a session of
+    the new transaction (not the closed one of the undone pass); its write is committed once."""
+    from functools import partial
+
+    from sqlalchemy import text
+
+    from server.deps import _in_batch
+
+    maker, engine = client.app.state.sessionmaker, client.app.state.engine
+    calls: list[str] = []
+
+    def rename(db) -> str:  # noqa: ANN001
+        calls.append("rename")
+        db.execute(text("UPDATE controller SET name = name || '+' WHERE id = 1"))
+        return "renamed"
+
+    def fails_after_writing(db) -> None:  # noqa: ANN001
+        db.execute(text("UPDATE controller SET name = 'lost' WHERE id = 1"))
+        raise RuntimeError("failed after writing")
+
+    name0 = ok(client.get(C))["name"]
+    request_db = maker()
+    jobs = [partial(_in_batch, rename, maker, request_db, (), {"db": request_db}),
+            partial(_in_batch, fails_after_writing, maker, request_db, (), {"db": request_db})]
+    outcomes = in_one_transaction(engine, None, jobs)
+    request_db.close()
+    assert outcomes[0] == (True, "renamed") and outcomes[1][0] is False
+    assert calls == ["rename", "rename"]  # run again in the second pass
+    assert ok(client.get(C))["name"] == name0 + "+"
