@@ -51,28 +51,27 @@ class _Undo(Exception):
     """A writer failed after it wrote: the batch's transaction is rolled back."""
 
 
-def _count_writes(conn: Connection) -> list[int]:
-    """A counter of the statements ``conn`` sends that are not reads."""
-    count = [0]
-
-    def counted(_conn: Any, _cursor: Any, statement: str, *_: Any) -> None:
-        if not statement.lstrip()[:6].upper().startswith("SELECT"):
-            count[0] += 1
-
-    event.listen(conn, "before_cursor_execute", counted)
-    return count
+def _count_write(conn: Connection, _cursor: Any, statement: str, *_: Any) -> None:
+    """``before_cursor_execute`` of every engine (SQLAlchemy 2.0.34 has no events of one
+    ``Connection``): a statement that is not a read, sent in a batch, is counted there."""
+    locked = conn.info.get(rows.LOCKED)
+    if locked is not None and not statement.lstrip()[:6].upper().startswith("SELECT"):
+        locked.written += 1
 
 
-def _written(writes: list[int], locked: rows.Locked) -> int:
+if not event.contains(Engine, "before_cursor_execute", _count_write):
+    event.listen(Engine, "before_cursor_execute", _count_write)
+
+
+def _written(locked: rows.Locked) -> int:
     """How many writes the batch has sent or set aside so far."""
-    return writes[0] + len(locked.pending)
+    return locked.written + len(locked.pending)
 
 
 def _one_pass(engine: Engine, controller_id: int | None,
               jobs: Sequence[Callable[[Connection], Any]], todo: list[int],
               outcomes: list[Outcome | None]) -> None:
     with engine.connect() as conn:
-        writes = _count_writes(conn)
         with conn.begin():  # committed as the block ends, rolled back if it raises
             locked = conn.info[rows.LOCKED] = rows.Locked()
             try:
@@ -82,12 +81,12 @@ def _one_pass(engine: Engine, controller_id: int | None,
                     except NotFound:
                         pass  # each writer says so itself
                 for i in todo:
-                    before = _written(writes, locked)
+                    before = _written(locked)
                     try:
                         outcomes[i] = (True, jobs[i](conn))
                     except Exception as exc:  # the writer's own error (a 4xx, a 500)
                         outcomes[i] = (False, exc)
-                        if _written(writes, locked) != before:
+                        if _written(locked) != before:
                             raise _Undo from exc
                 write_locked(conn, locked)
             finally:

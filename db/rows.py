@@ -94,6 +94,7 @@ class Locked:
         self.versions: dict[int, int] = {}
         self.sessions: dict[int, SessionRow] = {}
         self.pending: list[tuple[Any, Any, dict[str, Any]]] = []
+        self.written = 0  # statements sent that were not reads (db.batch counts them)
 
     def keep(self, c: ControllerRow) -> ControllerRow:
         self.controllers[c.id], self.versions[c.id] = c, c.version
