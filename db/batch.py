@@ -69,8 +69,8 @@ def _written(locked: rows.Locked) -> int:
 
 
 def _one_pass(engine: Engine, controller_id: int | None,
-              jobs: Sequence[Callable[[Connection], Any]], todo: list[int],
-              outcomes: list[Outcome | None]) -> None:
+              jobs: Sequence[Callable[[Connection], Any]], reads: Sequence[Any],
+              todo: list[int], outcomes: list[Outcome | None]) -> None:
     with engine.connect() as conn:
         with conn.begin():  # committed as the block ends, rolled back if it raises
             locked = conn.info[rows.LOCKED] = rows.Locked()
@@ -80,6 +80,7 @@ def _one_pass(engine: Engine, controller_id: int | None,
                         rows.controller(conn, controller_id, lock=True)
                     except NotFound:
                         pass  # each writer says so itself
+                rows.read_sessions(conn, [reads[i] for i in todo] if reads else ())
                 for i in todo:
                     before = _written(locked)
                     try:
@@ -94,10 +95,12 @@ def _one_pass(engine: Engine, controller_id: int | None,
 
 
 def in_one_transaction(engine: Engine, controller_id: int | None,
-                       jobs: Sequence[Callable[[Connection], Any]]) -> list[Outcome]:
+                       jobs: Sequence[Callable[[Connection], Any]],
+                       reads: Sequence[Any] = ()) -> list[Outcome]:
     """Run ``jobs`` (each a function of the connection) one after another in one transaction
-    of ``engine`` (that first locks controller ``controller_id``'s row, if given), and commit:
-    each one's outcome.
+    of ``engine`` (that first locks controller ``controller_id``'s row, if given, then reads
+    the sessions ``reads`` names, one per job or None, in one query), and commit: each one's
+    outcome.
 
     A job that raises after it wrote rolls the transaction back; the others run again in a
     new one (each pass drops one such job, so this ends). An error of the commit itself
@@ -106,7 +109,7 @@ def in_one_transaction(engine: Engine, controller_id: int | None,
     while True:
         todo = [i for i, o in enumerate(outcomes) if o is None or o[0]]
         try:
-            _one_pass(engine, controller_id, jobs, todo, outcomes)
+            _one_pass(engine, controller_id, jobs, reads, todo, outcomes)
         except _Undo:
             continue
         return outcomes  # type: ignore[return-value]
@@ -116,14 +119,16 @@ class OneTransaction(Batch):
     """A :class:`db.writers.Batch` whose writers (functions of the connection) run in one
     transaction (:func:`in_one_transaction`); :meth:`_outcomes` says where."""
 
-    async def _outcomes(self, jobs: list[Callable[[Connection], Any]]) -> list[Outcome]:
+    async def _outcomes(self, jobs: list[Callable[[Connection], Any]],
+                        reads: list[Any]) -> list[Outcome]:
         raise NotImplementedError
 
     async def _run(self, jobs: deque[tuple[Callable[..., Any], asyncio.Future]]) -> None:
         live = [(job, future) for job, future in jobs if not future.done()]
         jobs.clear()
         try:
-            outcomes = await self._outcomes([job for job, _ in live])
+            outcomes = await self._outcomes([job for job, _ in live],
+                                            [getattr(job, "reads", None) for job, _ in live])
         except BaseException as exc:
             for _, future in live:
                 if not future.done():
@@ -156,10 +161,11 @@ class ControllerBatch(OneTransaction):
     def _give(self) -> None:
         self.turn.release()
 
-    async def _outcomes(self, jobs: list[Callable[[Connection], Any]]) -> list[Outcome]:
+    async def _outcomes(self, jobs: list[Callable[[Connection], Any]],
+                        reads: list[Any]) -> list[Outcome]:
         # the thread is waited for even if this task is cancelled (anyio's default)
         return await anyio.to_thread.run_sync(in_one_transaction, self.engine,
-                                              self.controller_id, jobs)
+                                              self.controller_id, jobs, reads)
 
 
 IN_A_THREAD = object()  # a SQLiteBatch writer's result when SQLite's lock is held elsewhere
@@ -186,10 +192,11 @@ class SQLiteBatch(OneTransaction):
     def _give(self) -> None:
         self.queue.release()
 
-    async def _outcomes(self, jobs: list[Callable[[Connection], Any]]) -> list[Outcome]:
+    async def _outcomes(self, jobs: list[Callable[[Connection], Any]],
+                        reads: list[Any]) -> list[Outcome]:
         no_wait = NO_WAIT_AT_BEGIN.set(True)
         try:
-            return in_one_transaction(self.engine, None, jobs)
+            return in_one_transaction(self.engine, None, jobs, reads)
         except OperationalError as exc:
             if "locked" not in str(exc.orig):
                 raise

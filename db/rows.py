@@ -36,6 +36,10 @@ SESSION_POINTS = select(*(c.label(f"s_{c.name}") for c in S.c),
                         *(c.label(f"p_{c.name}") for c in P.c)) \
     .select_from(S.outerjoin(P, P.c.session_id == S.c.id)) \
     .where(S.c.id == bindparam("b_id")).order_by(P.c.step)
+SESSIONS_POINTS = select(*(c.label(f"s_{c.name}") for c in S.c),
+                         *(c.label(f"p_{c.name}") for c in P.c)) \
+    .select_from(S.outerjoin(P, P.c.session_id == S.c.id)) \
+    .where(S.c.id.in_(bindparam("b_ids", expanding=True))).order_by(S.c.id, P.c.step)
 S_KEYS = tuple((f"s_{c.name}", c.name) for c in S.c)
 P_KEYS = tuple((f"p_{c.name}", c.name) for c in P.c)
 ENTRY = select(E).where(E.c.controller_id == bindparam("b_cid"),
@@ -142,13 +146,35 @@ def session(conn: Connection, controller_id: int, session_id: int) -> SessionRow
     found = [] if rid is None else conn.execute(SESSION_POINTS, {"b_id": rid}).all()
     if not found or found[0].s_controller_id != controller_id:
         raise NotFound(("session_id",), f"no session {session_id} on controller {controller_id}")
-    first = found[0]._mapping
-    s = SessionRow({name: first[label] for label, name in S_KEYS})
-    s.points = [PointRow({name: m[label] for label, name in P_KEYS})
-                for m in (r._mapping for r in found) if m["p_id"] is not None]
+    (s,) = _sessions_of(found)
     if locked is not None:
         locked.sessions[s.id] = s
     return s
+
+
+def _sessions_of(found: Any) -> list[SessionRow]:
+    """Sessions with their points from rows of :data:`SESSION_POINTS` (ordered by session)."""
+    out: list[SessionRow] = []
+    for r in found:
+        m = r._mapping
+        if not out or out[-1].id != m["s_id"]:
+            out.append(SessionRow({name: m[label] for label, name in S_KEYS}))
+            out[-1].points = []
+        if m["p_id"] is not None:
+            out[-1].points.append(PointRow({name: m[label] for label, name in P_KEYS}))
+    return out
+
+
+def read_sessions(conn: Connection, session_ids: Any) -> None:
+    """In a batch (:class:`Locked`): read the sessions its writers will read, in one query,
+    into ``Locked.sessions`` (each writer then reads its own as a copy, :func:`session`).
+    Ids out of range or of no session are left for the writers to refuse."""
+    locked = conn.info[LOCKED]
+    rids = {r for r in (row_id(i, conn) for i in session_ids if i is not None)
+            if r is not None and r not in locked.sessions}
+    if rids:
+        for s in _sessions_of(conn.execute(SESSIONS_POINTS, {"b_ids": sorted(rids)})):
+            locked.sessions[s.id] = s
 
 
 def entry(conn: Connection, controller_id: int, table: str, number: int) -> EntryRow:

@@ -163,12 +163,15 @@ class Batch:
         self._jobs: deque[tuple[Callable[..., Any], asyncio.Future]] = deque()
         self._leader: asyncio.Task | None = None
 
-    async def run(self, job: Callable[..., Any]) -> Any:
+    async def run(self, job: Callable[..., Any], reads: Any = None) -> Any:
         """``job`` in the next batch, with the turn; its result. It runs in the caller's
-        context (its context variables: the request's actor for the audit)."""
+        context (its context variables: the request's actor for the audit). ``reads``: what
+        it will read, for a batch that reads ahead (``db.batch``: its session's id)."""
         loop = asyncio.get_running_loop()
         future = loop.create_future()
-        self._jobs.append((functools.partial(contextvars.copy_context().run, job), future))
+        call = functools.partial(contextvars.copy_context().run, job)
+        call.reads = reads  # type: ignore[attr-defined]
+        self._jobs.append((call, future))
         if self._leader is None:
             # its own context, not the first writer's (each job runs in its writer's context)
             self._leader = loop.create_task(self._lead(), context=contextvars.Context())

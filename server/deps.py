@@ -311,7 +311,7 @@ def one_thread(endpoint: Callable[..., Any], route: APIRoute | None = None) -> C
                 _make_plan(endpoint, db, kwargs)  # on the loop, before the lock
                 batch, maker = db.info.pop(BATCH)
                 job = functools.partial(_in_batch, endpoint, maker, db, args, kwargs)
-                result = await batch.run(job)
+                result = await batch.run(job, reads=kwargs.get("session_id"))
                 if result is IN_A_THREAD:  # SQLite's lock is held outside the queue
                     return await run_in_threadpool(run, *args, **kwargs)
                 return answer(result, kwargs)

@@ -141,3 +141,30 @@ def test_a_route_run_again_after_an_undone_batch_gets_a_fresh_session(client):
     assert outcomes[0] == (True, "renamed") and outcomes[1][0] is False
     assert calls == ["rename", "rename"]  # run again in the second pass
     assert ok(client.get(C))["name"] == name0 + "+"
+
+
+def test_a_batch_reads_its_writers_sessions_in_one_query(client):
+    """With the writers' sessions named (``reads``: what ``deps`` passes, the path's
+    session_id), the batch reads the controller and all the sessions in two queries, however
+    many writers it has; a writer naming a session that is not its controller's is refused."""
+    from sqlalchemy import event
+
+    engine = client.app.state.engine
+    sids = [_session_id(client) for _ in range(4)]
+    selects: list[str] = []
+
+    def seen(_conn, _cursor, statement, *_):  # noqa: ANN001, ANN202
+        if statement.lstrip().upper().startswith("SELECT"):
+            selects.append(statement)
+
+    event.listen(engine, "before_cursor_execute", seen)
+    try:
+        outcomes = in_one_transaction(engine, 1, [_teach(sid, 0) for sid in sids] +
+                                      [_teach(10**6, 0)], reads=[*sids, 10**6])
+    finally:
+        event.remove(engine, "before_cursor_execute", seen)
+    assert [ok_ for ok_, _ in outcomes] == [True] * 4 + [False]
+    assert "no session" in str(outcomes[4][1])
+    assert len(selects) == 3  # the controller, the four sessions, the unknown one's own try
+    assert [_state(client, sid)[:2] for sid in sids] == [(outcomes[k][1]()[0], [0])
+                                                         for k in range(4)]
