@@ -301,3 +301,35 @@ def test_no_auth_demo_mode_acts_as_administrator(db_url):
     with make_client(db_url, token=None, auth=False) as c:
         assert ok(c.put(f"{C}/tools/1", json={"name": "demo"}, headers={"If-Match": "*"}))["name"] == "demo"
         assert audit(c)[-1]["user"] == "no-auth"
+
+
+def test_requests_that_carry_an_expired_cache_entry_share_one_verification(client,
+                                                                           monkeypatch):
+    """When a token's cache entry runs out, the requests carrying it at that moment wait for
+    one lookup of the token (not a thread and three queries each); a bad token is refused to
+    every one of them."""
+    import threading
+
+    from server.auth import tokens
+
+    calls: list[str] = []
+    verify = tokens.verified_actor
+
+    def slow_verify(db_factory, digest):  # noqa: ANN001, ANN202
+        calls.append(digest)
+        time.sleep(0.3)  # the other requests arrive meanwhile
+        return verify(db_factory, digest)
+
+    monkeypatch.setattr(tokens, "verified_actor", slow_verify)
+    for headers, status in (({}, 200), ({"Authorization": "Bearer pdt_not-a-token"}, 401)):
+        tokens.CACHE.clear()
+        calls.clear()
+        codes: list[int] = []
+        threads = [threading.Thread(target=lambda: codes.append(
+            client.get(f"{C}/tools/1", headers=headers).status_code)) for _ in range(6)]
+        for t in threads:
+            t.start()
+        for t in threads:
+            t.join(30)
+        assert codes == [status] * 6
+        assert len(calls) == 1, calls
