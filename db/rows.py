@@ -31,15 +31,13 @@ POSE_COLUMNS = ("x_mm", "y_mm", "z_mm", "a_deg", "b_deg", "c_deg")
 CONTROLLER = select(C).where(C.c.id == bindparam("b_id"))
 CONTROLLERS = select(C).order_by(C.c.id)
 CONTROLLER_LOCKED = CONTROLLER.with_for_update()  # PostgreSQL's row lock; SQLite ignores it
-# a session and its points in one statement: one row per point (one with NULLs for none)
-SESSION_POINTS = select(*(c.label(f"s_{c.name}") for c in S.c),
-                        *(c.label(f"p_{c.name}") for c in P.c)) \
-    .select_from(S.outerjoin(P, P.c.session_id == S.c.id)) \
-    .where(S.c.id == bindparam("b_id")).order_by(P.c.step)
-SESSIONS_POINTS = select(*(c.label(f"s_{c.name}") for c in S.c),
-                         *(c.label(f"p_{c.name}") for c in P.c)) \
-    .select_from(S.outerjoin(P, P.c.session_id == S.c.id)) \
-    .where(S.c.id.in_(bindparam("b_ids", expanding=True))).order_by(S.c.id, P.c.step)
+# sessions and their points in one statement: one row per point (one with NULLs for none)
+_SESSIONS_AND_POINTS = select(*(c.label(f"s_{c.name}") for c in S.c),
+                              *(c.label(f"p_{c.name}") for c in P.c)) \
+    .select_from(S.outerjoin(P, P.c.session_id == S.c.id))
+SESSION_POINTS = _SESSIONS_AND_POINTS.where(S.c.id == bindparam("b_id")).order_by(P.c.step)
+SESSIONS_POINTS = _SESSIONS_AND_POINTS.where(S.c.id.in_(bindparam("b_ids", expanding=True))) \
+    .order_by(S.c.id, P.c.step)
 S_KEYS = tuple((f"s_{c.name}", c.name) for c in S.c)
 P_KEYS = tuple((f"p_{c.name}", c.name) for c in P.c)
 ENTRY = select(E).where(E.c.controller_id == bindparam("b_cid"),
@@ -88,7 +86,7 @@ class Locked:
       (``versions``: each one's version as read);
     - ``sessions``: each session as the batch's last writer of it left it (a later writer
       of the same session reads a copy, so each writer's answer shows its own change);
-    - ``pending``: the writes of its writers, ``(table, statement, params)`` in order, sent
+    - ``pending``: the writes of its writers, ``(statement, params)`` in order, sent
       together before the commit (``db.touch_up.write_locked``: one round trip per run of
       one statement).
     """
@@ -97,7 +95,7 @@ class Locked:
         self.controllers: dict[int, ControllerRow] = {}
         self.versions: dict[int, int] = {}
         self.sessions: dict[int, SessionRow] = {}
-        self.pending: list[tuple[Any, Any, dict[str, Any]]] = []
+        self.pending: list[tuple[Any, dict[str, Any]]] = []
         self.written = 0  # statements sent that were not reads (db.batch counts them)
 
     def keep(self, c: ControllerRow) -> ControllerRow:

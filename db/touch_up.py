@@ -51,7 +51,7 @@ def _write(conn: Connection, stmt: Any, params: dict[str, Any], what: str) -> No
     counter). In a batch (``db.rows.Locked``) it is sent with the batch's writes."""
     locked = conn.info.get(LOCKED)
     if locked is not None:
-        locked.pending.append((stmt.table, stmt, params))
+        locked.pending.append((stmt, params))
     elif conn.execute(stmt, params).rowcount != 1:
         raise StateConflict(("path",), f"{what} changed while this request ran; try again")
 
@@ -124,8 +124,8 @@ def write_locked(conn: Connection, locked: Locked) -> None:
     controllers as its writers left them (``UPDATE`` at the version each was read at, to the
     version they bumped it to)."""
     tables: dict[Any, list[tuple[Any, dict[str, Any]]]] = {}
-    for table, stmt, params in locked.pending:
-        tables.setdefault(table, []).append((stmt, params))
+    for stmt, params in locked.pending:
+        tables.setdefault(stmt.table, []).append((stmt, params))
     locked.pending = []
     for writes in tables.values():
         for _, run in itertools.groupby(writes, key=lambda w: id(w[0])):

@@ -65,7 +65,7 @@ READ_METHODS = ("GET", "HEAD", "OPTIONS")
 LOCK_ON_BEGIN = "pendant_lock_controller"  # Session.info: the controller to lock at BEGIN
 TURN = "pendant_writer_turn"  # Session.info: the request's db.session.WriterTurn (SQLite)
 PLAN = "pendant_plan"  # Session.info: what a short route's plan returned (see short)
-BATCH = "pendant_batch"  # Session.info: (db.batch.ControllerBatch, sessionmaker) of a PG writer
+BATCH = "pendant_batch"  # Session.info: (its db.batch batch, sessionmaker) of a short writer
 WRITER_SLOTS = {"sqlite": 4}  # threads of one process waiting in SQLite's writer queue; PG: 8
 
 
@@ -316,7 +316,8 @@ def one_thread(endpoint: Callable[..., Any], route: APIRoute | None = None) -> C
                     return await run_in_threadpool(run, *args, **kwargs)
                 return answer(result, kwargs)
             sqlite = db is not None and db.get_bind().dialect.name == "sqlite"
-            if sqlite and (_turn(db) is None or _turn(db).held):  # type: ignore[union-attr]
+            turn = _turn(db) if sqlite else None  # type: ignore[arg-type]
+            if sqlite and (turn is None or turn.held):
                 return run(*args, **kwargs)  # a read, or a writer begun with its turn
             return await run_in_threadpool(run, *args, **kwargs)
 
