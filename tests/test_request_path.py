@@ -42,7 +42,11 @@ def test_a_request_takes_one_worker_thread(client, monkeypatch):
     without a second hop between the event loop and the threadpool; a short route
     (``deps.short``: a touch-up, the reads of a slot, a controller, a session) takes none on
     SQLite when it need not wait."""
-    monkeypatch.setattr(tokens.CACHE, "ttl_s", 600.0)  # a slow machine takes over 1 s here
+    # a slow machine takes over 1 s here, so the token is trusted for 10 minutes from its next
+    # verification, made now: the cache is the process's, and an entry put by an earlier test
+    # (the same Administrator token) would still run out after its 1 s, mid-test
+    monkeypatch.setattr(tokens.CACHE, "ttl_s", 600.0)
+    tokens.CACHE.clear()
     url = open_session(client, "tool.xyz_4point", 1)
     ok(client.post(f"{url}/touch-up", json={"step": 0}))  # the token is now verified
     hops = count_hops(monkeypatch)
