@@ -12,11 +12,13 @@ touch-up) run as a batch:
 - :class:`ControllerBatch`: PostgreSQL, the writers of one controller, in one thread, in one
   transaction that locks the controller's row first.
 
-In the batch's transaction each controller is read once (``db.rows.Locked``); its writers read
-it from there and change it in place, and it is written once, before the commit
-(``db.touch_up.write_locked``). Each writer's own rows (its session, its point) are set aside
-as it runs and sent together before the commit, a run of one statement as one
-``executemany`` (one round trip on PostgreSQL: psycopg pipelines it).
+In the batch's transaction the controller and its writers' sessions are read first, in one
+round trip on PostgreSQL (``db.rows.read_locked``; the points of a session the process holds
+at its current version are not read again: ``db.rows.SessionCache``). Its writers read them
+from there (``db.rows.Locked``) and change them in place. Each writer's own rows (its
+session, its point) are set aside as it runs; they and the controller, written once, go
+together before the commit, in one round trip on PostgreSQL (``db.touch_up.write_locked``,
+``db.pipeline``).
 
 A writer that fails without having written (a 4xx: a wrong step, a stale ``If-Match``) leaves
 the transaction as it was: the batch goes on. One that fails after a write rolls the whole
@@ -39,7 +41,6 @@ from sqlalchemy import Connection, Engine, event
 from sqlalchemy.exc import OperationalError
 
 from db import rows
-from db.crud import NotFound
 from db.session import NO_WAIT_AT_BEGIN
 from db.touch_up import write_locked
 from db.writers import Batch, WriterQueue
@@ -72,15 +73,11 @@ def _one_pass(engine: Engine, controller_id: int | None,
               jobs: Sequence[Callable[[Connection], Any]], reads: Sequence[Any],
               todo: list[int], outcomes: list[Outcome | None]) -> None:
     with engine.connect() as conn:
+        locked = rows.Locked()
         with conn.begin():  # committed as the block ends, rolled back if it raises
-            locked = conn.info[rows.LOCKED] = rows.Locked()
+            conn.info[rows.LOCKED] = locked
             try:
-                if controller_id is not None:
-                    try:
-                        rows.controller(conn, controller_id, lock=True)
-                    except NotFound:
-                        pass  # each writer says so itself
-                rows.read_sessions(conn, [reads[i] for i in todo] if reads else ())
+                rows.read_locked(conn, controller_id, [reads[i] for i in todo] if reads else ())
                 for i in todo:
                     before = _written(locked)
                     try:
@@ -92,6 +89,7 @@ def _one_pass(engine: Engine, controller_id: int | None,
                 write_locked(conn, locked)
             finally:
                 conn.info.pop(rows.LOCKED, None)
+        rows.session_cache(conn).put(locked.sessions.values())  # as committed
 
 
 def in_one_transaction(engine: Engine, controller_id: int | None,

@@ -24,6 +24,7 @@ from typing import Any
 
 from sqlalchemy import Connection, bindparam
 
+from db import pipeline
 from db.crud import StateConflict, require_open
 from db.models import utcnow
 from db.rows import (LOCKED, POSE_COLUMNS, RESULT_COLUMNS, C, P, S, ControllerRow, Locked,
@@ -118,27 +119,40 @@ def store_state(conn: Connection, c: ControllerRow, state: Any) -> None:
     c.__dict__.update(values)
 
 
-def write_locked(conn: Connection, locked: Locked) -> None:
-    """Send a batch's writes (``db.rows.Locked``): each table's in their order, a run of one
-    statement as one ``executemany`` (psycopg pipelines it: one round trip), then the
-    controllers as its writers left them (``UPDATE`` at the version each was read at, to the
-    version they bumped it to)."""
+def _runs(locked: Locked) -> list[tuple[Any, list[dict[str, Any]]]]:
+    """A batch's writes as runs of one statement: each table's in their order, then the
+    controllers as its writers left them (at the version each was read at, to the version
+    they bumped it to)."""
     tables: dict[Any, list[tuple[Any, dict[str, Any]]]] = {}
     for stmt, params in locked.pending:
         tables.setdefault(stmt.table, []).append((stmt, params))
-    locked.pending = []
+    runs = []
     for writes in tables.values():
         for _, run in itertools.groupby(writes, key=lambda w: id(w[0])):
             stmts, params = zip(*run)
-            if conn.execute(stmts[0], list(params)).rowcount != len(params):
-                raise StateConflict(("path",), f"{stmts[0].table.name} rows changed while "
-                                    "this request ran; try again")
+            runs.append((stmts[0], list(params)))
     for cid, c in locked.controllers.items():
-        if c.version == locked.versions[cid]:
-            continue
-        params = {"b_id": cid, "b_v": locked.versions[cid], "b_nv": c.version,
-                  **{f"b_{k}": getattr(c, k) for k in STATE_VALUES}}
-        if conn.execute(STORE_STATE, params).rowcount != 1:
-            raise StateConflict(("path",), f"controller {cid} changed while this request ran; "
-                                "try again")
+        if c.version != locked.versions[cid]:
+            runs.append((STORE_STATE, [{"b_id": cid, "b_v": locked.versions[cid],
+                                        "b_nv": c.version,
+                                        **{f"b_{k}": getattr(c, k) for k in STATE_VALUES}}]))
+    return runs
+
+
+def write_locked(conn: Connection, locked: Locked) -> None:
+    """Send a batch's writes (``db.rows.Locked``, :func:`_runs`): on PostgreSQL in one round
+    trip (``db.pipeline``), else a run of one statement as one ``executemany``; each run's
+    rowcount is checked (409 if a row changed under the batch: under its lock that cannot
+    happen, as with the ORM's version counter)."""
+    runs = _runs(locked)
+    locked.pending = []
+    if pipeline.supported(conn):
+        counts = pipeline.write(conn, runs)
+    else:
+        counts = [conn.execute(stmt, params).rowcount for stmt, params in runs]
+    for (stmt, params), n in zip(runs, counts):
+        if n != len(params):
+            raise StateConflict(("path",), f"{stmt.table.name} rows changed while this "
+                                "request ran; try again")
+    for cid, c in locked.controllers.items():
         locked.versions[cid] = c.version

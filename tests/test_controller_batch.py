@@ -11,7 +11,7 @@ import threading
 
 import emulator
 from api_helpers import *  # noqa: F403
-from api_helpers import C, ok, open_session
+from api_helpers import C, make_client, ok, open_session
 from db import rows
 from db import touch_up as touch
 from db.batch import in_one_transaction
@@ -143,15 +143,22 @@ def test_a_route_run_again_after_an_undone_batch_gets_a_fresh_session(client):
     assert ok(client.get(C))["name"] == name0 + "+"
 
 
-def test_a_batch_reads_its_writers_sessions_in_one_query(client):
+def test_a_batch_reads_its_writers_sessions_in_one_query(client, monkeypatch):
     """With the writers' sessions named (``reads``: what ``deps`` passes, the path's
     session_id), the batch reads the controller and all the sessions in two queries, however
-    many writers it has; a writer naming a session that is not its controller's is refused."""
+    many writers it has (PostgreSQL: in one round trip, ``db.pipeline``); a writer naming a
+    session that is not its controller's is refused."""
     from sqlalchemy import event
+
+    from db import pipeline
 
     engine = client.app.state.engine
     sids = [_session_id(client) for _ in range(4)]
     selects: list[str] = []
+    piped: list[int] = []  # selects sent together through db.pipeline (one round trip)
+    read = pipeline.read
+    monkeypatch.setattr(pipeline, "read", lambda conn, sent: piped.append(len(sent)) or
+                        read(conn, sent))
 
     def seen(_conn, _cursor, statement, *_):  # noqa: ANN001, ANN202
         if statement.lstrip().upper().startswith("SELECT"):
@@ -165,6 +172,66 @@ def test_a_batch_reads_its_writers_sessions_in_one_query(client):
         event.remove(engine, "before_cursor_execute", seen)
     assert [ok_ for ok_, _ in outcomes] == [True] * 4 + [False]
     assert "no session" in str(outcomes[4][1])
-    assert len(selects) == 3  # the controller, the four sessions, the unknown one's own try
+    # the controller, the four sessions (together on PostgreSQL), the unknown one's own try
+    if engine.dialect.name == "postgresql":
+        assert piped == [2] and len(selects) == 1
+    else:
+        assert piped == [] and len(selects) == 3
     assert [_state(client, sid)[:2] for sid in sids] == [(outcomes[k][1]()[0], [0])
                                                          for k in range(4)]
+
+
+
+def _batch_steps(engine, session_id: int, step: int) -> list[int]:  # noqa: ANN001
+    """Teach ``step`` of ``session_id`` in a batch of ``engine`` (its process's session cache):
+    the steps the writer saw filled after its touch-up."""
+    ((ok_, result),) = in_one_transaction(engine, 1, [_teach(session_id, step)],
+                                          reads=[session_id])
+    assert ok_, result
+    return result()[1]
+
+
+def _cached_version(engine, session_id: int) -> int | None:  # noqa: ANN001
+    with engine.connect() as conn:
+        return rows.session_cache(conn).version_of(session_id)
+
+
+def test_a_session_changed_by_another_process_is_read_again(client, db_url):
+    """A batch keeps the sessions it committed (``db.rows.SessionCache``, one per database
+    pool) and does not read their points again while their version is the one it left; a
+    change by another process (here another app's engine and pool on the same database)
+    bumps the version, and the next batch here reads the session again."""
+    here = client.app.state.engine
+    sid = _session_id(client)
+    assert _batch_steps(here, sid, 0) == [0]
+    cached = _cached_version(here, sid)
+    assert cached == _state(client, sid)[0]  # kept as committed
+    with make_client(db_url) as other:  # another worker
+        assert _batch_steps(other.app.state.engine, sid, 1) == [0, 1]
+        ok(other.post(f"{C}/sessions/{sid}/touch-up", json={"step": 2}))
+    assert _batch_steps(here, sid, 3) == [0, 1, 2, 3]  # not the [0, 3] of a stale copy
+    assert _batch_steps(here, sid, 0) == [0, 1, 2, 3]  # a hit: its own change, kept
+    assert _state(client, sid)[:2] == (cached + 4, [0, 1, 2, 3])
+
+
+def test_a_new_session_with_an_old_sessions_id_and_version_is_not_taken_for_it(client,
+                                                                                db_url):
+    """SQLite gives the id of a deleted last row again: a session made then, by another
+    process, can reach the version this process's cache holds for the old one. Its
+    ``created_at`` tells them apart, and its own points are read."""
+    from sqlalchemy import text
+
+    engine = client.app.state.engine
+    if engine.dialect.name != "sqlite":
+        return  # PostgreSQL's sequences never give an id again
+    sid = _session_id(client)
+    assert _batch_steps(engine, sid, 0) == [0]
+    old = _cached_version(engine, sid)
+    with engine.begin() as conn:  # deleted behind the service's back (a restore, an admin)
+        conn.execute(text("DELETE FROM taught_point WHERE session_id = :s"), {"s": sid})
+        conn.execute(text("DELETE FROM calib_session WHERE id = :s"), {"s": sid})
+    with make_client(db_url) as other:  # another worker makes and teaches a new one
+        assert _session_id(other) == sid  # the same id again
+        ok(other.post(f"{C}/sessions/{sid}/touch-up", json={"step": 1}))
+    assert _state(client, sid)[0] == old == _cached_version(engine, sid)  # same id, version
+    assert _batch_steps(engine, sid, 2) == [1, 2]  # not the old session's [0, 2]
