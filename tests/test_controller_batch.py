@@ -235,3 +235,47 @@ def test_a_new_session_with_an_old_sessions_id_and_version_is_not_taken_for_it(c
         ok(other.post(f"{C}/sessions/{sid}/touch-up", json={"step": 1}))
     assert _state(client, sid)[0] == old == _cached_version(engine, sid)  # same id, version
     assert _batch_steps(engine, sid, 2) == [1, 2]  # not the old session's [0, 2]
+
+
+def test_re_teaches_of_a_batch_are_written_as_the_one_row_statements_write_them(client,
+                                                                                monkeypatch):
+    """Re-teaches of several sessions in one batch, one session twice (their writes set
+    aside and sent together: one round trip on PostgreSQL, ``db.pipeline``): each point
+    holds its own joints, pose and time, each session's version went up once per touch-up."""
+    from db import pipeline
+    from db.models import TaughtPoint
+
+    engine = client.app.state.engine
+    sids = [_session_id(client) for _ in range(3)]
+    in_one_transaction(engine, 1, [_teach(sid, 0) for sid in sids], reads=sids)
+    before = {sid: _state(client, sid)[0] for sid in sids}
+    sent: list[tuple] = []
+    write = pipeline.write
+    monkeypatch.setattr(pipeline, "write", lambda conn, runs: sent.append(tuple(
+        (stmt, len(params)) for stmt, params in runs)) or write(conn, runs))
+
+    def reteach(sid: int, q0: float):  # noqa: ANN202
+        def job(conn):  # noqa: ANN001, ANN202
+            c = rows.controller(conn, 1, lock=True)
+            s = rows.session(conn, 1, sid)
+            touch.put_point(conn, s, 0, "joints", (q0, 1.0, 2.0, 3.0, 4.0, 5.0),
+                            [q0, 0.0, 0.0, 0.0, 0.0, 0.0], t_s=q0)
+            touch.store_state(conn, c, emulator.touched_up(state_of(c)))
+        return job
+
+    jobs = [reteach(sids[0], 10.0), reteach(sids[1], 11.0), reteach(sids[2], 12.0),
+            reteach(sids[0], 13.0)]
+    assert all(ok_ for ok_, _ in in_one_transaction(engine, 1, jobs, reads=[*sids, sids[0]]))
+    with client.app.state.sessionmaker() as db:
+        got = {sid: db.query(TaughtPoint).filter_by(session_id=sid, step=0).one()
+               for sid in sids}
+        for sid, q0 in zip(sids, (13.0, 11.0, 12.0)):
+            p = got[sid]
+            assert (p.joints_deg, p.x_mm, p.c_deg, p.t_s, p.motion_sign) == \
+                ([q0, 0.0, 0.0, 0.0, 0.0, 0.0], q0, 5.0, q0, None)
+    assert [_state(client, sid)[0] - before[sid] for sid in sids] == [2, 1, 1]
+    if engine.dialect.name == "postgresql":  # the points, the sessions, the controller
+        assert sent == [((touch.UPDATE_POINT, 4), (touch.BUMP_SESSION, 4),
+                         (touch.STORE_STATE, 1))]
+    else:
+        assert sent == []
