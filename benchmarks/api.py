@@ -20,6 +20,11 @@ touch-up phase again at the best worker count. The last line is
 PostgreSQL, or n/a> read_rps=<the slower of the two reads, at its best worker count>``.
 
     python benchmarks/api.py [--workers 1,2] [--connections 20] [--seconds 10] [--no-pg]
+                             [--pg-delay-ms 0]
+
+``--pg-delay-ms D`` puts ``benchmarks/delay_proxy.py`` between the service and PostgreSQL,
+holding every chunk D ms each way: a database on another host, where each round trip a
+batch makes under the controller's row lock costs 2 D.
 
 Needs ``wrk`` (``apt-get install wrk``) and, for pg_rps, ``postgresql`` and psycopg.
 """
@@ -211,10 +216,27 @@ def run_service(db_url: str, workers: int, args: argparse.Namespace, phases: tup
         stop(proc)
 
 
-def pg_url_from_env() -> str:
+def pg_url_from_env(port: str | None = None) -> str:
     e = os.environ
     return (f"postgresql+psycopg://{e['PGUSER']}:{e.get('PGPASSWORD', '')}@{e['PGHOST']}:"
-            f"{e['PGPORT']}/{e['PGDATABASE']}")
+            f"{port or e['PGPORT']}/{e['PGDATABASE']}")
+
+
+def delayed_pg(delay_ms: float) -> tuple[str, subprocess.Popen | None]:
+    """The pg_virtualenv cluster's URL, behind ``benchmarks/delay_proxy.py`` holding each
+    chunk ``delay_ms`` each way when it is > 0 (PostgreSQL on another host), and the proxy."""
+    if delay_ms <= 0:
+        return pg_url_from_env(), None
+    port = free_port()
+    proxy = subprocess.Popen([sys.executable, str(ROOT / "benchmarks" / "delay_proxy.py"),
+                              str(port), os.environ["PGHOST"], os.environ["PGPORT"],
+                              str(delay_ms)])
+    for _ in range(100):  # listening?
+        with socket.socket() as s:
+            if s.connect_ex(("127.0.0.1", port)) == 0:
+                break
+        time.sleep(0.05)
+    return pg_url_from_env(str(port)), proxy
 
 
 def pg_touch_rps(workers: int, args: argparse.Namespace) -> str:
@@ -225,7 +247,8 @@ def pg_touch_rps(workers: int, args: argparse.Namespace) -> str:
         print("pg_rps: pg_virtualenv not found (apt-get install postgresql)", file=sys.stderr)
         return "n/a"
     cmd = ["pg_virtualenv", "-t", sys.executable, __file__, "--pg-inner", "--workers", str(workers),
-           "--connections", str(args.connections), "--seconds", str(args.seconds)]
+           "--connections", str(args.connections), "--seconds", str(args.seconds),
+           "--pg-delay-ms", str(args.pg_delay_ms)]
     r = subprocess.run(cmd, capture_output=True, text=True, cwd=ROOT)
     m = re.search(r"^pg_inner_rps=([\d.]+)", r.stdout, re.M)
     if r.returncode != 0 or m is None:
@@ -252,6 +275,9 @@ def main() -> int:
     ap.add_argument("--connections", type=int, default=20)
     ap.add_argument("--seconds", type=float, default=10.0, help="per phase")
     ap.add_argument("--no-pg", action="store_true", help="skip the PostgreSQL run")
+    ap.add_argument("--pg-delay-ms", type=float, default=0.0,
+                    help="PostgreSQL behind a proxy holding each chunk this long each way "
+                         "(benchmarks/delay_proxy.py: a database on another host)")
     ap.add_argument("--pg-inner", action="store_true", help=argparse.SUPPRESS)
     args = ap.parse_args()
     if shutil.which("wrk") is None:
@@ -264,9 +290,16 @@ def main() -> int:
     with tempfile.TemporaryDirectory() as tmp_s:
         tmp = Path(tmp_s)
         if args.pg_inner:
-            rows = run_service(pg_url_from_env(), counts[0], args, ("touch-up",), joints, tmp)
-            show(f"PostgreSQL, uvicorn --workers {counts[0]}, {args.connections} connections",
-                 rows)
+            url, proxy = delayed_pg(args.pg_delay_ms)
+            try:
+                rows = run_service(url, counts[0], args, ("touch-up",), joints, tmp)
+            finally:
+                if proxy is not None:
+                    proxy.kill()
+                    proxy.wait()
+            delay = f", {args.pg_delay_ms:g} ms each way" if args.pg_delay_ms > 0 else ""
+            show(f"PostgreSQL{delay}, uvicorn --workers {counts[0]}, {args.connections} "
+                 "connections", rows)
             print(f"pg_inner_rps={rows['touch-up']['rps']:.1f}")
             return 0
         results = {}
