@@ -439,7 +439,7 @@ def restore_backup(db: Session, c: Controller, doc: dict[str, Any]) -> tuple[int
         s = CalibSession(controller_id=c.id, method=sd["method"], target_table=sd["target_table"],
                          target_no=int(sd["target_no"]), params=sd.get("params") or {},
                          state=sd["state"], created_at=_dt(sd.get("created_at")) or utcnow(),
-                         report=sd.get("report"))
+                         report=sd.get("report"), updated_at=utcnow())  # made now (rows.py)
         s.set_result_values(sd.get("result"))
         for pd in sd.get("points", []):
             p = TaughtPoint(step=int(pd["step"]), source=pd["source"],

@@ -1,33 +1,40 @@
-"""PostgreSQL: a batch's statements in three round trips (psycopg's pipeline mode).
+"""PostgreSQL: a batch's statements in three round trips under the row lock, not six
+(psycopg's pipeline mode).
 
 SQLAlchemy sends a statement and waits for its answer before the next. A batch of short
-writers (:mod:`db.batch`) on PostgreSQL sent eight that way: ``BEGIN``, the controller's row
-lock, its sessions, two runs of writes, the controller, ``COMMIT`` (and the pool's ping),
-each a round trip with the row lock held, and each a wait in which the batch's thread gave the
-GIL up and then had to win it back from the event loop. psycopg's pipeline mode sends several
+writers (:mod:`db.batch`) on PostgreSQL sent eight that way: the pool's ping, ``BEGIN``, the
+controller's row lock, its sessions, two runs of writes, the controller, ``COMMIT``; six of
+them with the row lock held, each a wait in which the batch's thread gave the GIL up and
+then had to win it back from the event loop. psycopg's pipeline mode sends several
 statements and waits once (`libpq pipeline mode
 <https://www.postgresql.org/docs/current/libpq-pipeline-mode.html>`_, PostgreSQL 14's libpq,
 which psycopg's binary wheel carries). A batch uses it twice, then commits:
 
-- :func:`read`: ``BEGIN``, ``SELECT ... FOR UPDATE`` of the controller and the sessions'
-  select, in one round trip (the server runs them in order, so the sessions are read under
-  the lock);
+- :func:`read`: ``SELECT ... FOR UPDATE`` of the controller and the sessions' select in one
+  round trip (the server runs them in order, so the sessions are read under the lock;
+  psycopg's ``BEGIN`` goes before, on its own, before the lock);
 - :func:`write`: the writes, each run of one statement as one ``executemany``, in one
-  round trip; their rowcounts are checked before the ``COMMIT`` (SQLAlchemy's).
+  round trip; their rowcounts are checked before the ``COMMIT`` (SQLAlchemy's). (A step
+  taught for the first time is inserted at once, for its id: a round trip of its own.)
 
 The statements are the Core statements of :mod:`db.rows` and :mod:`db.touch_up`, compiled by
 SQLAlchemy for the connection's dialect, with SQLAlchemy's own bind and result processors
 (``TypeEngine.bind_processor`` / ``result_processor``); only the sending is psycopg's. The
 connection and its transaction are SQLAlchemy's: the pipeline runs on the DBAPI connection
-under them, and a failure raises through the batch's ``with conn.begin()``, which rolls back.
+under them, and a failure raises (as SQLAlchemy's exception) through the batch's ``with
+conn.begin()``, which rolls back. These statements pass no ``before_cursor_execute``
+listener and no ``echo``.
 """
 
 from __future__ import annotations
 
-from collections.abc import Sequence
+import weakref
+from collections.abc import Iterator, Sequence
+from contextlib import contextmanager
 from typing import Any
 
 from sqlalchemy import Connection
+from sqlalchemy.exc import DBAPIError
 
 Statement = tuple[Any, dict[str, Any]]  # a Core statement and its parameters
 
@@ -43,14 +50,16 @@ def supported(conn: Connection) -> bool:
     return Pipeline.is_supported()
 
 
-_COMPILED: dict[tuple[Any, Any], tuple[Any, dict[str, Any], dict[str, Any]]] = {}
+_COMPILED: weakref.WeakKeyDictionary[Any, dict[Any, tuple[Any, dict[str, Any],
+                                                          dict[str, Any]]]] = \
+    weakref.WeakKeyDictionary()  # per dialect (an engine's), then per statement
 
 
 def _compiled(stmt: Any, dialect: Any) -> tuple[Any, dict[str, Any], dict[str, Any]]:
     """``stmt`` compiled for ``dialect``, the bind processors of its parameters, and the
     values it carries itself (``.values(state="open")``)."""
-    key = (stmt, dialect)
-    found = _COMPILED.get(key)
+    known = _COMPILED.setdefault(dialect, {})
+    found = known.get(stmt)
     if found is None:
         compiled = stmt.compile(dialect=dialect)
         procs = {name: p for name, b in compiled.binds.items()
@@ -58,7 +67,7 @@ def _compiled(stmt: Any, dialect: Any) -> tuple[Any, dict[str, Any], dict[str, A
         rendered = set(compiled.bind_names.values())
         own = {name: b.effective_value for name, b in compiled.binds.items()
                if name in rendered and not b.required}
-        found = _COMPILED[key] = compiled, procs, own
+        found = known[stmt] = compiled, procs, own
     return found
 
 
@@ -92,16 +101,30 @@ def _rows(cursor: Any, stmt: Any, dialect: Any) -> list[tuple]:
     return out
 
 
+@contextmanager
+def _as_sqlalchemy_errors(conn: Connection, what: str) -> Iterator[None]:
+    """The driver's errors as SQLAlchemy's (``sqlalchemy.exc.OperationalError`` and so on),
+    as ``Connection.execute`` raises them. A connection lost here is not marked invalid at
+    once: the pool's ping finds it at its next checkout."""
+    try:
+        yield
+    except conn.dialect.loaded_dbapi.Error as exc:
+        raise DBAPIError.instance(what, None, exc, conn.dialect.loaded_dbapi.Error,
+                                  dialect=conn.dialect) from exc
+
+
 def read(conn: Connection, statements: Sequence[Statement]) -> list[list[tuple]]:
-    """Run the selects ``statements`` in ``conn``'s transaction (beginning it) in one round
-    trip: each one's rows, in the order of its columns."""
+    """Run the selects ``statements`` in ``conn``'s transaction in one round trip (psycopg
+    sends the ``BEGIN`` of a transaction on its own first): each one's rows, in the order of
+    its columns. Rows come in binary (fewer bytes to parse than text)."""
     raw, dialect = conn.connection.driver_connection, conn.dialect
-    with raw.pipeline():
-        cursors = []
-        for stmt, params in statements:
-            cursor = raw.cursor(binary=True)
-            cursor.execute(*_sql(stmt, params, dialect))
-            cursors.append(cursor)
+    with _as_sqlalchemy_errors(conn, "a batch's reads"):
+        with raw.pipeline():  # its end sends one Sync and takes every result
+            cursors = []
+            for stmt, params in statements:
+                cursor = raw.cursor(binary=True)
+                cursor.execute(*_sql(stmt, params, dialect))
+                cursors.append(cursor)
         return [_rows(c, stmt, dialect) for c, (stmt, _) in zip(cursors, statements)]
 
 
@@ -109,11 +132,12 @@ def write(conn: Connection, runs: Sequence[tuple[Any, list[dict[str, Any]]]]) ->
     """Send ``runs`` (a statement and its parameter sets each: one ``executemany``) in
     ``conn``'s transaction, in one round trip: how many rows each run changed."""
     raw, dialect = conn.connection.driver_connection, conn.dialect
-    with raw.pipeline():  # its end sends the Sync and waits for every result
-        cursors = []
-        for stmt, params in runs:
-            sent = [_sql(stmt, p, dialect) for p in params]
-            cursor = raw.cursor()
-            cursor.executemany(sent[0][0], [p for _, p in sent])
-            cursors.append(cursor)
+    with _as_sqlalchemy_errors(conn, "a batch's writes"):
+        with raw.pipeline():  # its end sends one Sync and takes every result
+            cursors = []
+            for stmt, params in runs:
+                sent = [_sql(stmt, p, dialect) for p in params]
+                cursor = raw.cursor()
+                cursor.executemany(sent[0][0], [p for _, p in sent])
+                cursors.append(cursor)
     return [c.rowcount for c in cursors]

@@ -185,10 +185,13 @@ class SessionCache:
     trusted while its row's (version, created_at) is unchanged.
 
     A session's version is its ETag: every change of it or of its points bumps it (the ORM's
-    version counter, or :mod:`db.touch_up`), so a session read again at the same version is
-    the same session. ``created_at`` tells a new session from a deleted one whose id SQLite
-    gave again. One cache per database (:func:`session_cache`: per connection pool), bounded
-    (the least recently used go first); it hands out copies, which a batch's writers change.
+    version counter, or :mod:`db.touch_up`) and sets ``updated_at``, so a session read again
+    at the same version and ``updated_at`` has the same points. ``created_at`` and
+    ``updated_at`` tell a new session from a deleted one whose id SQLite gave again (a
+    restored backup's sessions are made at version 1, with their old ``created_at`` and an
+    ``updated_at`` of the restore). One cache per database (:func:`session_cache`: per
+    connection pool), bounded (the least recently used go first); it hands out copies of the
+    points, which a batch's writers change.
     """
 
     def __init__(self, max_entries: int = 1024) -> None:
@@ -197,19 +200,19 @@ class SessionCache:
         self._lock = threading.Lock()  # PostgreSQL's batches run in threads
 
     def version_of(self, session_id: int) -> int | None:
-        s = self._entries.get(session_id)
+        with self._lock:
+            s = self._entries.get(session_id)
         return None if s is None else s.version
 
-    def get(self, s: SessionRow) -> SessionRow | None:
-        """A copy of the cached session whose row is ``s`` (read now), if it is cached at
-        ``s``'s version and ``created_at``."""
+    def points(self, s: SessionRow) -> list[PointRow] | None:
+        """Copies of the cached points of the session whose row is ``s`` (read now), if it
+        is cached with ``s``'s version, ``created_at`` and ``updated_at``."""
         with self._lock:
             cached = self._entries.get(s.id)
-            if cached is None or (cached.version, cached.created_at) != (s.version,
-                                                                         s.created_at):
+            if cached is None or _stamp(cached) != _stamp(s):
                 return None
             self._entries.move_to_end(s.id)
-        return _copy(cached)
+        return [PointRow(p.__dict__) for p in cached.points]
 
     def put(self, sessions: Any) -> None:
         """Remember ``sessions`` (copies) as they now are in the database (committed)."""
@@ -220,6 +223,10 @@ class SessionCache:
                 self._entries.move_to_end(s.id)
             while len(self._entries) > self.max_entries:
                 self._entries.popitem(last=False)
+
+
+def _stamp(s: SessionRow) -> tuple:
+    return s.version, s.created_at, s.updated_at
 
 
 _CACHES: weakref.WeakKeyDictionary[Any, SessionCache] = weakref.WeakKeyDictionary()
@@ -241,8 +248,8 @@ def read_locked(conn: Connection, controller_id: int | None, session_ids: Any) -
     """In a batch (:class:`Locked`): lock and read controller ``controller_id`` (if given:
     PostgreSQL; a SQLite writer holds the database's lock already), then read the sessions
     the batch's writers will read (``session_ids``), in one query, into the batch (each writer
-    then reads its own as a copy, :func:`session`). On PostgreSQL the two selects and the
-    ``BEGIN`` go in one round trip (:mod:`db.pipeline`).
+    then reads its own as a copy, :func:`session`). On PostgreSQL the two selects go in one
+    round trip (:mod:`db.pipeline`; psycopg's ``BEGIN`` goes before, on its own).
 
     The points of a session the process's :class:`SessionCache` holds at its current version
     are not read again (a writer of another process may have changed it: then they are). An
@@ -270,7 +277,11 @@ def read_locked(conn: Connection, controller_id: int | None, session_ids: Any) -
             locked.keep(_controller_of(controller_rows[0]))
     for s in _sessions_of(found[0] if rids else ()):
         if (s.id, s.version) in known:  # read without its points
-            s = cache.get(s) or session(conn, s.controller_id, s.id, cached=False)
+            points = cache.points(s)
+            if points is None:  # another session at the cached one's id and version
+                s = session(conn, s.controller_id, s.id, cached=False)
+            else:
+                s.points = points
         locked.sessions[s.id] = s
 
 

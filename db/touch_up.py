@@ -36,7 +36,8 @@ POINT_VALUES = ("source", "joints_deg", "beam_id", "edge", "t_s", "motion_sign",
 STATE_VALUES = ("joints_deg", "clock_s", "motion_sign", "motion_count")
 
 INSERT_POINT = P.insert()
-UPDATE_POINT = P.update().where(P.c.id == bindparam("b_id")).values(
+UPDATE_POINT = P.update().where(P.c.id == bindparam("b_id"),
+                                P.c.session_id == bindparam("b_sid")).values(
     {k: bindparam(f"b_{k}") for k in POINT_VALUES})
 BUMP_SESSION = S.update().where(S.c.id == bindparam("b_id"), S.c.version == bindparam("b_v")) \
     .values(version=bindparam("b_nv"), updated_at=bindparam("b_now"))
@@ -88,7 +89,8 @@ def put_point(conn: Connection, s: SessionRow, step: int, source: str,
         p = PointRow({"id": pid, "session_id": s.id, "step": step, **values})
         s.points = sorted([*s.points, p], key=lambda q: q.step)
     else:
-        _write(conn, UPDATE_POINT, {"b_id": p.id, **{f"b_{k}": v for k, v in values.items()}},
+        _write(conn, UPDATE_POINT, {"b_id": p.id, "b_sid": s.id,
+                                    **{f"b_{k}": v for k, v in values.items()}},
                f"point {p.id}")
         p.__dict__.update(values)
     computed = s.state == "computed"

@@ -279,3 +279,58 @@ def test_re_teaches_of_a_batch_are_written_as_the_one_row_statements_write_them(
                          (touch.STORE_STATE, 1))]
     else:
         assert sent == []
+
+
+def test_a_restored_session_is_not_taken_for_the_one_restored_before_it(client):
+    """A restore makes a controller's sessions again, at version 1 with their old
+    ``created_at`` (and on SQLite at the ids they had): restoring an older backup after a
+    batch kept a session of a newer one must not hand the batch the newer one's points."""
+    from db import crud
+
+    engine = client.app.state.engine
+    sid = _session_id(client)
+    ok(client.post(f"{C}/sessions/{sid}/touch-up", json={"step": 0, "joints_deg": [1.0] * 6}))
+    with client.app.state.sessionmaker() as db:
+        older = crud.backup(db, db.get(Controller, 1))
+    ok(client.post(f"{C}/sessions/{sid}/touch-up", json={"step": 0, "joints_deg": [2.0] * 6}))
+    with client.app.state.sessionmaker() as db:
+        newer = crud.backup(db, db.get(Controller, 1))
+
+    def restore(doc: dict) -> int:
+        with client.app.state.sessionmaker() as db:
+            crud.restore_backup(db, db.get(Controller, 1), doc)
+            db.commit()
+            (s,) = crud.list_sessions(db, 1)
+            return s.id
+
+    def joints_of_step_0(session_id: int):  # noqa: ANN202
+        def job(conn):  # noqa: ANN001, ANN202
+            return rows.session(conn, 1, session_id).points[0].joints_deg
+        return job
+
+    new_id = restore(newer)
+    ((_, seen),) = in_one_transaction(engine, 1, [joints_of_step_0(new_id)], reads=[new_id])
+    assert seen == [2.0] * 6  # and the batch keeps this session
+    old_id = restore(older)
+    ((_, seen),) = in_one_transaction(engine, 1, [joints_of_step_0(old_id)], reads=[old_id])
+    assert seen == [1.0] * 6
+
+
+def test_a_pipelined_statement_that_fails_raises_sqlalchemys_error(client):
+    """PostgreSQL (``db.pipeline``): a statement the server refuses raises as
+    ``Connection.execute`` would (SQLAlchemy's ``DBAPIError``, naming the server's reason),
+    and the connection rolls back and goes on."""
+    import pytest
+    from sqlalchemy import literal_column, select
+    from sqlalchemy.exc import DBAPIError
+
+    from db import pipeline
+
+    engine = client.app.state.engine
+    with engine.connect() as conn:
+        if not pipeline.supported(conn):
+            return  # SQLite: SQLAlchemy sends each statement itself
+        with pytest.raises(DBAPIError, match="division by zero"), conn.begin():  # a batch's
+            pipeline.read(conn, [(select(literal_column("1") / literal_column("0")), {})])
+        with conn.begin():
+            assert pipeline.read(conn, [(rows.CONTROLLER, {"b_id": 1})])[0][0][0] == 1
