@@ -83,13 +83,27 @@ def _sql(stmt: Any, params: dict[str, Any], dialect: Any) -> tuple[str, dict[str
     return sql, {k: (procs[k](v) if k in procs else v) for k, v in params.items()}
 
 
+_RESULT_PROCESSORS: weakref.WeakKeyDictionary[Any, dict[Any, list[tuple[int, Any]]]] = \
+    weakref.WeakKeyDictionary()  # per dialect, then per (statement, column types)
+
+
+def _result_processors(stmt: Any, description: Any, dialect: Any) -> list[tuple[int, Any]]:
+    """SQLAlchemy's result processors of ``stmt``'s columns, by the types the server sent
+    (``cursor.description``): (column index, processor) where there is one."""
+    known = _RESULT_PROCESSORS.setdefault(dialect, {})
+    key = (stmt, tuple(d.type_code for d in description))
+    found = known.get(key)
+    if found is None:
+        found = known[key] = [
+            (i, p) for i, (col, d) in enumerate(zip(stmt.selected_columns, description))
+            if (p := col.type.dialect_impl(dialect).result_processor(dialect, d.type_code))]
+    return found
+
+
 def _rows(cursor: Any, stmt: Any, dialect: Any) -> list[tuple]:
-    """The cursor's rows with SQLAlchemy's result processors for ``stmt``'s columns (by the
-    types the server sent: ``cursor.description``)."""
+    """The cursor's rows with SQLAlchemy's result processors for ``stmt``'s columns."""
     rows = cursor.fetchall()
-    procs = [(i, p) for i, (col, desc) in enumerate(zip(stmt.selected_columns,
-                                                         cursor.description))
-             if (p := col.type.dialect_impl(dialect).result_processor(dialect, desc.type_code))]
+    procs = _result_processors(stmt, cursor.description, dialect)
     if not procs:
         return rows
     out = []

@@ -147,13 +147,12 @@ def _copy(s: SessionRow) -> SessionRow:
     return copy
 
 
-def session(conn: Connection, controller_id: int, session_id: int,
-            cached: bool = True) -> SessionRow:
+def session(conn: Connection, controller_id: int, session_id: int) -> SessionRow:
     """The session with its taught points (as ``crud.get_session``); in a batch
-    (:class:`Locked`), as the batch's last writer of it left it (unless not ``cached``)."""
+    (:class:`Locked`), as the batch's last writer of it left it."""
     rid = row_id(session_id, conn)
     locked = conn.info.get(LOCKED)
-    if cached and locked is not None and rid in locked.sessions:
+    if locked is not None and rid in locked.sessions:
         if locked.sessions[rid].controller_id == controller_id:
             return _copy(locked.sessions[rid])
     found = [] if rid is None else _sessions_of(conn.execute(SESSION_POINTS, {"b_id": rid}))
@@ -279,7 +278,7 @@ def read_locked(conn: Connection, controller_id: int | None, session_ids: Any) -
         if (s.id, s.version) in known:  # read without its points
             points = cache.points(s)
             if points is None:  # another session at the cached one's id and version
-                s = session(conn, s.controller_id, s.id, cached=False)
+                s = session(conn, s.controller_id, s.id)  # not in the batch yet: read
             else:
                 s.points = points
         locked.sessions[s.id] = s
