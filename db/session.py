@@ -14,7 +14,6 @@ it once; :func:`schema_status` tells ``serve`` whether the schema is the code's.
 from __future__ import annotations
 
 import contextlib
-import contextvars
 import fcntl
 import functools
 import os
@@ -27,8 +26,6 @@ from alembic.runtime.migration import MigrationContext
 from alembic.script import ScriptDirectory
 from sqlalchemy import Engine, create_engine, event, text
 from sqlalchemy.orm import Session, sessionmaker
-
-from db.writers import TURN_AT_BEGIN
 
 DB_DIR = Path(__file__).resolve().parent
 WRITE = {"sqlite_begin": "BEGIN IMMEDIATE"}  # execution options of a writing session
@@ -57,22 +54,8 @@ def make_engine(url: str) -> Engine:
         def _begin(conn) -> None:  # noqa: ANN001
             # a writer takes SQLite's write lock now (BEGIN IMMEDIATE), not at its first
             # write: so what it read cannot be changed by another process before it writes;
-            # its turn in the writers' queue (if it has one) just before
-            begin = conn.get_execution_options().get("sqlite_begin", "BEGIN")
-            turn = TURN_AT_BEGIN.get()
-            if turn is not None and begin != "BEGIN":
-                turn.take()
-            if begin == "BEGIN" or not NO_WAIT_AT_BEGIN.get():
-                conn.exec_driver_sql(begin)
-                return
-            # on the event loop (server.deps.short): fail at once ("database is locked") if a
-            # writer outside the queue (a job worker, the CLI) holds the lock, never wait
-            raw = conn.connection.dbapi_connection
-            raw.execute("PRAGMA busy_timeout=0")
-            try:
-                conn.exec_driver_sql(begin)
-            finally:
-                raw.execute(f"PRAGMA busy_timeout={BUSY_TIMEOUT_MS}")
+            # it waits for the lock in SQLite's busy handler (BUSY_TIMEOUT_MS)
+            conn.exec_driver_sql(conn.get_execution_options().get("sqlite_begin", "BEGIN"))
     return engine
 
 
@@ -89,10 +72,6 @@ def write_engine(engine: Engine) -> Engine:
 def write_session(maker: sessionmaker[Session]) -> Session:
     """A session whose transaction is a writer's: ``BEGIN IMMEDIATE`` on SQLite."""
     return maker(bind=write_engine(maker.kw["bind"]))
-
-
-NO_WAIT_AT_BEGIN: contextvars.ContextVar[bool] = contextvars.ContextVar(
-    "pendant_no_wait_at_begin", default=False)  # BEGIN IMMEDIATE fails rather than waits
 
 
 def is_postgres(db: Session | Engine) -> bool:

@@ -11,7 +11,6 @@ data dir); ``pendant serve --workers N`` starts N such processes on one database
 from __future__ import annotations
 
 import gc
-import sys
 from collections.abc import AsyncIterator
 from contextlib import asynccontextmanager
 from pathlib import Path
@@ -62,13 +61,6 @@ TAGS = [
     {"name": "Events", "description": "Webhooks for MES: frame committed, calibration computed, "
                                       "import applied, analysis finished (signed, retried)."},
 ]
-
-# A route's thread gives up the GIL at each SQLite or PostgreSQL call and must get it back from
-# the event-loop thread, which keeps it up to the switch interval (Python's default 5 ms): a
-# writer holding the database's write lock waited that long several times per request. At
-# 0.5 ms, touch-ups with 2 workers went from 329-611 to 512-817 req/s, alternating runs of
-# benchmarks/api.py (0.1 ms was worse again: 422-447); reads did not change.
-GIL_SWITCH_S = 0.0005
 
 WEB_SUFFIXES = (".html", ".js", ".css", ".json", ".png", ".svg")  # what web/ serves
 
@@ -136,11 +128,8 @@ def event_dispatcher(app: FastAPI) -> Dispatcher:
 
 @asynccontextmanager
 async def lifespan(app: FastAPI) -> AsyncIterator[None]:
-    """Deliver events while the service runs; close the DB pool at the end. The GIL's switch
-    interval is :data:`GIL_SWITCH_S` while the service runs; a service process
+    """Deliver events while the service runs; close the DB pool at the end. A service process
     (``app.state.freeze_gc``) starts with :func:`freeze_garbage`."""
-    switch_s = sys.getswitchinterval()
-    sys.setswitchinterval(GIL_SWITCH_S)
     if getattr(app.state, "freeze_gc", False):
         freeze_garbage()
     dispatcher = event_dispatcher(app) if app.state.settings.dispatch_events else None
@@ -153,7 +142,6 @@ async def lifespan(app: FastAPI) -> AsyncIterator[None]:
         if dispatcher is not None:
             dispatcher.stop()
         app.state.engine.dispose()  # close the pooled connections (a PostgreSQL server counts them)
-        sys.setswitchinterval(switch_s)
 
 
 def create_app(settings: Settings | None = None) -> FastAPI:

@@ -26,11 +26,11 @@ from fastapi.responses import JSONResponse, Response
 from sqlalchemy import delete, update
 from sqlalchemy.exc import IntegrityError
 from sqlalchemy.orm import Session
+from starlette.concurrency import run_in_threadpool
 from starlette.types import ASGIApp, Message, Receive, Scope, Send
 
 from db.models import IdempotencyKey, utcnow
 from db.session import write_session
-from db.writers import WriterQueue, WriterTurn
 
 HEADER = "idempotency-key"
 KEEP = timedelta(hours=24)
@@ -115,20 +115,11 @@ def claim(db: Session, request: Request) -> None:
     raise Replay(row)
 
 
-def _store(maker: Any, queue: WriterQueue | None, key: str, status: int,
-           headers: dict[str, str], body: bytes) -> None:
-    turn = None if queue is None else WriterTurn(queue)
-    db = write_session(maker)
-    try:
-        if turn is not None:
-            turn.take()  # SQLite: in the writers' queue (db.session.WriterQueue)
+def _store(maker: Any, key: str, status: int, headers: dict[str, str], body: bytes) -> None:
+    with write_session(maker) as db:
         db.execute(update(IdempotencyKey).where(IdempotencyKey.key == key)
                    .values(status=status, headers=headers, body=body))
         db.commit()
-    finally:
-        db.close()
-        if turn is not None:
-            turn.give()
 
 
 class IdempotencyMiddleware:
@@ -160,12 +151,8 @@ class IdempotencyMiddleware:
         headers = {k.decode("latin-1").lower(): v.decode("latin-1")
                    for k, v in start.get("headers", [])}
         kept = {k: v for k, v in headers.items() if k in STORED_HEADERS}
-        from starlette.concurrency import run_in_threadpool
-
-        async with self.fastapi_app.state.writers:  # the writers' bulkhead (server.deps)
-            await run_in_threadpool(_store, self.fastapi_app.state.sessionmaker,
-                                    self.fastapi_app.state.writer_queue, key,
-                                    int(start["status"]), kept, b"".join(chunks))
+        await run_in_threadpool(_store, self.fastapi_app.state.sessionmaker, key,
+                                int(start["status"]), kept, b"".join(chunks))
 
 
 def install(app: FastAPI) -> None:

@@ -1,16 +1,11 @@
-"""Fixtures and helpers of the API and menu tests: a real app on a temporary SQLite file, and a
-person at the pendant (approach a target as the step says, touch up, compute, save).
-
-Import into a test module with ``from api_helpers import *`` (the fixtures ``db_url`` and
-``client`` come along).
-"""
+"""Helpers of the API and menu tests: a real app on a fresh database (the fixtures ``db_url``
+and ``client`` are in conftest.py), and a person at the pendant (approach a target as the
+step says, touch up, compute, save). Import what a test uses by name."""
 
 from __future__ import annotations
 
-from pathlib import Path
 
 import numpy as np
-import pytest
 from fastapi.testclient import TestClient
 
 from server.app import create_app
@@ -41,20 +36,6 @@ def make_client(db_url: str, token: str | None = ADMIN_TOKEN, **kw) -> TestClien
     headers = {"Authorization": f"Bearer {token}"} if token else {}
     return TestClient(create_app(app_settings(db_url, **kw)), raise_server_exceptions=False,
                       headers=headers)
-
-
-@pytest.fixture
-def db_url(tmp_path: Path) -> str:
-    """A fresh database: a SQLite file, or PostgreSQL in the suite's PostgreSQL pass."""
-    from db_backends import fresh_url
-
-    return fresh_url(tmp_path)
-
-
-@pytest.fixture
-def client(db_url: str) -> TestClient:
-    with make_client(db_url) as c:
-        yield c
 
 
 def ok(r):  # noqa: ANN001, ANN201
@@ -154,6 +135,6 @@ def calibrated_pointer(client: TestClient, number: int = 1) -> dict:
 
 
 __all__ = ["C", "CELL", "TRUE_TCP_MM", "ADMIN_TOKEN", "TEST_HOSTS", "app_settings", "make_client",
-           "db_url", "client", "ok", "open_session", "edit_slot", "restore_slot",
+           "ok", "open_session", "edit_slot", "restore_slot",
            "approach", "walk", "calibrate", "pose_array", "pose_matrix", "angle_deg",
            "calibrated_pointer", "finish_job", "analyze"]

@@ -4,14 +4,12 @@ tests a live service on a temporary SQLite file with Debian's Chromium.
 Two markers sort the suite for ``tests/run`` (they are set here, at collection, not by hand):
 
 - ``db``: the test opens the suite's database, so the PostgreSQL pass runs it
-  (``-m db``). A test is ``db`` when it, a fixture it uses (at any depth), or a helper of
-  ``tests/`` they call, calls ``db_backends.fresh_url`` or ``db_backends.backends`` -- the
-  only way a test gets a PostgreSQL database. A new test gets its database from there (the
-  ``db_url``/``client``/``site`` fixtures do), so it is picked up without a list to keep.
-  Tests that never open a database (solvers, formats, analysis statistics, doctests) and
-  tests that name their own SQLite file run in the SQLite pass only: on PostgreSQL they
-  would prove the same thing again. ``@pytest.mark.db`` forces it where the search cannot
-  see the call.
+  (``-m db``). A test is ``db`` when it uses the :func:`fresh_db` fixture, at any depth (the
+  ``db_url``, ``client`` and ``site`` fixtures do): the one way a test gets the suite's
+  database, so a new test is picked up without a list to keep. Tests that never open a
+  database (solvers, formats, analysis statistics, doctests) and tests that name their own
+  SQLite file run in the SQLite pass only: on PostgreSQL they would prove the same thing
+  again. ``@pytest.mark.db`` marks one by hand.
 - ``load``: the load and crash tests (``LOAD_MODULES``): several uvicorn workers, SIGKILLs, a
   45-analyses flood with a latency bound. They are also ``serial``; the lowest-versions pass
   leaves them out (``tests/run`` says why).
@@ -25,8 +23,6 @@ from __future__ import annotations
 
 import contextlib
 import fcntl
-import inspect
-import types
 from pathlib import Path
 
 import numpy as np
@@ -46,14 +42,40 @@ def robot(request):
     return ROBOTS[request.param]
 
 
+@pytest.fixture(scope="session")
+def fresh_db(tmp_path_factory: pytest.TempPathFactory):  # noqa: ANN201
+    """The one door to the suite's database: ``fresh_db(name="db", backend=None,
+    migrated=True)`` makes a fresh one (a SQLite file, or PostgreSQL in the suite's PostgreSQL
+    pass) and gives its URL. A test that uses this fixture, at any depth, is marked ``db``."""
+    from db_backends import fresh_url
+
+    def make(name: str = "db", backend: str | None = None, migrated: bool = True) -> str:
+        return fresh_url(tmp_path_factory.mktemp(name), backend, migrated)
+
+    return make
+
+
+@pytest.fixture
+def db_url(fresh_db) -> str:  # noqa: ANN001
+    """A fresh database for one test (see :func:`fresh_db`)."""
+    return fresh_db()
+
+
+@pytest.fixture
+def client(db_url: str):  # noqa: ANN201
+    """A TestClient of the real app on :func:`db_url`, as the Administrator."""
+    from api_helpers import make_client
+
+    with make_client(db_url) as c:
+        yield c
+
+
 @pytest.fixture(scope="module")
-def site(tmp_path_factory: pytest.TempPathFactory):  # noqa: ANN201
+def site(fresh_db):  # noqa: ANN001, ANN201
     """The real service (uvicorn, loopback, free port) on a fresh database per module."""
     from browser_helpers import serve
 
-    from db_backends import fresh_url
-
-    with serve(fresh_url(tmp_path_factory.mktemp("site"))) as url:
+    with serve(fresh_db("site")) as url:
         yield url
 
 
@@ -69,7 +91,6 @@ def chromium():  # noqa: ANN201
 # ------------------------------------------------------------------- the markers of tests/run
 
 TESTS_DIR = Path(__file__).resolve().parent
-DB_ENTRY_POINTS = frozenset({"fresh_url", "fresh_pg_url", "backends"})  # db_backends' doors
 LOAD_MODULES = frozenset({"test_workers.py", "test_jobs_flood.py"})
 
 
@@ -82,54 +103,9 @@ def pytest_configure(config: pytest.Config) -> None:
                                        "(under pytest-xdist)")
 
 
-def _code_objects(code: types.CodeType):  # noqa: ANN201
-    """``code`` and the code of its nested functions, lambdas and comprehensions."""
-    yield code
-    for const in code.co_consts:
-        if isinstance(const, types.CodeType):
-            yield from _code_objects(const)
-
-
-def _in_tests(obj: object) -> bool:
-    try:
-        return Path(inspect.getfile(obj)).resolve().is_relative_to(TESTS_DIR)
-    except TypeError:  # a builtin
-        return False
-
-
-def _reaches_db(obj: object, seen: set[int]) -> bool:
-    """Whether ``obj`` (a function or class of tests/) names a db_backends entry point, itself
-    or through the functions and classes of tests/ it names (recursively)."""
-    obj = inspect.unwrap(getattr(obj, "__func__", obj))
-    if id(obj) in seen or not _in_tests(obj):
-        return False
-    seen.add(id(obj))
-    if inspect.isclass(obj):
-        return any(_reaches_db(v, seen) for v in vars(obj).values()
-                   if inspect.isfunction(v) or isinstance(v, (staticmethod, classmethod)))
-    code = getattr(obj, "__code__", None)
-    if code is None:
-        return False
-    names = {n for c in _code_objects(code) for n in c.co_names}
-    if names & DB_ENTRY_POINTS:
-        return True
-    scope = getattr(obj, "__globals__", {})
-    return any(_reaches_db(scope[n], seen) for n in names
-               if n in scope and (inspect.isfunction(scope[n]) or inspect.isclass(scope[n])))
-
-
-def _opens_db(item: pytest.Item) -> bool:
-    seen: set[int] = set()
-    if _reaches_db(getattr(item, "function", None), seen):
-        return True
-    info = getattr(item, "_fixtureinfo", None)
-    defs = info.name2fixturedefs.values() if info is not None else ()
-    return any(_reaches_db(d.func, seen) for fixturedefs in defs for d in fixturedefs)
-
-
 def pytest_collection_modifyitems(config: pytest.Config, items: list[pytest.Item]) -> None:
     for item in items:
-        if item.get_closest_marker("db") is None and _opens_db(item):
+        if item.get_closest_marker("db") is None and "fresh_db" in getattr(item, "fixturenames", ()):
             item.add_marker(pytest.mark.db)
         if item.path.name in LOAD_MODULES:
             item.add_marker(pytest.mark.load)

@@ -6,7 +6,7 @@ from __future__ import annotations
 import json
 
 import pytest
-from api_helpers import analyze, client, db_url, finish_job, make_client, ok  # noqa: F401
+from api_helpers import analyze, make_client, ok
 
 from server.analysis_cli import parse_effects
 from server.cli import main

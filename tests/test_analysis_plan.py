@@ -7,7 +7,7 @@ import json
 
 import numpy as np
 import pytest
-from api_helpers import analyze, client, db_url, make_client, ok  # noqa: F401  (fixtures)
+from api_helpers import analyze, ok
 
 from server.cli import main
 from solvers.analysis.plan import (Workspace, _criterion, design_matrices, parse_effects,

@@ -7,7 +7,7 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from api_helpers import C, CELL, client, db_url, make_client, ok, open_session  # noqa: F401
+from api_helpers import C, CELL, make_client, ok, open_session
 from server.schemas import AIM_NOISE_MM
 from solvers.dh import forward_kinematics
 from solvers.robots import ROBOTS

@@ -5,7 +5,6 @@ schema step (``pendant db upgrade``; ``serve --no-migrate`` refuses an old schem
 
 from __future__ import annotations
 
-from api_helpers import *  # noqa: F403  (fixtures client, db_url)
 from api_helpers import C, edit_slot, ok, open_session, walk
 
 from db.session import alembic_config as _alembic_config
@@ -164,7 +163,7 @@ def test_db_upgrade_then_serve_without_migrating(tmp_path, capsys):  # noqa: ANN
     create_app(Settings(db_url=url, migrate=False))  # the schema is the code's: it serves
 
 
-def test_the_cli_edits_a_slot_with_if_match(tmp_path, capsys, monkeypatch):  # noqa: ANN001
+def test_the_cli_edits_a_slot_with_if_match(db_url, capsys, monkeypatch):  # noqa: ANN001
     """``pendant slot`` against a running service: reads the ETag, writes with If-Match, and
     refuses (exit 3, nothing written) when the ETag it is given is stale. The CLI's token
     comes from $PENDANT_TOKEN."""
@@ -172,12 +171,11 @@ def test_the_cli_edits_a_slot_with_if_match(tmp_path, capsys, monkeypatch):  # n
 
     from api_helpers import ADMIN_TOKEN
     from browser_helpers import serve
-    from db_backends import fresh_url
     from server.cli import main
 
     monkeypatch.setenv("PENDANT_TOKEN", ADMIN_TOKEN)
     auth = {"Authorization": f"Bearer {ADMIN_TOKEN}"}
-    with serve(fresh_url(tmp_path)) as url:
+    with serve(db_url) as url:
         first = httpx.get(f"{url}{C}/tools/8", headers=auth).headers["ETag"]
         assert main(["slot", "tool", "8", "--url", url, "--name", "pointer",
                      "--pose", "1,2,180,0,0,0"]) == 0

@@ -54,12 +54,11 @@ def test_db_url_from_the_environment(monkeypatch):
     assert default_db_url() == "sqlite:////tmp/elsewhere.db"
 
 
-def test_migrations_build_exactly_the_models_on_the_suite_backend(tmp_path):
+def test_migrations_build_exactly_the_models_on_the_suite_backend(fresh_db):
     """The same check on the suite's backend (PostgreSQL in tests/run's second pass)."""
     from db.session import upgrade
-    from db_backends import fresh_url
 
-    engine = make_engine(fresh_url(tmp_path, migrated=False))
+    engine = make_engine(fresh_db(migrated=False))
     upgrade(engine)
     with engine.connect() as conn:
         diff = compare_metadata(MigrationContext.configure(conn), Base.metadata)

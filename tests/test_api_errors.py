@@ -4,8 +4,7 @@ from __future__ import annotations
 
 import json
 
-from api_helpers import *  # noqa: F403
-from api_helpers import C, approach, ok, open_session, walk
+from api_helpers import C, approach, edit_slot, ok, open_session, walk
 
 
 def _detail(r):  # noqa: ANN001, ANN202

@@ -4,8 +4,8 @@ from __future__ import annotations
 
 import pytest
 
-from api_helpers import *  # noqa: F403
-from api_helpers import C, TRUE_TCP_MM, calibrate, finish_job, ok, pose_array
+from api_helpers import (C, TRUE_TCP_MM, calibrate, edit_slot, finish_job, ok, pose_array,
+                        restore_slot)
 
 
 def test_history_records_before_after_and_restore(client):

@@ -8,8 +8,7 @@ from __future__ import annotations
 import json
 
 import pytest
-from api_helpers import *  # noqa: F401,F403
-from api_helpers import C, calibrate, finish_job, ok, open_session, walk
+from api_helpers import C, calibrate, edit_slot, finish_job, ok, open_session, restore_slot, walk
 
 HUGE_ID = 10**20  # beyond SQLite's 64-bit INTEGER
 

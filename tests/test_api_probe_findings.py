@@ -6,7 +6,6 @@ import json
 
 import pytest
 
-from api_helpers import *  # noqa: F403
 from api_helpers import C, ok, open_session
 
 

@@ -4,7 +4,6 @@ from __future__ import annotations
 
 import pytest
 
-from api_helpers import *  # noqa: F403
 from api_helpers import C, TRUE_TCP_MM, approach, make_client, ok, open_session, pose_array
 
 ORIENTATION = ("tilt_deg", "around_deg", "spin_deg")

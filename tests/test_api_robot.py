@@ -5,8 +5,7 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from api_helpers import *  # noqa: F403
-from api_helpers import C, CELL, ok, pose_array
+from api_helpers import C, CELL, edit_slot, ok, pose_array
 from solvers.robots import ROBOTS
 
 

@@ -4,7 +4,6 @@ from __future__ import annotations
 
 import pytest
 
-from api_helpers import *  # noqa: F403
 from api_helpers import C, approach, ok, open_session, walk
 from server.methods import METHODS
 

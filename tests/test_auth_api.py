@@ -11,7 +11,6 @@ from datetime import datetime, timedelta, timezone
 import pytest
 from fastapi.testclient import TestClient
 
-from api_helpers import *  # noqa: F403
 from api_helpers import ADMIN_TOKEN, C, calibrate, finish_job, make_client, ok, open_session, walk
 
 

@@ -13,7 +13,7 @@ import re
 import pytest
 from fastapi.testclient import TestClient
 
-from api_helpers import *  # noqa: F403
+from api_helpers import make_client, ok
 from server.auth.permissions import DEFAULT_ROLES, PERMISSIONS, PUBLIC, ROUTES, SIGNED_IN
 
 ROLES = list(DEFAULT_ROLES)
@@ -31,11 +31,9 @@ def concrete(path: str) -> str:
 
 
 @pytest.fixture(scope="module")
-def world(tmp_path_factory):  # noqa: ANN001, ANN201
+def world(fresh_db):  # noqa: ANN001, ANN201
     """The app with one user and token per default role."""
-    from db_backends import fresh_url  # the suite's database: PostgreSQL in its pass
-
-    with make_client(fresh_url(tmp_path_factory.mktemp("perm"))) as admin:  # noqa: F405
+    with make_client(fresh_db("perm")) as admin:  # noqa: F405
         tokens = {}
         for role in ROLES:
             name = role.lower()

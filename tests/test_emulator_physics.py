@@ -11,9 +11,8 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from api_helpers import *  # noqa: F403  (fixtures client, db_url)
-from api_helpers import C, CELL, TRUE_TCP_MM, approach, make_client, ok, open_session, pose_array
-from api_helpers import analyze, walk
+from api_helpers import (C, CELL, TRUE_TCP_MM, analyze, approach, edit_slot, make_client, ok,
+                        open_session, pose_array, walk)
 from emulator import THERMAL_WARMUP_S
 from server.recording import parse_recording
 from solvers.physics import Imperfections, true_tcp_positions

@@ -18,7 +18,7 @@ import paho.mqtt.client as mqtt
 import pytest
 from fastapi.testclient import TestClient
 
-from api_helpers import C, calibrate, db_url, edit_slot, make_client, ok  # noqa: F401 (fixture db_url)
+from api_helpers import C, calibrate, edit_slot, make_client, ok
 from browser_helpers import free_port
 from server.events.dispatcher import Dispatcher, WebhookSink
 from server.events.signing import HEADER, verify

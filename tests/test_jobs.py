@@ -14,7 +14,7 @@ from datetime import timedelta
 from pathlib import Path
 
 import pytest
-from api_helpers import C, calibrate, db_url, finish_job, make_client, ok  # noqa: F401
+from api_helpers import C, calibrate, finish_job, make_client, ok
 
 from db import jobs
 from db.models import Job, utcnow

@@ -5,9 +5,8 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from api_helpers import *  # noqa: F403
 from api_helpers import (C, CELL, angle_deg, calibrate, calibrated_pointer, ok, open_session,
-                         pose_matrix, walk)
+                        pose_matrix, walk)
 
 
 def test_base_3point(client):

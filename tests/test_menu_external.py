@@ -10,9 +10,8 @@ import json
 import numpy as np
 import pytest
 
-from api_helpers import *  # noqa: F403
-from api_helpers import (ADMIN_TOKEN, C, CELL, approach, calibrate, edit_slot, ok,
-                         open_session, pose_matrix, restore_slot)
+from api_helpers import (ADMIN_TOKEN, C, CELL, approach, calibrate, edit_slot, ok, open_session,
+                        pose_matrix, restore_slot)
 from emulator import external as ext_emu
 from solvers.robots import ROBOTS
 
@@ -511,16 +510,15 @@ def test_cli_reads_a_point_without_its_axis_value_as_a_named_error(tmp_path, cap
     assert "points.0.external_axes.E1" in capsys.readouterr().err
 
 
-def test_cli_slot_edits_an_external_kinematic_with_if_match(tmp_path, capsys, monkeypatch):
+def test_cli_slot_edits_an_external_kinematic_with_if_match(db_url, capsys, monkeypatch):
     import httpx
 
     from browser_helpers import serve
-    from db_backends import fresh_url
     from server.cli import main
 
     monkeypatch.setenv("PENDANT_TOKEN", ADMIN_TOKEN)
     auth = {"Authorization": f"Bearer {ADMIN_TOKEN}"}
-    with serve(fresh_url(tmp_path)) as url:
+    with serve(db_url) as url:
         first = httpx.get(f"{url}{EXT}/1", headers=auth).headers["ETag"]
         assert main(["slot", "ext", "1", "--url", url, "--pose", "521,380,80,0,0,0"]) == 0
         assert "ext 1 'TURNTABLE' (turntable: E1)" in capsys.readouterr().out

@@ -4,8 +4,8 @@ from __future__ import annotations
 
 import pytest
 
-from api_helpers import *  # noqa: F403
-from api_helpers import C, CELL, angle_deg, calibrate, calibrated_pointer, ok, open_session, pose_matrix
+from api_helpers import (C, CELL, angle_deg, calibrate, calibrated_pointer, ok, open_session,
+                        pose_matrix)
 
 T_TRUE = CELL.T_world_fixedtool
 

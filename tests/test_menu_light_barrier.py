@@ -8,7 +8,6 @@ import json
 import numpy as np
 import pytest
 
-from api_helpers import *  # noqa: F403
 from api_helpers import C, CELL, TRUE_TCP_MM, ok, open_session, pose_matrix
 from server.cli import main
 from solvers.dh import forward_kinematics

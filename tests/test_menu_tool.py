@@ -5,9 +5,8 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from api_helpers import *  # noqa: F403  (fixtures client, db_url)
 from api_helpers import (C, CELL, TRUE_TCP_MM, angle_deg, approach, calibrate, ok, open_session,
-                         pose_array, pose_matrix, walk)
+                        pose_array, pose_matrix, walk)
 
 R_TRUE = CELL.T_flange_tool[:3, :3]
 

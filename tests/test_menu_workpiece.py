@@ -4,7 +4,6 @@ from __future__ import annotations
 
 import pytest
 
-from api_helpers import *  # noqa: F403
 from api_helpers import C, CELL, angle_deg, calibrate, calibrated_pointer, ok, pose_matrix
 
 T_TRUE = CELL.T_flange_workpiece

@@ -38,11 +38,9 @@ class LogRecords(logging.Handler):
 
 
 @pytest.fixture(scope="module")
-def face(tmp_path_factory: pytest.TempPathFactory) -> Iterator[dict]:
+def face(fresh_db, tmp_path_factory: pytest.TempPathFactory) -> Iterator[dict]:  # noqa: ANN001
     """The REST app (TestClient) and the OPC UA server on one SQLite file."""
-    from db_backends import fresh_url
-
-    db_url = fresh_url(tmp_path_factory.mktemp("opcua"))
+    db_url = fresh_db("opcua")
     logs = LogRecords()
     logging.getLogger("asyncua").addHandler(logs)
     loop = asyncio.new_event_loop()

@@ -1,26 +1,17 @@
 """The markers tests/run sorts the suite by (set in tests/conftest.py at collection): ``db``
-for a test that opens the suite's database -- through a fixture at any depth, a helper of
-tests/, or a direct call of db_backends -- ``load`` (and ``serial``) for the
-load and crash tests."""
+for a test that opens the suite's database -- it uses the ``fresh_db`` fixture, at any depth
+-- ``load`` (and ``serial``) for the load and crash tests."""
 
 from __future__ import annotations
 
-from api_helpers import client, db_url  # noqa: F401  (fixtures)
 
-
-def the_database(tmp_path):  # noqa: ANN001, ANN201
-    """A helper of this module that opens the suite's database."""
-    from db_backends import fresh_url
-
-    return fresh_url(tmp_path)
-
-
-def test_a_test_using_the_client_fixture_is_db(request, client):  # noqa: ANN001, F811
+def test_a_test_using_the_client_fixture_is_db(request, client):  # noqa: ANN001
+    assert client.get("/healthz").status_code == 200
     assert request.node.get_closest_marker("db") is not None
 
 
-def test_a_test_calling_a_helper_that_opens_the_database_is_db(request, tmp_path):  # noqa: ANN001
-    assert the_database(tmp_path)
+def test_a_test_making_its_own_database_is_db(request, fresh_db):  # noqa: ANN001
+    assert fresh_db(migrated=False)
     assert request.node.get_closest_marker("db") is not None
 
 
@@ -39,3 +30,21 @@ def test_every_load_module_exists():
 
     here = Path(__file__).parent
     assert LOAD_MODULES and all((here / name).is_file() for name in LOAD_MODULES)
+
+
+def test_no_test_returns_early_instead_of_skipping():
+    """A test that does not apply says so with ``pytest.skip`` (counted as skipped); a bare
+    ``return`` under a condition passes without checking anything."""
+    import ast
+    from pathlib import Path
+
+    found = []
+    for path in sorted(Path(__file__).parent.glob("test_*.py")):
+        for fn in ast.walk(ast.parse(path.read_text())):
+            if not (isinstance(fn, ast.FunctionDef) and fn.name.startswith("test_")):
+                continue
+            for node in ast.walk(fn):
+                if isinstance(node, ast.If) and any(
+                        isinstance(s, ast.Return) and s.value is None for s in node.body):
+                    found.append(f"{path.name}:{node.lineno} {fn.name}")
+    assert not found, found

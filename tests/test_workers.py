@@ -24,7 +24,7 @@ import time
 import admin_http as httpx  # httpx as the first Administrator
 import pytest
 
-from db_backends import backends, fresh_url
+from db_backends import backends
 from workers_helpers import concurrently, kill, service, start, wait_healthy
 
 from db.session import alembic_config as _alembic_config
@@ -38,10 +38,10 @@ WORKERS = 4
 
 
 @pytest.fixture(scope="module", params=backends())
-def svc(request, tmp_path_factory):  # noqa: ANN001, ANN201
+def svc(request, tmp_path_factory, fresh_db):  # noqa: ANN001, ANN201
     """4 workers on a fresh, *unmigrated* database of each backend."""
     tmp = tmp_path_factory.mktemp(f"workers-{request.param}")
-    url = fresh_url(tmp, request.param, migrated=False)
+    url = fresh_db(f"workers-db-{request.param}", backend=request.param, migrated=False)
     with service(url, WORKERS, tmp / "service.log") as s:
         s.db_url = url  # type: ignore[attr-defined]
         yield s

@@ -4,10 +4,10 @@ from __future__ import annotations
 
 from fastapi import APIRouter, Response
 
-from db import crud, rows
+from db import crud
 from db.models import Controller
 from server import external
-from server.deps import SessionDep, short
+from server.deps import SessionDep
 from server.preconditions import IfMatch, check, etag, set_etag
 from emulator import (THERMAL_WARMUP_S, home_joints, imperfections_document,
                              imperfections_from_document, robot_from_custom)
@@ -29,10 +29,9 @@ def controller_out(c: Controller) -> ControllerOut:
 
 
 @router.get("")
-@short
 def list_controllers(db: SessionDep) -> list[ControllerOut]:
-    """Every emulated controller (a Core read: ``db.rows``)."""
-    return [controller_out(c) for c in rows.controllers(db.connection())]  # type: ignore[arg-type]
+    """Every emulated controller."""
+    return [controller_out(c) for c in crud.list_controllers(db)]
 
 
 @router.post("", status_code=201)
@@ -61,13 +60,12 @@ def changing(db: SessionDep, controller_id: int, if_match: str | None) -> Contro
 
 
 @router.get("/{controller_id}")
-@short
 def get_controller(controller_id: int, db: SessionDep, response: Response) -> ControllerOut:
     """The controller; its ``ETag`` (bumped by every motion and setting) goes with a later
     write as ``If-Match``."""
-    c = rows.controller(db.connection(), controller_id)  # a Core read (db.rows)
+    c = crud.get_controller(db, controller_id)
     response.headers["ETag"] = etag(c.version)
-    return controller_out(c)  # type: ignore[arg-type]
+    return controller_out(c)
 
 
 @router.delete("/{controller_id}", status_code=204)

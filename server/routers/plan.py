@@ -98,6 +98,5 @@ async def record_from_plan(request: Request, body: PlanRecordingIn) -> dict[str,
     doc = await run_in_threadpool(lambda: record_plan(
         robot, body.joints_deg, imp, seed=body.seed,
         payload=(body.payload_kg, (0.0, 0.0, 50.0))))
-    async with request.app.state.writers:  # the writers' bulkhead (server.deps)
-        rid = await run_in_threadpool(_store, request, doc)
+    rid = await run_in_threadpool(_store, request, doc)
     return {"id": rid, "kind": "tracker", "n_samples": len(body.joints_deg), "robot": robot.name}

@@ -13,23 +13,20 @@ from fastapi import APIRouter, Body, Response
 
 import emulator
 from db import crud
-from db import rows
-from db import touch_up as touch
 from db.models import EXT_KIN_SLOTS
 from db.outbox import emit
-from server import deps
 from server import external as ext
-from server.deps import SessionDep, short
-from server.preconditions import IfMatch, check, etag, set_etag
+from server.deps import SessionDep
+from server.service import sessions as sessions_service
+from server.preconditions import IfMatch, check, set_etag
 from server.methods import METHODS, PARAM_HELP
 from server.routers.external import ext_slot_out
-from server.routers.common import (cell_of, check_step, entry_matrix, entry_out, flange_pose_on,
-                                   next_step, resolve_inputs, robot_of, session_out, spec_of,
+from server.routers.common import (cell_of, entry_matrix, entry_out, resolve_inputs, robot_of, session_out, spec_of,
                                    state_of, step_out, store_state, taught_data)
 from server.routers.robot import physics_of
 from server.schemas import (EntryOut, ExtSlotOut, ReportOut, RunCycleOut, SessionIn, SessionOut,
                             TouchUpIn, jsonable)
-from solvers.dh import RobotModel, forward_kinematics
+from solvers.dh import forward_kinematics
 from solvers.errors import CalibrationError
 from solvers.frames import Pose
 
@@ -89,7 +86,6 @@ def list_sessions(controller_id: int, db: SessionDep, state: str | None = None) 
 
 
 @router.get(PREFIX + "/{session_id}")
-@short
 def get_session(controller_id: int, session_id: int, db: SessionDep,
                 response: Response) -> SessionOut:
     """The steps with their prompts, which are filled, and the report once computed. Its
@@ -99,74 +95,14 @@ def get_session(controller_id: int, session_id: int, db: SessionDep,
     return session_out(s)
 
 
-ARMS: dict[int, tuple[tuple, RobotModel]] = {}  # controller id: (arm_key, arm) seen last
-
-
-def arm_key(c: Any) -> tuple:
-    """What a controller's arm (its kinematics) is made of: its model, or its own DH table."""
-    return c.robot_key, c.custom_robot
-
-
-def plan_touch_up(controller_id: int, body: TouchUpIn | None = None,
-                  **_: Any) -> tuple[tuple, Pose] | None:
-    """The flange pose of recorded joints (``joints_deg``), worked out before the writer's lock
-    (``deps.short``) on the controller's arm as this process last saw it, with that arm's
-    :func:`arm_key`: the touch-up checks the key under the lock and works the pose out again
-    if the arm has changed. None when there is nothing to plan (no joints in the body, an arm
-    not seen yet, joints the arm refuses: the touch-up then says why, under the lock)."""
-    seen = ARMS.get(controller_id)
-    if seen is None or body is None or body.joints_deg is None or body.flange_pose is not None:
-        return None
-    key, robot = seen
-    try:
-        return key, flange_pose_on(robot, body.joints_deg)
-    except CalibrationError:
-        return None
-
-
 @router.post(PREFIX + "/{session_id}/touch-up")
-@short(plan=plan_touch_up)
 def touch_up(controller_id: int, session_id: int, db: SessionDep, response: Response,
              body: TouchUpIn | None = Body(None), if_match: IfMatch = None) -> SessionOut:
     """Fill a step (default: the next empty one) with the emulated robot's current joints, or
-    with ``joints_deg`` / ``flange_pose`` recorded on a real controller.
-
-    The rows are read and written with Core statements (``db.rows``, ``db.touch_up``: the
-    hot path of every menu) in the request's transaction, under its row lock. The flange pose
-    of recorded joints is worked out before the lock (:func:`plan_touch_up`), and the answer
-    after the commit (``deps.later``)."""
-    body = body or TouchUpIn()
-    planned = deps.plan_of(db)
-    lock = deps.lock_here(db)  # the controller's row is locked by the read below (PostgreSQL)
-    conn = db.connection()  # the transaction begins (SQLite: BEGIN IMMEDIATE)
-    c = rows.controller(conn, controller_id, lock=lock)
-    s = rows.session(conn, controller_id, session_id)
-    check(if_match, s.version, lambda: session_out(s),  # type: ignore[arg-type]
-          f"session {s.id} of controller {controller_id}")
-    crud.require_open(s)  # type: ignore[arg-type]
-    if body.joints_deg is not None and body.flange_pose is not None:
-        raise CalibrationError(("flange_pose",), "give joints_deg or flange_pose, not both")
-    step = next_step(s) if body.step is None else body.step  # type: ignore[arg-type]
-    check_step(s, step)  # type: ignore[arg-type]
-    if body.flange_pose is not None:
-        pose, joints, source = body.flange_pose.to_pose(), None, "flange_pose"
-    else:
-        joints = c.joints_deg if body.joints_deg is None else body.joints_deg
-        source = "touch_up" if body.joints_deg is None else "joints"
-        key = arm_key(c)
-        if planned is not None and planned[0] == key:
-            pose = planned[1]
-        else:
-            robot = robot_of(c)  # type: ignore[arg-type]
-            ARMS[c.id] = key, robot
-            pose = flange_pose_on(robot, joints)  # type: ignore[arg-type]
-    sign = c.motion_sign if source == "touch_up" else None  # the emulated arm's flanks
-    ext_axes = c.external_axes if source == "touch_up" else body.external_axes
-    touch.put_point(conn, s, step, source, pose.as_array(), joints, t_s=float(c.clock_s or 0.0),
-                    motion_sign=sign, external_axes=ext_axes)
-    touch.store_state(conn, c, emulator.touched_up(state_of(c)))  # type: ignore[arg-type]
-    response.headers["ETag"] = etag(s.version)
-    return deps.later(lambda: session_out(s))  # built after the commit, without the lock
+    with ``joints_deg`` / ``flange_pose`` recorded on a real controller."""
+    s = sessions_service.touch_up(db, controller_id, session_id, body or TouchUpIn(), if_match)
+    set_etag(response, db, s)
+    return session_out(s)
 
 
 @router.delete(PREFIX + "/{session_id}/points/{step}")

@@ -4,9 +4,9 @@ from __future__ import annotations
 
 from fastapi import APIRouter, Response
 
-from db import crud, rows
+from db import crud
 from db.models import EntryHistory, FrameEntry
-from server.deps import SessionDep, short
+from server.deps import SessionDep
 from server.preconditions import IfMatch, check, etag, set_etag
 from server.routers.common import entry_out, load_values
 from server.schemas import EntryIn, EntryOut, HistoryOut
@@ -64,12 +64,11 @@ def table_router(table: str, path: str, tag: str) -> APIRouter:
         return [entry_out(e) for e in crud.list_entries(db, controller_id, table, kind)]
 
     @router.get("/{number}", name=f"get_{table}", summary=f"One {label} slot")
-    @short
     def get_slot(controller_id: int, number: int, db: SessionDep, response: Response) -> EntryOut:
         """The slot; its ``ETag`` is what a later edit sends as ``If-Match``."""
-        e = rows.entry(db.connection(), controller_id, table, number)  # a Core read (db.rows)
+        e = crud.get_entry(db, controller_id, table, number)
         response.headers["ETag"] = etag(e.version)
-        return entry_out(e)  # type: ignore[arg-type]
+        return entry_out(e)
 
     @router.put("/{number}", name=f"edit_{table}",
                 summary=f"Edit a {label} slot by hand (recorded in history)")

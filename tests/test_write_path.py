@@ -1,0 +1,80 @@
+"""The write path (issue 22): one transaction per request, in the route's worker thread.
+
+Behaviour only, nothing a refactor of the internals would change: a writer waiting for
+SQLite's write lock waits in a thread, never on the event loop, so reads and health checks go
+on; the service process freezes its start-up objects out of the garbage collector's walks."""
+
+from __future__ import annotations
+
+import gc
+import sqlite3
+import threading
+import time
+
+import pytest
+
+from api_helpers import C, make_client, open_session
+
+
+def test_a_writer_waiting_for_sqlites_lock_leaves_the_event_loop_free(client):
+    """SQLite's write lock held by another process's writer (a job worker, the CLI): a
+    touch-up waits for it in its thread, a read and the health check answer meanwhile, and
+    the touch-up lands once the lock is free."""
+    engine = client.app.state.engine
+    if engine.dialect.name != "sqlite":
+        pytest.skip("SQLite's database-wide write lock; PostgreSQL locks the controller's row")
+    url = open_session(client, "tool.xyz_4point", 1)
+    other = sqlite3.connect(engine.url.database, isolation_level=None)
+    other.execute("BEGIN IMMEDIATE")  # as another process's write transaction
+    answers: dict = {}
+    writer = threading.Thread(
+        target=lambda: answers.update(touch=client.post(f"{url}/touch-up", json={"step": 0})))
+    writer.start()
+    try:
+        t0 = time.perf_counter()
+        read = client.get(f"{C}/tools/1")
+        health = client.get("/healthz")
+        waited_s = time.perf_counter() - t0
+        assert read.status_code == 200 and health.status_code == 200 and waited_s < 2.0, waited_s
+        assert "touch" not in answers and writer.is_alive()  # the lock is still held
+    finally:
+        other.execute("ROLLBACK")
+        other.close()
+    writer.join(30)
+    assert answers["touch"].status_code == 200 and answers["touch"].json()["steps"][0]["filled"]
+
+
+def test_a_touch_up_is_one_transaction_with_its_clock(client):
+    """The point, the session's version and the emulated clock change together: a touch-up
+    refused after the point is built (a closed session) leaves the clock where it was."""
+    url = open_session(client, "tool.xyz_4point", 1)
+    clock0 = client.get(f"{C}/cell/clock").json()["clock_s"]
+    first = client.post(f"{url}/touch-up", json={"step": 0})
+    assert first.status_code == 200
+    clock1 = client.get(f"{C}/cell/clock").json()["clock_s"]
+    assert clock1 > clock0
+    assert client.post(f"{url}/discard", headers={"If-Match": first.headers["ETag"]}).status_code == 200
+    assert client.post(f"{url}/touch-up", json={"step": 1}).status_code == 409
+    assert client.get(f"{C}/cell/clock").json()["clock_s"] == clock1
+
+
+def test_a_service_process_freezes_its_start_out_of_the_garbage_collectors_walks(db_url):
+    """``server.app:app`` (uvicorn's worker) and ``pendant serve`` set ``freeze_gc``: the app's
+    start-up objects go to the collector's permanent generation, so a full collection does
+    not walk them (80-170 ms per collection otherwise). An app of a test (no ``freeze_gc``)
+    freezes nothing: what it leaves must stay collectable."""
+    from fastapi.testclient import TestClient
+
+    from api_helpers import app_settings
+    from server.app import create_app
+
+    gc.unfreeze()
+    with make_client(db_url) as c:
+        assert c.get(f"{C}/tools/1").status_code == 200 and gc.get_freeze_count() == 0
+    app = create_app(app_settings(db_url))
+    app.state.freeze_gc = True
+    try:
+        with TestClient(app):
+            assert gc.get_freeze_count() > 10_000
+    finally:
+        gc.unfreeze()
