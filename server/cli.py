@@ -493,8 +493,11 @@ def progress_line(label: str, stream: TextIO | None = None) -> Iterator[None]:
 
 
 def _check_port_free(host: str, port: int) -> None:
-    """Refuse a port already in use before starting uvicorn, suggesting --port."""
+    """Refuse a port already in use before starting uvicorn, suggesting --port. The probe
+    binds with ``SO_REUSEADDR``, as uvicorn does: connections of a service just stopped, left
+    in TIME_WAIT, do not hold the port; a listener does."""
     with socket.socket(socket.AF_INET6 if ":" in host else socket.AF_INET) as probe:
+        probe.setsockopt(socket.SOL_SOCKET, socket.SO_REUSEADDR, 1)
         try:
             probe.bind((host, port))
         except OSError as err:
@@ -523,6 +526,7 @@ def serve(args: argparse.Namespace) -> int:
     import os
 
     import uvicorn
+    from sqlalchemy.engine import make_url
 
     from server import app as app_module
     from server.settings import (ENV_ALLOWED_HOSTS, ENV_CORS_ORIGINS, ENV_DB_URL, ENV_MIGRATE,
@@ -552,6 +556,8 @@ def serve(args: argparse.Namespace) -> int:
     settings = application.state.settings
     shown = "localhost" if args.host in ("0.0.0.0", "::") else args.host
     base = f"http://{'[::1]' if shown == '::1' else shown}:{args.port}"
+    shown_db = make_url(settings.db_url).render_as_string(hide_password=True)  # no password
+    print(f"pendant: database: {shown_db}", file=sys.stderr)
     if args.no_auth:
         print("pendant: WARNING: --no-auth: NO LOGIN. Anyone who can reach this port may move "
               "the robot and change every frame. A demo on loopback only.", file=sys.stderr)
@@ -562,6 +568,9 @@ def serve(args: argparse.Namespace) -> int:
               f"(valid 24 h, shown only now; API: Authorization: Bearer {t}).\n"
               f"More users: pendant users add NAME --role Expert; pendant tokens create NAME",
               file=sys.stderr)
+    else:
+        print(f"pendant: serving {base}; a login link for the Administrator: "
+              f"pendant tokens create admin --db '{shown_db}'", file=sys.stderr)
     workers = start_job_workers(settings.db_url, args)  # the schema is current by now
     face = (start_beside(args.host, args.opcua_port, settings.db_url, auth=settings.auth)
             if args.opcua_port else None)
