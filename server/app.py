@@ -25,7 +25,7 @@ from db.session import (current_revision, make_engine, make_sessionmaker, migrat
                         schema_status, upgrade, write_session)
 from emulator import DEMO_ROBOT, home_joints
 from server import __version__, deps, errors, external, idempotency
-from server.auth import audit, guard, tokens
+from server.auth import audit, guard, openapi, tokens
 from server.auth import routes as auth_routes
 from server.auth.web import SiteGuard
 from server.events.dispatcher import Dispatcher, WebhookSink
@@ -183,6 +183,7 @@ def create_app(settings: Settings | None = None) -> FastAPI:
     if settings.demo_controller:
         ensure_demo(app)
     _mount_web(app, Path(settings.web_dir))
+    openapi.install(app)  # bearer and cookie + CSRF in /docs (server.auth.openapi)
     return app
 
 

@@ -43,3 +43,40 @@ def test_api_docs_render_with_the_network_off(chromium, site):  # noqa: ANN001
         assert not errors, errors
     finally:
         context.close()
+
+
+def test_docs_authorize_then_try_it_out_changes_a_slot(chromium, site):  # noqa: ANN001
+    """``/docs`` as a client (issue 27): *Authorize* with an API token, then *Try it out* on
+    ``PUT /controllers/{id}/tools/{number}``: the slot is changed (200), as the API reads it."""
+    import httpx
+
+    from api_helpers import ADMIN_TOKEN
+
+    context = chromium.new_context(viewport=VIEWPORT)
+    context.set_default_timeout(15_000)
+    page = context.new_page()
+    try:
+        page.goto(site + "/docs")
+        page.locator(".swagger-ui .btn.authorize").first.click()
+        bearer = page.locator(".auth-container", has_text="bearer")
+        bearer.locator("input").first.fill(ADMIN_TOKEN)
+        bearer.locator("button.authorize").click()  # "Authorize" (aria-label: Apply credentials)
+        page.locator(".auth-btn-wrapper .btn-done").first.click()  # "Close"
+        op = page.locator(".opblock-put").filter(
+            has=page.locator('[data-path="/controllers/{controller_id}/tools/{number}"]'))
+        op.locator(".opblock-summary").first.click()
+        op.get_by_role("button", name="Try it out").click()
+        op.locator('tr[data-param-name="controller_id"] input').fill("1")
+        op.locator('tr[data-param-name="number"] input').fill("7")
+        op.locator('tr[data-param-name="If-Match"] input').fill("*")
+        op.locator("textarea.body-param__text").fill(
+            '{"name": "from-docs", "pose": {"x": 1, "y": 2, "z": 150, "a": 0, "b": 0, "c": 0}}')
+        op.get_by_role("button", name="Execute").click()
+        status = op.locator(".live-responses-table tbody .response-col_status").first
+        status.wait_for()
+        assert status.inner_text().strip().startswith("200"), status.inner_text()
+    finally:
+        context.close()
+    slot = httpx.get(f"{site}/controllers/1/tools/7",
+                     headers={"Authorization": f"Bearer {ADMIN_TOKEN}"}).json()
+    assert slot["name"] == "from-docs" and slot["pose"]["z"] == 150
