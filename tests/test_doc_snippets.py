@@ -6,8 +6,9 @@ a variable an earlier one set, as a reader's shell would), in a scratch folder t
 the repository (``docs/`` is a copy, so a snippet may write there). When a document talks to
 ``http://127.0.0.1:8000``, the real service runs on a fresh SQLite file at a free port and
 the test writes that port in place of 8000; ``PENDANT_DB_URL`` points the CLI at the same
-file, and ``TOKEN`` / ``PENDANT_TOKEN`` hold its first Administrator's token (the login link's
-token a reader has after the first start). A snippet passes when bash exits 0 and nothing printed a traceback or a refused
+file (the reader's default database), and ``TOKEN`` holds its first Administrator's token (the
+login link's token a reader has after the first start); no other ``PENDANT_*`` variable is
+set, so a snippet whose CLI command needs ``PENDANT_TOKEN`` sets it where the reader sees it. A snippet passes when bash exits 0 and nothing printed a traceback or a refused
 request (``"detail"``).
 
 **Illustrative snippets.** A snippet that cannot run as written (the set-up itself, one that
@@ -101,10 +102,11 @@ def test_the_shell_snippets_of_a_document_run(document: Path, tmp_path: Path):
     db_url = f"sqlite:///{tmp_path / 'pendant.db'}"
     from api_helpers import ADMIN_TOKEN
 
-    # the reader's shell holds the first start's token as TOKEN (docs/api.md, Authentication);
-    # the CLI's service commands read it as PENDANT_TOKEN
-    env = {**os.environ, "PYTHONPATH": str(ROOT), "PENDANT_DB_URL": db_url,
-           "TOKEN": ADMIN_TOKEN, "PENDANT_TOKEN": ADMIN_TOKEN}
+    # the reader's shell holds the first start's token as TOKEN (docs/api.md, Authentication),
+    # and nothing else: a snippet whose CLI command reads PENDANT_TOKEN sets it visibly (it
+    # once did not, and passed here because this test set it for the reader)
+    env = {k: v for k, v in os.environ.items() if not k.startswith("PENDANT_")}
+    env.update({"PYTHONPATH": str(ROOT), "PENDANT_DB_URL": db_url, "TOKEN": ADMIN_TOKEN})
     if shutil.which("pendant") is None:  # the console script of `pip install -e .`
         bin_dir = tmp_path / "bin"
         bin_dir.mkdir()
