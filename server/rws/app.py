@@ -31,6 +31,7 @@ from typing import Any
 from urllib.parse import parse_qs, urlparse
 
 import numpy as np
+from pydantic import ValidationError
 from sqlalchemy.orm import Session, sessionmaker
 from starlette.applications import Starlette
 from starlette.concurrency import run_in_threadpool
@@ -200,6 +201,10 @@ async def call(fn, *args: Any, **kw: Any) -> Any:  # noqa: ANN001
         raise RwsError(409, E_STALE, str(err)) from None
     except crud.NotFound as err:
         raise RwsError(404, E_NOT_FOUND, str(err)) from None
+    except ValidationError as err:  # the API's own bounds (EntryIn)
+        e = err.errors()[0]
+        raise RwsError(400, E_VALUE, f"value.{'.'.join(str(x) for x in e['loc'])}: "
+                       f"{e['msg']}") from None
     except CalibrationError as err:  # FormatError too: the field and the reason
         loc = ".".join(str(x) for x in err.loc)
         raise RwsError(400, E_VALUE, f"{loc}: {err.reason}") from None

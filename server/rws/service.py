@@ -28,7 +28,12 @@ class Running:
             self._started.set()
             return
         self._started.set()
-        self.loop.run_forever()
+        try:
+            self.loop.run_forever()
+        finally:
+            self.loop.run_until_complete(self.loop.shutdown_asyncgens())
+            self.loop.run_until_complete(self.loop.shutdown_default_executor())
+            self.loop.close()
 
     def wait_started(self, timeout_s: float = 30.0) -> None:
         if not self._started.wait(timeout_s):
@@ -38,8 +43,14 @@ class Running:
 
     def stop(self, timeout_s: float = 10.0) -> None:
         async def stopping() -> None:
-            await self._stop()
-            self.loop.stop()
+            try:
+                await self._stop()
+            finally:  # every connection's task ends here, in its loop, before the loop stops
+                others = [t for t in asyncio.all_tasks() if t is not asyncio.current_task()]
+                for t in others:
+                    t.cancel()
+                await asyncio.gather(*others, return_exceptions=True)
+                self.loop.stop()
 
         self.loop.call_soon_threadsafe(lambda: self.loop.create_task(stopping()))
         self.thread.join(timeout_s)
