@@ -159,14 +159,88 @@ def test_bad_input_gets_rws_errors_and_service_goes_on(cell: dict) -> None:
 def test_rws_password_cli_stores_only_the_ha1(cell: dict, tmp_path) -> None:  # noqa: ANN001
     """``pendant users rws-password NAME`` reads the secret from stdin and stores its HA1."""
     db_url = cell["rest"].app.state.settings.db_url
-    r = subprocess.run([sys.executable, "-m", "server.cli", "users", "rws-password", "operator",
+    ok(cell["rest"].post("/users", json={"name": "cli-user", "role": "Operator"}))
+    with cell["maker"]() as db:
+        ops.set_rws_ha1(db, "cli-user", digest.ha1("cli-user", "first-secret"))
+        db.commit()
+    assert client(cell, "cli-user", "first-secret").get_operation_mode() == "MANR"
+    r = subprocess.run([sys.executable, "-m", "server.cli", "users", "rws-password", "cli-user",
                         "--db", db_url], input="new-secret\n", capture_output=True, text=True,
                        timeout=120)
     assert r.returncode == 0, r.stderr
-    assert ops.rws_ha1(cell["maker"], "operator") == digest.ha1("operator", "new-secret")
-    assert client(cell, "operator", "new-secret").get_operation_mode() == "MANR"
+    assert ops.rws_ha1(cell["maker"], "cli-user") == digest.ha1("cli-user", "new-secret")
+    assert client(cell, "cli-user", "new-secret").get_operation_mode() == "MANR"
     with pytest.raises(rws.ABBException, match="wrong digest"):
-        client(cell, "operator").get_operation_mode()
+        client(cell, "cli-user", "first-secret").get_operation_mode()
     r = subprocess.run([sys.executable, "-m", "server.cli", "users", "rws-password", "nobody",
                         "--db", db_url], input="x\n", capture_output=True, text=True, timeout=120)
     assert r.returncode == 2 and "nobody" in r.stderr
+
+
+def test_file_service_reads_the_export_and_a_put_imports(cell: dict) -> None:
+    """read_file gives the module as REST's export; upload_file imports it (a changed tool
+    shows in REST); a module that does not parse is refused whole, and an Operator may not
+    import."""
+    rest, cid = cell["rest"], cell["cid"]
+    c = client(cell)
+    text = c.read_file("$HOME/CalibData.mod").decode()
+    r = rest.get(f"/controllers/{cid}/export", params={"format": "abb"})
+    assert r.status_code == 200 and text == r.text
+    assert [f for f in c.list_files("$HOME")] == ["CalibData.mod"]
+    new = text.replace("PERS tooldata tool1:=[TRUE,[[1.5,-2,180.25]",
+                       "PERS tooldata tool1:=[TRUE,[[1.5,-2,181.75]")
+    assert new != text
+    c.upload_file("$HOME/CalibData.mod", new.encode())
+    assert ok(rest.get(f"/controllers/{cid}/tools/1"))["pose"]["z"] == 181.75
+    history = ok(rest.get(f"/controllers/{cid}/tools/1/history"))
+    assert history[-1]["reason"] == "import"
+    before = ok(rest.get(f"/controllers/{cid}/tools/1"))
+    with pytest.raises(Exception, match="Bad Request"):
+        c.upload_file("$HOME/CalibData.mod", new.replace("ENDMODULE", "").encode())
+    r = requests.put(f"{cell['url']}/fileservice/$HOME/CalibData.mod", data=text.encode(),
+                     auth=requests.auth.HTTPDigestAuth("operator", PASSWORD["operator"]))
+    assert r.status_code == 403 and "data:import" in r.json()["_embedded"]["status"]["msg"]
+    assert ok(rest.get(f"/controllers/{cid}/tools/1")) == before
+
+
+def test_subscription_sees_a_rest_edit(cell: dict) -> None:
+    """A PERS subscription (robapi2_subscription WebSocket) gets tool4's new value when
+    REST edits the slot."""
+    got: queue.Queue = queue.Queue()
+    c = client(cell)
+    sub = c.subscribe([rws.SubscriptionResourceRequest(rws.SubscriptionResourceType.PersVar,
+                                                       rws.SubscriptionResourcePriority.High,
+                                                       "tool4")], got.put)
+    try:
+        path = f"/controllers/{cell['cid']}/tools/4"
+        value = None
+        for k in range(50):  # until the socket is open, every edit is a new value
+            ok(edit_slot(cell["rest"], path, {"pose": {"z": 40.0 + k}}))
+            try:
+                event = got.get(timeout=1.0)
+            except queue.Empty:
+                continue
+            if isinstance(event, rws.VariableValue):
+                value = event.value
+                break
+        assert value is not None and value.startswith("[TRUE,[[0,0,")
+        z = float(value.split("[[0,0,")[1].split("]")[0])
+        assert z == ok(cell["rest"].get(path))["pose"]["z"]
+    finally:
+        sub.close()
+
+
+def test_oversize_and_stalled_requests_do_not_stall_the_face(cell: dict) -> None:
+    """A body beyond 64 KiB is refused in RWS's error shape; a client that sends half a
+    request holds up no one else."""
+    auth = requests.auth.HTTPDigestAuth("expert", PASSWORD["expert"])
+    r = requests.post(f"{cell['url']}/rw/rapid/symbol/data/RAPID/T_ROB1/tool1?action=set&json=1",
+                      data={"value": "[" * 70000}, auth=auth)
+    assert r.status_code == 413 and r.json()["_embedded"]["status"]["code"] < 0
+    host, port = cell["url"].removeprefix("http://").split(":")
+    import socket
+
+    with socket.create_connection((host, int(port)), timeout=10) as half:
+        half.sendall(b"POST /rw/rapid/symbol/data/RAPID/T_ROB1/tool1?action=set HTTP/1.1\r\n"
+                     b"Host: x\r\nContent-Length: 100\r\n\r\nvalue=")
+        assert client(cell).get_operation_mode() == "MANR"
