@@ -11,9 +11,9 @@ import time
 from collections.abc import Iterator
 
 import pytest
-
 from api_helpers import C, edit_slot, make_client, ok
 from browser_helpers import free_port
+
 from server.kvp import server as kvp
 from server.kvp.server import KvpFace, serve_in_thread
 
@@ -39,7 +39,7 @@ def cell(tmp_path_factory: pytest.TempPathFactory) -> Iterator[dict]:
             running.stop()
 
 
-def connect(cell: dict) -> "openshowvar":
+def connect(cell: dict) -> openshowvar:
     c = openshowvar("127.0.0.1", cell["port"])
     return c
 
@@ -162,7 +162,7 @@ def test_bad_input_gets_the_protocols_error(cell: dict) -> None:
     assert ok(cell["rest"].get(f"{C}/tools/5")) == before
 
 
-def test_oversize_and_half_sent_messages_never_stall_the_face(cell: dict, monkeypatch) -> None:  # noqa: ANN001
+def test_oversize_and_half_sent_messages_never_stall_the_face(cell: dict, monkeypatch) -> None:
     """An oversize message gets its error and the connection closes; a half-sent one is
     closed after the frame timeout; meanwhile another client is served."""
     monkeypatch.setattr(kvp, "FRAME_TIMEOUT_S", 1.0)

@@ -13,9 +13,9 @@ from collections.abc import Iterator
 import numpy as np
 import pytest
 import requests
-
 from api_helpers import edit_slot, make_client, ok
 from browser_helpers import free_port
+
 from server.rws import digest, ops
 from server.rws.app import RwsFace, create_rws_app
 from server.rws.service import serve_asgi
@@ -50,7 +50,7 @@ def cell(tmp_path_factory: pytest.TempPathFactory) -> Iterator[dict]:
             face.stop()
 
 
-def client(cell: dict, user: str = "expert", password: str | None = None) -> "rws.RWS":
+def client(cell: dict, user: str = "expert", password: str | None = None) -> rws.RWS:
     return rws.RWS(cell["url"], user, password or PASSWORD[user])
 
 
@@ -143,6 +143,7 @@ def test_bad_input_gets_rws_errors_and_service_goes_on(cell: dict) -> None:
     """Unknown symbol, malformed literal, wrong type: the RWS error naming the field; the
     slot is untouched and the next request is served."""
     c = client(cell)
+    c.set_rapid_variable("tool1", TOOL)
     with pytest.raises(rws.ABBException, match="no symbol"):
         c.get_rapid_variable("no_such_tool")
     with pytest.raises(rws.ABBException, match="value"):
@@ -156,7 +157,7 @@ def test_bad_input_gets_rws_errors_and_service_goes_on(cell: dict) -> None:
     assert c.get_rapid_variable("tool1").startswith("[TRUE,[[1.5,-2,180.25]")
 
 
-def test_rws_password_cli_stores_only_the_ha1(cell: dict, tmp_path) -> None:  # noqa: ANN001
+def test_rws_password_cli_stores_only_the_ha1(cell: dict, tmp_path) -> None:
     """``pendant users rws-password NAME`` reads the secret from stdin and stores its HA1."""
     db_url = cell["rest"].app.state.settings.db_url
     ok(cell["rest"].post("/users", json={"name": "cli-user", "role": "Operator"}))
@@ -165,7 +166,7 @@ def test_rws_password_cli_stores_only_the_ha1(cell: dict, tmp_path) -> None:  # 
         db.commit()
     assert client(cell, "cli-user", "first-secret").get_operation_mode() == "MANR"
     r = subprocess.run([sys.executable, "-m", "server.cli", "users", "rws-password", "cli-user",
-                        "--db", db_url], input="new-secret\n", capture_output=True, text=True,
+                        "--db", db_url], input="new-secret\n", check=False, capture_output=True, text=True,
                        timeout=120)
     assert r.returncode == 0, r.stderr
     assert ops.rws_ha1(cell["maker"], "cli-user") == digest.ha1("cli-user", "new-secret")
@@ -173,7 +174,7 @@ def test_rws_password_cli_stores_only_the_ha1(cell: dict, tmp_path) -> None:  # 
     with pytest.raises(rws.ABBException, match="wrong digest"):
         client(cell, "cli-user", "first-secret").get_operation_mode()
     r = subprocess.run([sys.executable, "-m", "server.cli", "users", "rws-password", "nobody",
-                        "--db", db_url], input="x\n", capture_output=True, text=True, timeout=120)
+                        "--db", db_url], input="x\n", check=False, capture_output=True, text=True, timeout=120)
     assert r.returncode == 2 and "nobody" in r.stderr
 
 
@@ -183,6 +184,7 @@ def test_file_service_reads_the_export_and_a_put_imports(cell: dict) -> None:
     import."""
     rest, cid = cell["rest"], cell["cid"]
     c = client(cell)
+    c.set_rapid_variable("tool1", TOOL)
     text = c.read_file("$HOME/CalibData.mod").decode()
     r = rest.get(f"/controllers/{cid}/export", params={"format": "abb"})
     assert r.status_code == 200 and text == r.text

@@ -13,7 +13,6 @@ import time
 from pathlib import Path
 
 import pytest
-
 from browser_helpers import free_port
 
 rws = pytest.importorskip("abb_robot_client.rws")
@@ -21,9 +20,9 @@ openshowvar = pytest.importorskip("py_openshowvar").openshowvar
 ROOT = Path(__file__).resolve().parent.parent
 
 
-def pendant(*args: str, **kw) -> subprocess.CompletedProcess:  # noqa: ANN003
+def pendant(*args: str, **kw) -> subprocess.CompletedProcess:
     env = {**os.environ, "PYTHONPATH": f"{ROOT}{os.pathsep}{os.environ.get('PYTHONPATH', '')}"}
-    return subprocess.run([sys.executable, "-m", "server.cli", *args], capture_output=True,
+    return subprocess.run([sys.executable, "-m", "server.cli", *args], check=False, capture_output=True,
                           text=True, env=env, timeout=120, **kw)
 
 

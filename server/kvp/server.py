@@ -22,9 +22,13 @@ import ipaddress
 import logging
 import struct
 from dataclasses import dataclass, field
+from typing import TYPE_CHECKING
 
 from server.kvp import variables
 from server.rws import ops
+
+if TYPE_CHECKING:
+    from server.rws.service import Running
 
 log = logging.getLogger("pendant.kvp")
 MAX_CONTENT = 4096  # bytes after the length field: a name and a value (KVP's own are < 1 KB)
@@ -135,9 +139,9 @@ class KvpFace:
         self.connections += 1
         try:
             await self._serve(reader, writer, client)
-        except (asyncio.IncompleteReadError, ConnectionError, asyncio.TimeoutError):
+        except (TimeoutError, asyncio.IncompleteReadError, ConnectionError):
             pass  # the client left, or stalled mid-message: its connection ends, nothing else
-        except Exception:  # noqa: BLE001 - one connection's fault never reaches the others
+        except Exception:
             log.exception("kvp: connection from %s ended by an error", client)
         finally:
             self.connections -= 1
@@ -166,7 +170,7 @@ class KvpFace:
             await writer.drain()
 
 
-def serve_in_thread(face: KvpFace, host: str, port: int) -> "Running":
+def serve_in_thread(face: KvpFace, host: str, port: int) -> Running:
     """The face on ``host:port`` in a thread and event loop of its own (beside REST)."""
     from server.rws.service import Running
 

@@ -43,9 +43,9 @@ from starlette.websockets import WebSocket, WebSocketDisconnect
 from db import crud
 from server.formats import abb
 from server.rws import digest, ops, rapid
+from server.schemas import EntryIn
 from solvers.errors import CalibrationError
-from solvers.frames import abb_from_matrix
-from solvers.frames import invert
+from solvers.frames import abb_from_matrix, invert
 
 log = logging.getLogger("pendant.rws")
 MAX_BODY = 64 * 1024  # bytes of a form or a file a client may send
@@ -166,7 +166,7 @@ class _Stale(RwsError):
         super().__init__(401, E_AUTH, msg)
 
 
-def guarded(face: RwsFace, handler):  # noqa: ANN001, ANN201
+def guarded(face: RwsFace, handler):
     """A route handler with Digest auth, RWS errors and the session cookie."""
     async def endpoint(request: Request) -> Response:
         try:
@@ -191,7 +191,7 @@ def guarded(face: RwsFace, handler):  # noqa: ANN001, ANN201
     return endpoint
 
 
-async def call(fn, *args: Any, **kw: Any) -> Any:  # noqa: ANN001
+async def call(fn, *args: Any, **kw: Any) -> Any:
     """An ops call in a thread, its exceptions as RWS errors."""
     try:
         return await run_in_threadpool(fn, *args, **kw)
@@ -267,8 +267,6 @@ def _set_symbol(face: RwsFace, who: ops.Caller, sym: rapid.Symbol, value: str) -
     parsed = rapid.parse_value(sym, value)
     cid = face.controller_id()
     if sym.dtype == "loaddata":  # the load of a robot-held work object
-        from server.schemas import EntryIn
-
         if parsed is None:
             body, clear = EntryIn(), True
         else:
@@ -416,7 +414,7 @@ async def logout(face: RwsFace, request: Request, who: ops.Caller) -> Response:
 
 def _module_file(face: RwsFace, who: ops.Caller) -> tuple[str, str]:
     text = ops.export(face.make_session, who, face.controller_id(), "abb")
-    m = abb._MODULE.search(text)  # noqa: SLF001
+    m = abb._MODULE.search(text)
     return (m.group(1) if m else rapid.DEFAULT_MODULE) + ".mod", text
 
 
@@ -522,7 +520,7 @@ async def poll(face: RwsFace, ws: WebSocket) -> None:
             first = False
             try:
                 await asyncio.wait_for(ws.receive_text(), POLL_S)
-            except asyncio.TimeoutError:
+            except TimeoutError:
                 pass
     except WebSocketDisconnect:
         pass
@@ -548,7 +546,7 @@ async def _ws_caller(face: RwsFace, ws: WebSocket) -> ops.Caller:
 
 def create_rws_app(face: RwsFace) -> Starlette:
     """The Starlette app of the face."""
-    def r(path: str, handler, methods: list[str]) -> Route:  # noqa: ANN001
+    def r(path: str, handler, methods: list[str]) -> Route:
         return Route(path, guarded(face, handler), methods=methods)
 
     async def ws_endpoint(ws: WebSocket) -> None:

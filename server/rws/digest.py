@@ -89,7 +89,7 @@ class Verdict:
         self.user, self.reason, self.stale = user, reason, stale
 
 
-def verify(params: dict[str, str], method: str, ha1_of, seen: Seen) -> Verdict:  # noqa: ANN001
+def verify(params: dict[str, str], method: str, ha1_of, seen: Seen) -> Verdict:
     """Check a Digest response: ``ha1_of(name)`` gives the stored HA1 (or None)."""
     need = ("username", "realm", "nonce", "uri", "response")
     missing = [k for k in need if not params.get(k)]

@@ -26,7 +26,7 @@ from db.session import write_session
 from server import controller_files, formats
 from server.auth import audit, tokens
 from server.auth.permissions import C, required
-from server.routers.common import active_frames, entry_matrix, robot_of
+from server.routers.common import active_frames, robot_of
 from server.routers.tables import edit_values
 from server.schemas import EntryIn
 from solvers.dh import forward_kinematics
@@ -45,7 +45,7 @@ IMPORT = required("POST", C + "/import")
 class Refused(Exception):
     """The caller's role lacks the permission (REST's 403)."""
 
-    def __init__(self, permission: str, caller: "Caller"):
+    def __init__(self, permission: str, caller: Caller):
         super().__init__(f"needs permission {permission}; {caller.name} acts as {caller.role}")
         self.permission = permission
 
@@ -267,8 +267,3 @@ def entry_body(fe: formats.FrameEntry, name: str | None = None) -> tuple[EntryIn
                    load=load, mech_unit=fe.mech_unit)
     return body, fe.load is None and fe.kind in formats.LOADED
 
-
-__all__ = ["Caller", "Refused", "Stale", "Slot", "RobotState", "caller", "no_auth_caller",
-           "rws_ha1", "set_rws_ha1", "controller_id", "slots", "slot", "export", "robot",
-           "frame_matrix", "tcp_in", "commit_slot", "set_active", "import_file", "entry_body",
-           "entry_matrix"]
