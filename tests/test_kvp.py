@@ -210,3 +210,22 @@ def test_only_allowed_clients_are_served(cell: dict) -> None:
     face = KvpFace(None, "cellpc", allowed=("10.1.2.3",))  # type: ignore[arg-type]
     assert face.allows("127.0.0.1") and face.allows("::1") and face.allows("10.1.2.3")
     assert not face.allows("10.1.2.4") and not face.allows(None)
+
+
+def test_a_revoked_user_ends_the_faces_answers(cell: dict) -> None:
+    """The face acts as its user as the database has it now: revoked, every message is
+    refused naming why."""
+    rest = cell["rest"]
+    ok(rest.post("/users", json={"name": "leaver", "role": "Expert"}))
+    port = free_port()
+    running = serve_in_thread(KvpFace(rest.app.state.sessionmaker, "leaver"), "127.0.0.1", port)
+    try:
+        with socket.create_connection(("127.0.0.1", port), timeout=10) as s:
+            s.sendall(raw(port, 1, 0, b"$OV_PRO"))
+            assert answer_of(s) == (1, "100", True)
+            assert rest.delete("/users/leaver").status_code < 300
+            s.sendall(raw(port, 2, 0, b"$OV_PRO"))
+            msg_id, text, good = answer_of(s)
+            assert (msg_id, good) == (2, False) and "revoked" in text
+    finally:
+        running.stop()

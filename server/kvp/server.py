@@ -100,7 +100,8 @@ class KvpFace:
             return ops.no_auth_caller("kvp", client)
         found = ops.caller(self.make_session, self.user or "", "kvp", client)
         if found is None:
-            raise ops.Refused("a user", ops.Caller(str(self.user), "none", frozenset(), "kvp"))
+            raise LookupError(f"the face's user {self.user!r} is unknown or revoked "
+                              "(pendant serve --kvp-user)")
         return found
 
     def allows(self, host: str | None) -> bool:
