@@ -129,6 +129,15 @@ def test_jointtarget_and_robtarget_follow_a_rest_jog(cell: dict) -> None:
     assert rt.trans == pytest.approx([tcp["x"], tcp["y"], tcp["z"]], abs=1e-4)
     q = abb_from_matrix(Pose(*(tcp[k] for k in "xyzabc")).as_matrix())[1]
     assert abs(float(np.dot(rt.rot, q))) == pytest.approx(1.0, abs=1e-8)
+    # in a work object: the TCP REST shows with that base active
+    c.set_rapid_variable("wobj5", "[FALSE,TRUE,\"\",[[400,-50,20],[0.9659258262890683,0,0,"
+                         "0.25881904510252074]],[[0,0,0],[1,0,0,0]]]")
+    ok(rest.put(f"/controllers/{cid}/robot/active", json={"tool_no": 1, "base_no": 5}))
+    tcp = ok(rest.get(f"/controllers/{cid}/robot"))["tcp_pose"]
+    rt = c.get_robtarget(tool="tool1", wobj="wobj5", coordinate="Wobj")
+    assert rt.trans == pytest.approx([tcp["x"], tcp["y"], tcp["z"]], abs=1e-4)
+    with pytest.raises(rws.ABBException, match="coordinate"):
+        c.get_robtarget(tool="tool1", wobj="wobj5", coordinate="Tool")
 
 
 def test_panel_and_execution_states(cell: dict) -> None:
