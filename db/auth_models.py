@@ -37,6 +37,9 @@ class User(Base):
     role: Mapped[str] = mapped_column(ForeignKey("auth_role.name"))
     created_at: Mapped[datetime] = mapped_column(default=utcnow)
     revoked_at: Mapped[datetime | None]
+    # revision 0009: the RWS face's HTTP Digest secret, kept as its HA1 =
+    # MD5("name:realm:password") (server/rws/digest.py; pendant users rws-password NAME)
+    rws_ha1: Mapped[str | None] = mapped_column(String(64))
 
 
 class ApiToken(Base):

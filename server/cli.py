@@ -2,7 +2,9 @@
 
     pendant serve [--host 127.0.0.1] [--port 8000] [--db URL] [--workers N] [--no-migrate]
                   [--job-workers 2] [--allow-host NAME] [--cors-origin URL] [--no-auth]
-                  [--opcua-port 4840]
+                  [--opcua-port 4840] [--rws-port 8610 [--rws-controller NAME]]
+                  [--kvp-port 7000 --kvp-user NAME [--kvp-controller NAME] [--kvp-host ADDR]
+                   [--kvp-allow ADDR]]
     pendant db upgrade [--db URL]
     pendant opcua [--host 127.0.0.1] [--port 4840] [--db URL]
     pendant worker [--processes 2] [--db URL] [--job-time-s 600] [--job-memory-mb 2048]
@@ -48,6 +50,7 @@ from server.auth.cli import add_auth_commands
 from server.slot_cli import add_slot_command
 from server.methods import METHODS, MethodInputs, TaughtData
 from server.opcua.cli import add_opcua_commands, start_beside
+from server.rws.cli import add_face_arguments, start_faces
 from server.schemas import ReportOut
 from server.settings import ENV_PARENT_PID, parent_pid
 from solvers.errors import CalibrationError
@@ -246,6 +249,7 @@ def build_parser() -> argparse.ArgumentParser:
     s.add_argument("--opcua-port", type=int, metavar="PORT",
                    help="also serve the OPC UA face on this port (a process of its own on the "
                         "same database; docs/opcua.md)")
+    add_face_arguments(s)
 
     c = sub.add_parser("calibrate",
                        help="solve a calibration menu from taught poses in a JSON/CSV file",
@@ -575,6 +579,13 @@ def serve(args: argparse.Namespace) -> int:
     face = (start_beside(args.host, args.opcua_port, settings.db_url, auth=settings.auth)
             if args.opcua_port else None)
     try:
+        controller_faces = start_faces(args, application.state.sessionmaker, settings.auth)
+    except BaseException:
+        for child in (workers, face):
+            if child is not None:
+                child.terminate()
+        raise
+    try:
         if args.workers == 1:
             application.state.freeze_gc = True  # a service process (server.app.lifespan)
             _serve(application, args.host, args.port)
@@ -591,6 +602,8 @@ def serve(args: argparse.Namespace) -> int:
                         timeout_worker_healthcheck=WORKER_HEALTHCHECK_S)
     finally:
         signal.signal(signal.SIGINT, signal.SIG_IGN)  # stopping: one more Ctrl-C changes nothing
+        for running in controller_faces:
+            running.stop()
         for child in (workers, face):
             if child is not None:
                 child.terminate()

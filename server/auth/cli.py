@@ -4,6 +4,7 @@
     pendant users list [--db URL]                      Administrator or a site role)
     pendant users revoke NAME [--db URL]
     pendant users cert NAME FILE [--days 365] [--db URL]   (an OPC UA certificate login)
+    pendant users rws-password NAME [--db URL]         (the RWS face's Digest secret, as HA1)
     pendant tokens create NAME [--days 90 | --no-expiry] [--label TEXT] [--db URL]
     pendant tokens list [NAME] [--db URL]              (ids, labels, expiry; never a secret)
     pendant tokens revoke ID [--db URL]
@@ -72,6 +73,13 @@ def run_users(args: Any) -> int:
                                     "opcua certificate", secret=tokens.certificate_secret(der))
                 print(f"certificate {args.file.name} logs {args.name} in over OPC UA "
                       f"(valid {args.days:g} days; pendant users revoke ends it)")
+            elif args.action == "rws-password":
+                from server.rws import digest, ops
+
+                tokens.get_user(db, args.name)  # an unknown user before the password prompt
+                ops.set_rws_ha1(db, args.name, digest.ha1(args.name, _new_password()))
+                print(f"{args.name} logs in to the RWS face with that password (stored as "
+                      "its Digest HA1)")
             else:
                 print(f"{'id':>4}  {'name':24s} {'role':16s} {'created (UTC)':20s} revoked")
                 for u in tokens.list_users(db):
@@ -81,6 +89,19 @@ def run_users(args: Any) -> int:
         except (ValueError, StateConflict, OSError) as err:
             return _fail(err)
     return 0
+
+
+def _new_password() -> str:
+    """The new RWS password: asked twice on a terminal, else the first line of stdin."""
+    if sys.stdin.isatty():
+        first = getpass.getpass("RWS password: ")
+        if first != getpass.getpass("again: "):
+            raise ValueError("password: the two entries differ")
+    else:
+        first = sys.stdin.readline().rstrip("\r\n")
+    if len(first) < 8:
+        raise ValueError("password: at least 8 characters")
+    return first
 
 
 def certificate_der(path: Path) -> bytes:
@@ -158,7 +179,10 @@ def add_auth_commands(subparsers: Any) -> None:
     ce.add_argument("name")
     ce.add_argument("file", type=Path, help="the client's X.509 certificate (PEM or DER)")
     ce.add_argument("--days", type=float, default=365.0, help="how long it logs in (365)")
-    for p in (a, us.choices["list"], r, ce):
+    rp = us.add_parser("rws-password", help="set a user's password for the RWS face (HTTP "
+                       "Digest; read from stdin or asked twice; docs/rws.md)")
+    rp.add_argument("name")
+    for p in (a, us.choices["list"], r, ce, rp):
         p.add_argument("--db", help="database URL")
         p.set_defaults(func=run_users)
 

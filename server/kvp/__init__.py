@@ -1,0 +1,1 @@
+"""The KVP face: KUKAVARPROXY's protocol over the KUKA-kind controllers' frames (docs/kvp.md)."""

@@ -1,0 +1,208 @@
+"""The KRL variables the KVP face serves, read and written in KRL's literal syntax.
+
+Values print as a KRC4 prints them through KUKAVARPROXY (``{FRAME: X 0.0, Y ...}``, a
+``"name"``, an ``INT``); a write takes the same syntax, with or without the type prefixes,
+and a partial aggregate (``{X 12.5}``) changes only the components it names, as a KRL
+assignment does. Every read and write goes through :mod:`server.rws.ops`.
+"""
+
+from __future__ import annotations
+
+import re
+from collections.abc import Callable
+from dataclasses import dataclass
+
+import numpy as np
+from pydantic import ValidationError
+
+from server.formats import kuka
+from server.formats.model import FormatError
+from server.rws import ops
+from server.schemas import EntryIn
+from solvers.errors import CalibrationError
+from solvers.frames import Pose, kuka_from_matrix
+
+FRAME_KEYS = ("X", "Y", "Z", "A", "B", "C")
+UNITS = {"X": "mm", "Y": "mm", "Z": "mm", "A": "deg", "B": "deg", "C": "deg"}
+_INDEXED = re.compile(r"^\$?(TOOL_DATA|BASE_DATA|LOAD_DATA|TOOL_NAME|BASE_NAME)\[\s*(\d+)\s*(,\s*)?\]$")
+_PREFIX = re.compile(r"\{\s*[A-Z_0-9]+\s*:", re.IGNORECASE)  # {FRAME: ... -> {...
+SYSTEM = ("$TOOL", "$BASE", "$ACT_TOOL", "$ACT_BASE", "$AXIS_ACT", "$POS_ACT", "$OV_PRO")
+
+
+class KvpError(Exception):
+    """A request the face refuses: the message goes back in the answer's value."""
+
+
+def real(v: float) -> str:
+    return kuka.krl_real(round(float(v), 9) + 0.0)
+
+
+def frame(p: Pose | None, type_name: str = "FRAME") -> str:
+    v = (0.0,) * 6 if p is None else p.as_array()
+    return "{" + f"{type_name}: " + ", ".join(f"{k} {real(x)}" for k, x in zip(FRAME_KEYS, v)) + "}"
+
+
+def load(entry) -> str:
+    ld = None if entry is None else entry.load
+    if ld is None:
+        return ("{LOAD: M -1.0, CM {FRAME: X 0.0, Y 0.0, Z 0.0, A 0.0, B 0.0, C 0.0}, "
+                "J {INERTIA: X 0.0, Y 0.0, Z 0.0}}")
+    cm = frame(Pose(*ld.com_mm, *ld.inertia_axes_deg))
+    j = ", ".join(f"{k} {real(x)}" for k, x in zip("XYZ", ld.inertia_kgm2))
+    return f"{{LOAD: M {real(ld.mass_kg)}, CM {cm}, J {{INERTIA: {j}}}}}"
+
+
+def _aggregate(text: str, fld: str) -> dict[str, object]:
+    """``{FRAME: X 1, ...}`` or ``{X 1, ...}`` (nested too) read by the KUKA import's reader."""
+    try:
+        return kuka._parse_aggregate(_PREFIX.sub("{", text.strip()), 1, fld)
+    except FormatError as err:
+        raise KvpError(f"{'.'.join(str(x) for x in err.loc[2:])}: {err.reason}") from None
+
+
+def _pose_write(text: str, current: Pose | None, fld: str) -> Pose:
+    agg = _aggregate(text, fld)
+    unknown = [k for k in agg if k not in FRAME_KEYS]
+    if unknown:
+        raise KvpError(f"{fld}.{unknown[0]}: unknown component; a FRAME has X, Y, Z, A, B, C")
+    base = dict(zip(FRAME_KEYS, (current or Pose(0, 0, 0, 0, 0, 0)).as_array()))
+    base.update(agg)
+    try:
+        values = kuka._components(base, FRAME_KEYS, UNITS, 1, fld)
+    except FormatError as err:
+        raise KvpError(f"{'.'.join(str(x) for x in err.loc[2:])}: {err.reason}") from None
+    return Pose(*values)
+
+
+def _name_write(text: str, fld: str) -> str:
+    m = re.fullmatch(r'\s*"([^"]*)"\s*', text)
+    if not m:
+        raise KvpError(f'{fld}: expected a quoted name such as "gripper"')
+    return m.group(1).strip()
+
+
+@dataclass
+class Face:
+    """What a variable needs: the service's sessionmaker, the controller, the acting user."""
+
+    maker: ops.Maker
+    controller_id: int
+    who: Callable[[], ops.Caller]  # the configured user as the database has it now
+
+
+def read(face: Face, name: str) -> str:
+    """The value of ``name`` as a KRC4 prints it; KvpError for one pendant does not serve."""
+    var = name.strip().upper()
+    m = _INDEXED.match(var)
+    who = face.who()
+    cid = face.controller_id
+    if m:
+        array, n = m.group(1), int(m.group(2))
+        table = "tool" if array in ("TOOL_DATA", "LOAD_DATA", "TOOL_NAME") else "base"
+        s = _slot(face, who, table, n, var)
+        if array.endswith("_DATA") and array != "LOAD_DATA":
+            return frame(s.entry.pose if s.entry else None)
+        if array == "LOAD_DATA":
+            return load(s.entry)
+        return '"' + (s.entry.name if s.entry else "") + '"'
+    if var not in SYSTEM:
+        raise KvpError(f"{name}: not a variable pendant serves ({', '.join(SYSTEM)}, "
+                       "TOOL_DATA[n], BASE_DATA[n], LOAD_DATA[n], TOOL_NAME[n,], BASE_NAME[n,])")
+    if var == "$OV_PRO":
+        ops.robot(face.maker, who, cid)  # the read permission
+        return "100"
+    state = ops.robot(face.maker, who, cid)
+    if var == "$ACT_TOOL":
+        return str(state.active_tool_no)
+    if var == "$ACT_BASE":
+        return str(state.active_base_no)
+    if var == "$AXIS_ACT":
+        q = list(state.joints_deg) + [0.0] * (6 - len(state.joints_deg))
+        ext = state.external_axes or {}
+        parts = [f"A{i + 1} {real(v)}" for i, v in enumerate(q[:6])]
+        parts += [f"E{i} {real(ext.get(f'E{i}', 0.0))}" for i in range(1, 7)]
+        return "{E6AXIS: " + ", ".join(parts) + "}"
+    if var == "$POS_ACT":
+        p = kuka_from_matrix(state.T_base_tcp_active)
+        q = np.asarray(state.joints_deg, float)
+        turn = sum(1 << i for i, v in enumerate(q[:6]) if v < 0)
+        ext = state.external_axes or {}
+        parts = [f"{k} {real(v)}" for k, v in zip(FRAME_KEYS, p)]
+        parts += ["S 2", f"T {turn}"]
+        parts += [f"E{i} {real(ext.get(f'E{i}', 0.0))}" for i in range(1, 7)]
+        return "{E6POS: " + ", ".join(parts) + "}"
+    table, n = ("tool", state.active_tool_no) if var == "$TOOL" else ("base", state.active_base_no)
+    if n == 0:
+        return frame(None)
+    s = _slot(face, who, table, n, var)
+    return frame(s.entry.pose if s.entry else None)
+
+
+def _slot(face: Face, who: ops.Caller, table: str, n: int, var: str) -> ops.Slot:
+    from db import crud
+
+    if not 1 <= n <= crud.SLOTS[table]:
+        raise KvpError(f"{var}: index {n} out of range 1..{crud.SLOTS[table]}")
+    return ops.slot(face.maker, who, face.controller_id, table, n)
+
+
+def write(face: Face, name: str, value: str) -> str:
+    """Write ``value`` to ``name`` through the service's operations; the value read back."""
+    var = name.strip().upper()
+    who = face.who()
+    cid = face.controller_id
+    m = _INDEXED.match(var)
+    if m:
+        array, n = m.group(1), int(m.group(2))
+        table = "tool" if array in ("TOOL_DATA", "LOAD_DATA", "TOOL_NAME") else "base"
+        s = _slot(face, who, table, n, var)
+        clear = False
+        if array in ("TOOL_DATA", "BASE_DATA"):
+            p = _pose_write(value, s.entry.pose if s.entry else None, var)
+            body = EntryIn(pose={k.lower(): v for k, v in zip(FRAME_KEYS, p.as_array())})
+        elif array == "LOAD_DATA":
+            try:
+                ld = kuka._parse_load(_PREFIX.sub("{", value.strip()), 1, var)
+            except FormatError as err:
+                raise KvpError(f"{'.'.join(str(x) for x in err.loc[2:])}: {err.reason}") \
+                    from None
+            if ld is None:
+                body, clear = EntryIn(), True
+            else:
+                body = EntryIn(load={"mass_kg": ld.mass_kg, "com_mm": list(ld.com_mm),
+                                     "inertia_kgm2": list(ld.inertia_kgm2),
+                                     "inertia_axes_deg": list(ld.inertia_axes_deg)})
+        else:
+            body = EntryIn(name=_name_write(value, var))
+        ops.commit_slot(face.maker, who, cid, table, n, body, clear_load=clear)
+        return read(face, name)
+    if var in ("$ACT_TOOL", "$ACT_BASE"):
+        if not re.fullmatch(r"\s*\d+\s*", value):
+            raise KvpError(f"{var}: expected an INT slot number, got {value[:40]!r}")
+        n = int(value)
+        if var == "$ACT_TOOL":
+            ops.set_active(face.maker, who, cid, tool_no=n)
+        else:
+            ops.set_active(face.maker, who, cid, base_no=n)
+        return read(face, name)
+    if var in SYSTEM:
+        raise KvpError(f"{var}: write-protected (pendant moves the arm and selects frames "
+                       "through $ACT_TOOL, $ACT_BASE and its REST API)")
+    raise KvpError(f"{name}: not a variable pendant serves")
+
+
+def answer(face: Face, name: str, value: str | None) -> tuple[str, bool]:
+    """(value, ok) of a read (``value`` None) or write; every refusal as its message."""
+    try:
+        return (read(face, name) if value is None else write(face, name, value)), True
+    except KvpError as err:
+        return str(err), False
+    except ops.Refused as err:
+        return str(err), False
+    except CalibrationError as err:
+        return f"{'.'.join(str(x) for x in err.loc)}: {err.reason}", False
+    except LookupError as err:  # crud.NotFound: the controller is gone
+        return str(err), False
+    except ValidationError as err:  # the API's own bounds (a name too long, ...)
+        e = err.errors()[0]
+        return f"{name}.{'.'.join(str(x) for x in e['loc'])}: {e['msg']}", False

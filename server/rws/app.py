@@ -1,0 +1,574 @@
+"""The RWS face: ABB Robot Web Services 1.0 (RobotWare 6) for one ABB-kind controller.
+
+``pendant serve --rws-port 8610 [--rws-controller NAME]`` serves it beside REST (docs/rws.md).
+One port serves one controller, as one RobotWare controller answers on its own address: RWS
+paths name no controller, so a client's base URL chooses it.
+
+Resources (``?json=1`` answers as RWS shapes them: ``_embedded._state[...]``; errors as
+``_embedded.status`` with a code and a message):
+
+- ``GET|POST /rw/rapid/symbol/data/RAPID/T_ROB1[/<module>]/<name>[?action=set]`` (value=)
+- ``POST /rw/rapid/symbols?action=search-symbols``
+- ``GET /rw/motionsystem/mechunits/ROB_1/jointtarget`` and ``.../robtarget?tool=&wobj=&coordinate=``
+- ``GET /rw/panel/ctrlstate``, ``/rw/panel/opmode``, ``/rw/panel/speedratio``,
+  ``/rw/rapid/execution``, ``/rw/rapid/tasks``
+- ``GET|PUT /fileservice/$HOME/<module>.mod``: the export; a PUT is an import
+- ``POST /subscription`` and the WebSocket ``/poll/<n>`` (subprotocol ``robapi2_subscription``)
+  for PERS values.
+
+Every request carries HTTP Digest credentials (:mod:`server.rws.digest`); what it may do is
+its user's role, checked by :mod:`server.rws.ops` against REST's permission table.
+"""
+
+from __future__ import annotations
+
+import asyncio
+import html
+import logging
+import secrets
+from dataclasses import dataclass, field
+from typing import Any
+from urllib.parse import parse_qs, urlparse
+
+import numpy as np
+from pydantic import ValidationError
+from sqlalchemy.orm import Session, sessionmaker
+from starlette.applications import Starlette
+from starlette.concurrency import run_in_threadpool
+from starlette.requests import Request
+from starlette.responses import JSONResponse, PlainTextResponse, Response
+from starlette.routing import Route, WebSocketRoute
+from starlette.websockets import WebSocket, WebSocketDisconnect
+
+from db import crud
+from server.formats import abb
+from server.rws import digest, ops, rapid
+from server.schemas import EntryIn
+from solvers.errors import CalibrationError
+from solvers.frames import abb_from_matrix, invert
+
+log = logging.getLogger("pendant.rws")
+MAX_BODY = 64 * 1024  # bytes of a form or a file a client may send
+POLL_S = 0.2  # how often a subscription looks for changed values
+EXTAX_NONE = "9E+09"  # RAPID's "no external axis"
+HOME = "$HOME"
+
+# RWS status codes (RobotWare's HRESULT-style numbers where pendant knows them)
+E_NOT_FOUND = -1073442805  # "symbol not found"
+E_VALUE = -1073442773  # "invalid value / wrong type"
+E_FORBIDDEN = -1073445859  # "not allowed for the user's grants"
+E_AUTH = -1073445864  # "not authorized"
+E_STALE = -1073445870  # "the data changed meanwhile"
+E_NOT_OFFERED = -1073445877  # "resource or action not supported"
+E_LARGE = -1073445876  # "request too large"
+
+
+class RwsError(Exception):
+    def __init__(self, http: int, code: int, msg: str):
+        super().__init__(msg)
+        self.http, self.code, self.msg = http, code, msg
+
+
+@dataclass
+class RwsFace:
+    """The face's settings and the subscriptions it holds."""
+
+    make_session: sessionmaker[Session]
+    controller: str | int | None = None  # name or id; None: the lowest-id ABB controller
+    auth: bool = True
+    seen: digest.Seen = field(default_factory=digest.Seen)
+    sessions: dict[str, str] = field(default_factory=dict)  # ABBCX cookie -> user
+    subscriptions: dict[int, list[str]] = field(default_factory=dict)  # id -> symbol paths
+    sub_owner: dict[int, str] = field(default_factory=dict)
+    next_sub: int = 1
+
+    def controller_id(self) -> int:
+        return ops.controller_id(self.make_session, self.controller, "abb")
+
+
+# ----------------------------------------------------------------------------- answers
+
+def _wants_json(request: Request) -> bool:
+    return request.query_params.get("json") == "1"
+
+
+def _xhtml(states: list[dict[str, Any]], base: str) -> str:
+    items = []
+    for s in states:
+        spans = "".join(f'<span class="{html.escape(k)}">{html.escape(str(v))}</span>'
+                        for k, v in s.items() if not k.startswith("_"))
+        items.append(f'<li class="{html.escape(s.get("_type", ""))}" '
+                     f'title="{html.escape(s.get("_title", ""))}">{spans}</li>')
+    return ('<?xml version="1.0" encoding="utf-8"?><html xmlns="http://www.w3.org/1999/xhtml">'
+            f'<head><base href="{html.escape(base)}"/></head><body><div class="state">'
+            f'<ul>{"".join(items)}</ul></div></body></html>')
+
+
+def answer(request: Request, states: list[dict[str, Any]], status: int = 200) -> Response:
+    base = str(request.base_url).rstrip("/") + request.url.path.rsplit("/", 1)[0] + "/"
+    if _wants_json(request):
+        return JSONResponse({"_links": {"base": {"href": base}},
+                             "_embedded": {"_state": states}}, status_code=status)
+    return Response(_xhtml(states, base), status_code=status,
+                    media_type="application/xhtml+xml")
+
+
+def error(request: Request, err: RwsError, headers: dict[str, str] | None = None) -> Response:
+    base = str(request.base_url)
+    if _wants_json(request) or err.http != 401:
+        body = {"_links": {"base": {"href": base}},
+                "_embedded": {"_state": [], "status": {"code": err.code, "msg": err.msg}}}
+        return JSONResponse(body, status_code=err.http, headers=headers)
+    return PlainTextResponse(err.msg, status_code=err.http, headers=headers)
+
+
+# ------------------------------------------------------------------------------- auth
+
+def _client(request: Request | WebSocket) -> str | None:
+    return request.client.host if request.client else None
+
+
+def _uri(scope: dict[str, Any]) -> str:
+    path = scope.get("raw_path", b"").decode("latin-1") or scope["path"]
+    q = scope.get("query_string", b"").decode("latin-1")
+    return path + ("?" + q if q and "?" not in path else "")
+
+
+async def authenticate(face: RwsFace, request: Request | WebSocket,
+                       method: str) -> ops.Caller:
+    """The caller of a request with valid Digest credentials; RwsError(401) otherwise."""
+    if not face.auth:
+        return ops.no_auth_caller("rws", _client(request))
+    header = request.headers.get("authorization")
+    params = digest.parse(header) if header else None
+    if params is None:
+        raise RwsError(401, E_AUTH, "HTTP Digest credentials required (realm validusers)")
+    uri = _uri(request.scope)
+    parsed = urlparse(uri)  # how requests signs a path with ';' parameters: without them
+    signed_as = parsed.path + ("?" + parsed.query if parsed.query else "")
+    if params.get("uri") not in (uri, signed_as):
+        raise RwsError(401, E_AUTH, "the Digest uri is not this request's")
+    verdict = await run_in_threadpool(
+        digest.verify, params, method,
+        lambda name: ops.rws_ha1(face.make_session, name), face.seen)
+    if verdict.user is None:
+        raise RwsError(401, E_AUTH, verdict.reason) if not verdict.stale else \
+            _Stale(verdict.reason)
+    who = await run_in_threadpool(ops.caller, face.make_session, verdict.user, "rws",
+                                  _client(request))
+    if who is None:
+        raise RwsError(401, E_AUTH, "the user is revoked")
+    return who
+
+
+class _Stale(RwsError):
+    def __init__(self, msg: str):
+        super().__init__(401, E_AUTH, msg)
+
+
+def guarded(face: RwsFace, handler):
+    """A route handler with Digest auth, RWS errors and the session cookie."""
+    async def endpoint(request: Request) -> Response:
+        try:
+            length = int(request.headers.get("content-length") or 0)
+            if length > MAX_BODY:
+                raise RwsError(413, E_LARGE, f"the body has {length} bytes; at most {MAX_BODY}")
+            who = await authenticate(face, request, request.method)
+            response = await handler(face, request, who)
+        except RwsError as err:
+            headers = None
+            if err.http == 401:
+                headers = {"WWW-Authenticate": digest.challenge(isinstance(err, _Stale))}
+            return error(request, err, headers)
+        cookie = request.cookies.get("ABBCX")
+        if cookie is None or face.sessions.get(cookie) != who.name:
+            cookie = secrets.token_urlsafe(24)
+            face.sessions[cookie] = who.name
+            while len(face.sessions) > 10_000:
+                face.sessions.pop(next(iter(face.sessions)))
+            response.set_cookie("ABBCX", cookie, httponly=True, samesite="strict")
+        return response
+    return endpoint
+
+
+async def call(fn, *args: Any, **kw: Any) -> Any:
+    """An ops call in a thread, its exceptions as RWS errors."""
+    try:
+        return await run_in_threadpool(fn, *args, **kw)
+    except ops.Refused as err:
+        raise RwsError(403, E_FORBIDDEN, str(err)) from None
+    except ops.Stale as err:
+        raise RwsError(409, E_STALE, str(err)) from None
+    except crud.NotFound as err:
+        raise RwsError(404, E_NOT_FOUND, str(err)) from None
+    except ValidationError as err:  # the API's own bounds (EntryIn)
+        e = err.errors()[0]
+        raise RwsError(400, E_VALUE, f"value.{'.'.join(str(x) for x in e['loc'])}: "
+                       f"{e['msg']}") from None
+    except CalibrationError as err:  # FormatError too: the field and the reason
+        loc = ".".join(str(x) for x in err.loc)
+        raise RwsError(400, E_VALUE, f"{loc}: {err.reason}") from None
+
+
+async def form(request: Request) -> dict[str, str]:
+    body = await request.body()
+    if len(body) > MAX_BODY:
+        raise RwsError(413, E_LARGE, f"the body has {len(body)} bytes; at most {MAX_BODY}")
+    try:
+        parsed = parse_qs(body.decode("utf-8"), keep_blank_values=True, strict_parsing=False)
+    except UnicodeDecodeError:
+        raise RwsError(400, E_VALUE, "the form is not UTF-8") from None
+    return {k: v[-1] for k, v in parsed.items()}
+
+
+# ----------------------------------------------------------------------------- symbols
+
+def _symbols(face: RwsFace, who: ops.Caller) -> list[rapid.Symbol]:
+    cid = face.controller_id()
+    text = ops.export(face.make_session, who, cid, "abb")
+    all_slots = ops.slots(face.make_session, who, cid)
+    numbers: dict[str, list[int]] = {}
+    for s in all_slots:
+        numbers.setdefault(s.table, []).append(s.number)
+    return rapid.symbols(text, numbers, {(s.table, s.number) for s in all_slots if s.used})
+
+
+async def symbols_of(face: RwsFace, who: ops.Caller) -> list[rapid.Symbol]:
+    return await call(_symbols, face, who)
+
+
+def _state_of(sym: rapid.Symbol) -> dict[str, Any]:
+    return {"_type": "rap-data", "_title": sym.url, "value": sym.value}
+
+
+async def symbol_data(face: RwsFace, request: Request, who: ops.Caller) -> Response:
+    path = request.path_params["path"]
+    syms = await symbols_of(face, who)
+    try:
+        sym = rapid.find(syms, path)
+    except LookupError as err:
+        raise RwsError(400 if request.method == "POST" else 404, E_NOT_FOUND, str(err)) from None
+    if request.method == "GET":
+        return answer(request, [_state_of(sym)])
+    action = request.query_params.get("action")
+    if action != "set":
+        raise RwsError(400, E_NOT_OFFERED, f"action={action!r}: pendant offers action=set")
+    fields = await form(request)
+    if "value" not in fields:
+        raise RwsError(400, E_VALUE, "value: missing (form field value=<RAPID literal>)")
+    await call(_set_symbol, face, who, sym, fields["value"])
+    return Response(status_code=204)
+
+
+def _set_symbol(face: RwsFace, who: ops.Caller, sym: rapid.Symbol, value: str) -> None:
+    if sym.table is None or sym.number is None:
+        raise CalibrationError(("symbol",), f"{sym.name} is no slot's data; pendant writes "
+                               "tooldata, wobjdata and the loaddata <wobj>_load of a slot")
+    parsed = rapid.parse_value(sym, value)
+    cid = face.controller_id()
+    if sym.dtype == "loaddata":  # the load of a robot-held work object
+        if parsed is None:
+            body, clear = EntryIn(), True
+        else:
+            ld = parsed
+            body, clear = EntryIn(load={  # type: ignore[arg-type]
+                "mass_kg": ld.mass_kg, "com_mm": list(ld.com_mm),
+                "inertia_kgm2": list(ld.inertia_kgm2),
+                "inertia_axes_deg": list(ld.inertia_axes_deg)}), False
+    else:
+        rapid.kind_allowed(sym, parsed.kind)  # type: ignore[attr-defined]
+        body, clear = ops.entry_body(parsed)  # type: ignore[arg-type]
+        clear = clear and sym.dtype == "tooldata"  # a wobjdata's load is its own symbol
+    ops.commit_slot(face.make_session, who, cid, sym.table, sym.number, body, clear_load=clear)
+
+
+async def search_symbols(face: RwsFace, request: Request, who: ops.Caller) -> Response:
+    if request.query_params.get("action") != "search-symbols":
+        raise RwsError(400, E_NOT_OFFERED, "pendant offers action=search-symbols")
+    fields = await form(request)
+    block = fields.get("blockurl", "RAPID").strip("/")
+    vartyp = fields.get("vartyp", "any").lower()
+    symtyp = fields.get("symtyp", "per").lower()
+    syms = await symbols_of(face, who)
+    out = []
+    for s in syms:
+        if not (f"RAPID/{rapid.TASK}/{s.module}".upper().startswith(block.upper())):
+            continue
+        if vartyp not in ("any", s.dtype) or symtyp not in ("per", "any", "dat"):
+            continue
+        out.append({"_type": "rap-sympropvar-li", "_title": s.url, "name": s.name,
+                    "symburl": s.url, "symtyp": "per", "named": "true", "dattyp": s.dtype,
+                    "ndim": "0", "dim": "", "local": "false", "rdonly": "false",
+                    "taskpers": "false", "typurl": f"RAPID/{s.dtype}"})
+    return answer(request, out)
+
+
+# ----------------------------------------------------------------------------- motion
+
+def _mechunit(request: Request) -> None:
+    unit = request.path_params["unit"]
+    if unit.upper() != "ROB_1":
+        raise RwsError(404, E_NOT_FOUND, f"no mechanical unit {unit!r}; pendant has ROB_1")
+
+
+def _extax(state: ops.RobotState) -> list[str]:
+    ext = state.external_axes or {}
+    return [f"{float(ext[k]):.6g}" if k in ext else EXTAX_NONE
+            for k in ("E1", "E2", "E3", "E4", "E5", "E6")]
+
+
+async def jointtarget(face: RwsFace, request: Request, who: ops.Caller) -> Response:
+    _mechunit(request)
+    state = await call(ops.robot, face.make_session, who, await call(face.controller_id))
+    q = list(state.joints_deg) + [EXTAX_NONE] * (6 - len(state.joints_deg))
+    s: dict[str, Any] = {"_type": "ms-jointtarget", "_title": "ROB_1"}
+    s.update({f"rax_{i + 1}": (f"{v:.6f}" if isinstance(v, float) else v)
+              for i, v in enumerate(q[:6])})
+    s.update({f"eax_{k}": v for k, v in zip("abcdef", _extax(state))})
+    return answer(request, [s])
+
+
+def _frame_of(syms: list[rapid.Symbol], name: str, dtype: str, slots: dict) -> np.ndarray:
+    """T of the tool (T_flange_tcp) or work object (T_world_wobj) symbol ``name``."""
+    if name.lower() in ("tool0", "wobj0"):
+        return np.eye(4)
+    hit = [s for s in syms if s.name.upper() == name.upper() and s.dtype == dtype]
+    if not hit:
+        raise RwsError(400, E_NOT_FOUND, f"{'tool' if dtype == 'tooldata' else 'wobj'}: "
+                       f"no {dtype} {name!r}")
+    s = hit[0]
+    if dtype == "tooldata" and s.kind != "tool":
+        raise RwsError(400, E_VALUE, f"tool: {name} is a stationary tool (robhold FALSE); "
+                       "pendant gives robtargets of robot-held tools")
+    if dtype == "wobjdata" and s.kind == "workpiece":
+        raise RwsError(400, E_VALUE, f"wobj: {name} is held by the robot (robhold TRUE); "
+                       "pendant gives robtargets in fixed work objects")
+    return ops.frame_matrix(slots.get((s.table, s.number)))
+
+
+def _robtarget(face: RwsFace, who: ops.Caller, tool: str, wobj: str, coordinate: str) -> dict:
+    cid = face.controller_id()
+    syms = _symbols(face, who)
+    slots = {(s.table, s.number): s.entry for s in ops.slots(face.make_session, who, cid)}
+    T_flange_tcp = _frame_of(syms, tool, "tooldata", slots)
+    T_world_wobj = _frame_of(syms, wobj, "wobjdata", slots)
+    state = ops.robot(face.make_session, who, cid)
+    T_world_tcp = ops.tcp_in(face.make_session, who, cid, T_flange_tcp)
+    c = coordinate.lower()
+    if c in ("base", "world"):  # pendant's world is the robot base
+        T = T_world_tcp
+    elif c == "wobj":
+        T = invert(T_world_wobj) @ T_world_tcp
+    else:
+        raise RwsError(400, E_VALUE, f"coordinate: {coordinate!r}; pendant gives Base, World "
+                       "and Wobj")
+    pos, q = abb_from_matrix(T)
+    joints = list(state.joints_deg) + [0.0] * 6
+    cf = [int(np.floor(joints[i] / 90.0)) for i in (0, 3, 5)]
+    s: dict[str, Any] = {"_type": "ms-robtargets", "_title": "ROB_1"}
+    s.update({k: f"{float(v):.6f}" for k, v in zip("xyz", pos)})
+    s.update({f"q{i + 1}": f"{float(v):.9f}" for i, v in enumerate(q)})
+    s.update({"cf1": str(cf[0]), "cf4": str(cf[1]), "cf6": str(cf[2]), "cfx": "0"})
+    s.update({f"eax{k}": v for k, v in zip("abcdef", _extax(state))})
+    return s
+
+
+async def robtarget(face: RwsFace, request: Request, who: ops.Caller) -> Response:
+    _mechunit(request)
+    p = request.query_params
+    s = await call(_robtarget, face, who, p.get("tool", "tool0"), p.get("wobj", "wobj0"),
+                   p.get("coordinate", "Base"))
+    return answer(request, [s])
+
+
+# ------------------------------------------------------------------------ panel, rapid
+
+STATES: dict[str, dict[str, Any]] = {
+    "/rw/panel/ctrlstate": {"_type": "pnl-ctrlstate", "_title": "ctrlstate",
+                            "ctrlstate": "motoron"},
+    "/rw/panel/opmode": {"_type": "pnl-opmode", "_title": "opmode", "opmode": "MANR"},
+    "/rw/panel/speedratio": {"_type": "pnl-speedratio", "_title": "speedratio",
+                             "speedratio": "100"},
+    "/rw/rapid/execution": {"_type": "rap-execution", "_title": "execution",
+                            "ctrlexecstate": "stopped", "cycle": "once"},
+}
+TASKS = [{"_type": "rap-task-li", "_title": rapid.TASK, "name": rapid.TASK, "type": "normal",
+          "taskstate": "linked", "excstate": "ready", "active": "On", "motiontask": "TRUE"}]
+
+
+async def panel(face: RwsFace, request: Request, who: ops.Caller) -> Response:
+    if request.method != "GET" or request.query_params.get("action"):
+        raise RwsError(400, E_NOT_OFFERED, f"{request.url.path}: pendant's emulated controller "
+                       "is read here, not commanded (the pendant's REST API jogs it)")
+    await call(ops.robot, face.make_session, who, await call(face.controller_id))  # may read?
+    path = request.url.path.rstrip("/")
+    return answer(request, TASKS if path == "/rw/rapid/tasks" else [STATES[path]])
+
+
+async def logout(face: RwsFace, request: Request, who: ops.Caller) -> Response:
+    face.sessions.pop(request.cookies.get("ABBCX", ""), None)
+    return Response(status_code=204)
+
+
+# ------------------------------------------------------------------------- file service
+
+def _module_file(face: RwsFace, who: ops.Caller) -> tuple[str, str]:
+    text = ops.export(face.make_session, who, face.controller_id(), "abb")
+    m = abb._MODULE.search(text)
+    return (m.group(1) if m else rapid.DEFAULT_MODULE) + ".mod", text
+
+
+async def fileservice(face: RwsFace, request: Request, who: ops.Caller) -> Response:
+    path = request.path_params.get("path", "").strip("/")
+    name, text = await call(_module_file, face, who)
+    home = [HOME, "HOME:", "HOME"]
+    if path in home or path == "":
+        listing = [{"_type": "fs-file", "_title": name, "fs-size": str(len(text.encode())),
+                    "fs-readonly": "false"}]
+        return answer(request, listing)
+    folder, _, file = path.rpartition("/")
+    if folder not in home or not file.lower().endswith(".mod"):
+        raise RwsError(404, E_NOT_FOUND, f"no file {path!r}; pendant serves {HOME}/{name}")
+    if request.method == "GET":
+        if file.lower() != name.lower():
+            raise RwsError(404, E_NOT_FOUND, f"no file {path!r}; pendant serves {HOME}/{name}")
+        return Response(text.encode("utf-8"), media_type="text/plain; charset=utf-8")
+    if request.method == "PUT":
+        body = await request.body()
+        if len(body) > MAX_BODY:
+            raise RwsError(413, E_LARGE, f"the file has {len(body)} bytes; at most {MAX_BODY}")
+        try:
+            new = body.decode("utf-8")
+        except UnicodeDecodeError:
+            raise RwsError(400, E_VALUE, "file: not UTF-8 text") from None
+        await call(ops.import_file, face.make_session, who, await call(face.controller_id),
+                   "abb", new)
+        return Response(status_code=201)
+    raise RwsError(400, E_NOT_OFFERED, f"{request.method} {path}: pendant reads (GET) and "
+                   "imports (PUT) the module")
+
+
+# ------------------------------------------------------------------------ subscriptions
+
+async def subscribe(face: RwsFace, request: Request, who: ops.Caller) -> Response:
+    fields = await form(request)
+    resources = parse_qs((await request.body()).decode("utf-8")).get("resources", [])
+    paths = []
+    for r in resources:
+        res = fields.get(r, "")
+        prefix = "/rw/rapid/symbol/data/RAPID/"
+        if not (res.startswith(prefix) and res.endswith(";value")):
+            raise RwsError(400, E_NOT_OFFERED, f"resource {r} = {res!r}: pendant subscribes "
+                           "PERS values (/rw/rapid/symbol/data/RAPID/T_ROB1/<name>;value)")
+        sym_path = res[len(prefix):-len(";value")]
+        try:
+            rapid.find(await symbols_of(face, who), sym_path)
+        except LookupError as err:
+            raise RwsError(400, E_NOT_FOUND, str(err)) from None
+        paths.append(sym_path)
+    if not paths:
+        raise RwsError(400, E_VALUE, "resources: none given")
+    sub_id = face.next_sub
+    face.next_sub += 1
+    face.subscriptions[sub_id] = paths
+    face.sub_owner[sub_id] = who.name
+    ws = str(request.base_url).replace("http:", "ws:").rstrip("/") + f"/poll/{sub_id}"
+    body = ('<?xml version="1.0" encoding="utf-8"?><html xmlns="http://www.w3.org/1999/xhtml">'
+            f'<head><title>poll</title></head><body><div class="state"><a href="{ws}" '
+            f'rel="self">poll</a></div></body></html>')
+    return Response(body, status_code=201, media_type="application/xhtml+xml",
+                    headers={"Location": ws})
+
+
+def _event(sym: rapid.Symbol) -> str:
+    url = f"/rw/rapid/symbol/data/{sym.url};value"
+    return ('<?xml version="1.0" encoding="utf-8"?><html xmlns="http://www.w3.org/1999/xhtml">'
+            '<head><base href="/"/></head><body><div class="state"><ul>'
+            f'<li class="rap-data" title="{html.escape(sym.url)}"><a href="{url}" rel="self"/>'
+            f'<span class="value">{html.escape(sym.value)}</span></li></ul></div></body></html>')
+
+
+async def poll(face: RwsFace, ws: WebSocket) -> None:
+    sub_id = int(ws.path_params["sub"])
+    paths = face.subscriptions.get(sub_id)
+    try:
+        who = await _ws_caller(face, ws)
+    except RwsError:
+        await ws.close(code=1008)
+        return
+    if paths is None or face.sub_owner.get(sub_id) != who.name:
+        await ws.close(code=1008)
+        return
+    await ws.accept(subprotocol="robapi2_subscription")
+    last: dict[str, str] = {}
+    try:
+        first = True
+        while True:
+            try:
+                syms = await run_in_threadpool(_symbols, face, who)
+            except (ops.Refused, crud.NotFound):
+                await ws.close(code=1008)
+                return
+            for p in paths:
+                try:
+                    sym = rapid.find(syms, p)
+                except LookupError:
+                    continue
+                if not first and last.get(p) != sym.value:
+                    await ws.send_text(_event(sym))
+                last[p] = sym.value
+            first = False
+            try:
+                await asyncio.wait_for(ws.receive_text(), POLL_S)
+            except TimeoutError:
+                pass
+    except WebSocketDisconnect:
+        pass
+    finally:
+        face.subscriptions.pop(sub_id, None)
+        face.sub_owner.pop(sub_id, None)
+
+
+async def _ws_caller(face: RwsFace, ws: WebSocket) -> ops.Caller:
+    """A WebSocket's caller: its Digest header, else the ABBCX session cookie of its login."""
+    if not face.auth:
+        return ops.no_auth_caller("rws", _client(ws))
+    try:
+        return await authenticate(face, ws, "GET")
+    except RwsError:
+        name = face.sessions.get(ws.cookies.get("ABBCX", ""))
+        who = None if name is None else await run_in_threadpool(
+            ops.caller, face.make_session, name, "rws", _client(ws))
+        if who is None:
+            raise
+        return who
+
+
+def create_rws_app(face: RwsFace) -> Starlette:
+    """The Starlette app of the face."""
+    def r(path: str, handler, methods: list[str]) -> Route:
+        return Route(path, guarded(face, handler), methods=methods)
+
+    async def ws_endpoint(ws: WebSocket) -> None:
+        await poll(face, ws)
+
+    routes = [
+        r("/rw/rapid/symbol/data/RAPID/{path:path}", symbol_data, ["GET", "POST"]),
+        r("/rw/rapid/symbols", search_symbols, ["POST"]),
+        r("/rw/motionsystem/mechunits/{unit}/jointtarget", jointtarget, ["GET"]),
+        r("/rw/motionsystem/mechunits/{unit}/robtarget", robtarget, ["GET"]),
+        *[r(p, panel, ["GET", "POST"]) for p in (*STATES, "/rw/rapid/tasks")],
+        r("/fileservice/{path:path}", fileservice, ["GET", "PUT", "DELETE"]),
+        r("/fileservice", fileservice, ["GET"]),
+        r("/subscription", subscribe, ["POST"]),
+        r("/logout", logout, ["GET"]),
+        WebSocketRoute("/poll/{sub:int}", ws_endpoint),
+    ]
+
+    async def not_found(request: Request, exc: Exception) -> Response:
+        status = getattr(exc, "status_code", 404)
+        msg = (f"{request.method} {request.url.path}: not a resource pendant's RWS face serves "
+               "(docs/rws.md)")
+        return error(request, RwsError(status, E_NOT_OFFERED, msg))
+
+    return Starlette(routes=routes, exception_handlers={404: not_found, 405: not_found})

@@ -1,0 +1,122 @@
+"""HTTP Digest authentication (RFC 7616, MD5, qop ``auth``) as RobotWare's RWS asks for it.
+
+A user's RWS secret is stored only as its HA1, ``MD5(name ":" realm ":" password)``
+(``pendant users rws-password NAME``): the digest needs nothing else, and the password itself
+is never stored. The realm is RWS's own, ``validusers``, so an HA1 is bound to it.
+
+Nonces are stateless: ``<unix time>.<HMAC-SHA256(key, time)>`` with a key made per process;
+a nonce is honoured for :data:`NONCE_TTL_S`, after which the answer is a 401 with
+``stale=true`` (clients sign again without asking the user). A (nonce, cnonce, nc) seen
+once is refused the second time, so a captured request cannot be replayed.
+"""
+
+from __future__ import annotations
+
+import hashlib
+import hmac
+import re
+import secrets
+import threading
+import time
+from collections import OrderedDict
+
+REALM = "validusers"
+NONCE_TTL_S = 300.0
+SEEN_MAX = 100_000  # remembered (nonce, cnonce, nc) triples; the oldest go first
+_KEY = secrets.token_bytes(32)
+_PARAM = re.compile(r'(\w+)\s*=\s*(?:"((?:[^"\\]|\\.)*)"|([^\s,]+))')
+
+
+def md5(text: str) -> str:
+    return hashlib.md5(text.encode("utf-8"), usedforsecurity=False).hexdigest()
+
+
+def ha1(name: str, password: str) -> str:
+    """The stored form of an RWS secret."""
+    return md5(f"{name}:{REALM}:{password}")
+
+
+def new_nonce(now: float | None = None) -> str:
+    t = f"{int(now if now is not None else time.time())}"
+    return t + "." + hmac.new(_KEY, t.encode(), hashlib.sha256).hexdigest()[:32]
+
+
+def nonce_age_s(nonce: str, now: float | None = None) -> float | None:
+    """Seconds since this process made ``nonce``; None if it did not make it."""
+    t, _, mac = nonce.partition(".")
+    good = hmac.new(_KEY, t.encode(), hashlib.sha256).hexdigest()[:32]
+    if not t.isdigit() or not hmac.compare_digest(mac, good):
+        return None
+    return (now if now is not None else time.time()) - int(t)
+
+
+def challenge(stale: bool = False) -> str:
+    """The ``WWW-Authenticate`` value of a 401."""
+    return (f'Digest realm="{REALM}", qop="auth", algorithm=MD5, nonce="{new_nonce()}"'
+            + (", stale=true" if stale else ""))
+
+
+def parse(header: str) -> dict[str, str] | None:
+    """The parameters of an ``Authorization: Digest ...`` header (None: not Digest)."""
+    scheme, _, rest = header.strip().partition(" ")
+    if scheme.lower() != "digest":
+        return None
+    return {m.group(1).lower(): m.group(2) if m.group(2) is not None else m.group(3)
+            for m in _PARAM.finditer(rest)}
+
+
+class Seen:
+    """The (nonce, cnonce, nc) triples already used (replays are refused)."""
+
+    def __init__(self) -> None:
+        self._seen: OrderedDict[tuple[str, str, str], float] = OrderedDict()
+        self._lock = threading.Lock()
+
+    def first_use(self, key: tuple[str, str, str]) -> bool:
+        with self._lock:
+            if key in self._seen:
+                return False
+            self._seen[key] = time.monotonic()
+            while len(self._seen) > SEEN_MAX:
+                self._seen.popitem(last=False)
+            return True
+
+
+class Verdict:
+    """The outcome of :func:`verify`: ``user`` on success, else why (``stale`` nonce or not)."""
+
+    def __init__(self, user: str | None, reason: str, stale: bool = False):
+        self.user, self.reason, self.stale = user, reason, stale
+
+
+def verify(params: dict[str, str], method: str, ha1_of, seen: Seen) -> Verdict:
+    """Check a Digest response: ``ha1_of(name)`` gives the stored HA1 (or None)."""
+    need = ("username", "realm", "nonce", "uri", "response")
+    missing = [k for k in need if not params.get(k)]
+    if missing:
+        return Verdict(None, f"Digest without {', '.join(missing)}")
+    if params["realm"] != REALM:
+        return Verdict(None, f"realm must be {REALM!r}")
+    if params.get("algorithm", "MD5").upper() != "MD5":
+        return Verdict(None, "algorithm must be MD5")
+    age = nonce_age_s(params["nonce"])
+    if age is None:
+        return Verdict(None, "unknown nonce", stale=True)
+    if age > NONCE_TTL_S or age < -5:
+        return Verdict(None, "nonce expired", stale=True)
+    stored = ha1_of(params["username"])
+    if not stored:
+        return Verdict(None, "unknown user or no RWS secret (pendant users rws-password)")
+    ha2 = md5(f"{method}:{params['uri']}")
+    qop = params.get("qop")
+    if qop:
+        if qop != "auth" or not params.get("nc") or not params.get("cnonce"):
+            return Verdict(None, "qop must be auth, with nc and cnonce")
+        want = md5(f"{stored}:{params['nonce']}:{params['nc']}:{params['cnonce']}:auth:{ha2}")
+    else:
+        want = md5(f"{stored}:{params['nonce']}:{ha2}")
+    if not hmac.compare_digest(want, params["response"].lower()):
+        return Verdict(None, "wrong digest (user name or password)")
+    if not seen.first_use((params["nonce"], params.get("cnonce", ""), params.get("nc", ""))):
+        return Verdict(None, "nonce count used before (a replay)", stale=True)
+    return Verdict(params["username"], "ok")

@@ -1,0 +1,269 @@
+"""The operations the controller faces (RWS, KVP) call: the one place they touch pendant.
+
+Both faces translate a protocol into these calls and never open the database themselves.
+Each function takes the service's sessionmaker, the :class:`Caller` (who, through which
+face) and typed input, checks the permission REST's route needs (the one table,
+:mod:`server.auth.permissions`), runs the REST route's own code in a writer's transaction
+(controller row locked, version bumped, history, audit with the face as its source, the
+``frame-committed`` event), and returns plain values. When the write path moves to one
+service layer, this module is re-pointed at it and the faces stay as they are.
+"""
+
+from __future__ import annotations
+
+import uuid
+from dataclasses import dataclass, field
+from typing import Any
+
+import numpy as np
+from sqlalchemy import select
+from sqlalchemy.orm import Session, sessionmaker
+
+import emulator
+from db import crud
+from db.auth_models import User
+from db.session import write_session
+from server import controller_files, formats
+from server.auth import audit, tokens
+from server.auth.permissions import C, required
+from server.routers.common import active_frames, robot_of
+from server.routers.tables import edit_values
+from server.schemas import EntryIn
+from solvers.dh import forward_kinematics
+from solvers.errors import CalibrationError
+
+Maker = sessionmaker[Session]
+
+# the permission of each operation: the REST route's, from the one table
+EDIT_SLOT = {"tool": required("PUT", C + "/tools/{number}"),
+             "base": required("PUT", C + "/bases/{number}")}
+READ = required("GET", C + "/robot")
+SET_ACTIVE = required("PUT", C + "/robot/active")
+IMPORT = required("POST", C + "/import")
+
+
+class Refused(Exception):
+    """The caller's role lacks the permission (REST's 403)."""
+
+    def __init__(self, permission: str, caller: Caller):
+        super().__init__(f"needs permission {permission}; {caller.name} acts as {caller.role}")
+        self.permission = permission
+
+
+class Stale(Exception):
+    """The slot changed since the version the caller gave (REST's 412)."""
+
+
+@dataclass(frozen=True)
+class Caller:
+    """A pendant user acting through a face (``source`` rws | kvp) from ``client``."""
+
+    name: str
+    role: str
+    permissions: frozenset[str]
+    source: str
+    client: str | None = None
+    request_id: str = field(default_factory=lambda: uuid.uuid4().hex)
+
+    def require(self, permission: str | None) -> None:
+        if permission is None or permission not in self.permissions:
+            raise Refused(str(permission), self)
+
+    def who(self) -> dict[str, Any]:
+        """As :func:`server.auth.audit.actor` has it."""
+        return {"user_name": self.name, "role": self.role, "source": self.source,
+                "request_id": self.request_id, "client": self.client}
+
+
+def caller(maker: Maker, name: str, source: str, client: str | None = None) -> Caller | None:
+    """The user ``name`` with the role and permissions in force now; None if gone or revoked."""
+    with maker() as db:
+        u = db.scalar(select(User).where(User.name == name))
+        if u is None or u.revoked_at is not None:
+            return None
+        return Caller(u.name, u.role, tokens.role_permissions(db, u.role), source, client)
+
+
+def no_auth_caller(source: str, client: str | None = None) -> Caller:
+    """``serve --no-auth``: everyone an Administrator, as on REST."""
+    from server.auth.permissions import PERMISSIONS
+
+    return Caller("no-auth", "Administrator", frozenset(PERMISSIONS), source, client)
+
+
+def rws_ha1(maker: Maker, name: str) -> str | None:
+    """The stored HA1 of the user's RWS secret (None: no secret, or the user is revoked)."""
+    with maker() as db:
+        u = db.scalar(select(User).where(User.name == name))
+        return None if u is None or u.revoked_at is not None else u.rws_ha1
+
+
+def set_rws_ha1(db: Session, name: str, ha1: str) -> None:
+    """Store a user's RWS HA1 (``pendant users rws-password``), audited as ``user.rws_secret``."""
+    u = tokens.get_user(db, name)
+    u.rws_ha1 = ha1
+    audit.record(db, "user.rws_secret", after={"name": u.name})
+
+
+# ------------------------------------------------------------------------------------ reads
+
+def controller_id(maker: Maker, name_or_id: str | int | None, prefix: str) -> int:
+    """The controller a face serves: the one named (or numbered), else the lowest id whose
+    robot is ``prefix``'s (``abb``, ``kuka``); NotFound when there is none."""
+    with maker() as db:
+        if name_or_id is not None:
+            return crud.find_controller(db, str(name_or_id)).id
+        for c in crud.list_controllers(db):
+            if (c.robot_key or "").startswith(prefix):
+                return c.id
+    raise crud.NotFound(("controller",), f"no {prefix.upper()} controller; create one or name it")
+
+
+@dataclass(frozen=True)
+class Slot:
+    """A slot as the faces show it."""
+
+    table: str
+    number: int
+    version: int
+    used: bool
+    entry: formats.FrameEntry | None  # None when unused
+
+
+def slots(maker: Maker, caller_: Caller, cid: int, table: str | None = None) -> list[Slot]:
+    caller_.require(READ)
+    with maker() as db:
+        crud.get_controller(db, cid)
+        return [Slot(e.entry_table, e.number, e.version, controller_files.is_used(e),
+                     controller_files.to_frame_entry(e) if controller_files.is_used(e) else None)
+                for e in crud.list_entries(db, cid, table)]
+
+
+def slot(maker: Maker, caller_: Caller, cid: int, table: str, number: int) -> Slot:
+    caller_.require(READ)
+    with maker() as db:
+        e = crud.get_entry(db, cid, table, number)
+        used = controller_files.is_used(e)
+        return Slot(table, number, e.version, used,
+                    controller_files.to_frame_entry(e) if used else None)
+
+
+def export(maker: Maker, caller_: Caller, cid: int, fmt: str) -> str:
+    """The controller's file in ``fmt``, as ``GET /controllers/{id}/export`` gives it."""
+    caller_.require(required("GET", C + "/export"))
+    with maker() as db:
+        crud.get_controller(db, cid)
+        return controller_files.export_file(db, cid, fmt)
+
+
+@dataclass(frozen=True)
+class RobotState:
+    joints_deg: list[float]
+    active_tool_no: int
+    active_base_no: int
+    T_base_flange: np.ndarray
+    T_world_tcp_active: np.ndarray  # the active TCP in world
+    T_base_tcp_active: np.ndarray  # ... in the active base
+    external_axes: dict[str, float] | None
+
+
+def robot(maker: Maker, caller_: Caller, cid: int) -> RobotState:
+    """The emulated arm as ``GET /controllers/{id}/robot`` shows it."""
+    caller_.require(READ)
+    with maker() as db:
+        c = crud.get_controller(db, cid)
+        rob = robot_of(c)
+        tool, base = active_frames(db, c)
+        return RobotState(list(c.joints_deg), c.active_tool_no, c.active_base_no,
+                          forward_kinematics(rob, c.joints_deg),
+                          forward_kinematics(rob, c.joints_deg, tool),
+                          emulator.tcp_pose(rob, c.joints_deg, tool, base),
+                          dict(c.external_axes) if c.external_axes else None)
+
+
+def frame_matrix(entry: formats.FrameEntry | None) -> np.ndarray:
+    """T of a slot's frame (identity for none: flange, world)."""
+    return np.eye(4) if entry is None else entry.pose.as_matrix()
+
+
+def tcp_in(maker: Maker, caller_: Caller, cid: int, T_flange_tool: np.ndarray) -> np.ndarray:
+    """T_world_tcp of the arm now with the tool ``T_flange_tool`` (not the active one)."""
+    caller_.require(READ)
+    with maker() as db:
+        c = crud.get_controller(db, cid)
+        return forward_kinematics(robot_of(c), c.joints_deg, T_flange_tool)
+
+
+# ----------------------------------------------------------------------------------- writes
+
+def commit_slot(maker: Maker, caller_: Caller, cid: int, table: str, number: int,
+                body: EntryIn, *, clear_load: bool = False,
+                expected_version: int | None = None) -> Slot:
+    """A hand edit of slot ``table`` ``number``: the REST ``PUT .../tools|bases/{n}``.
+
+    ``expected_version`` is the protocol's If-Match (None: the protocol has none, so the
+    version the edit reads under the lock). ``clear_load`` drops the slot's load (a RAPID
+    literal with ABB's "nothing known" load, KUKA's ``M -1``). Raises :class:`Refused`,
+    :class:`Stale`, ``crud.NotFound`` and CalibrationError naming the field."""
+    caller_.require(EDIT_SLOT.get(table))
+    with audit.acting_as(caller_.who()), write_session(maker) as db:
+        crud.lock_controller(db, cid)
+        e = crud.get_entry(db, cid, table, number)
+        values = edit_values(e, body)
+        if clear_load:
+            values.update(dict.fromkeys(controller_files.LOAD_FIELDS))
+        if expected_version is not None and e.version != expected_version:
+            raise Stale(f"{table} {number} is at version {e.version}, not {expected_version}")
+        crud.change_entry(db, e, values, reason="edit")
+        db.commit()
+        used = controller_files.is_used(e)
+        return Slot(table, number, e.version, used,
+                    controller_files.to_frame_entry(e) if used else None)
+
+
+def set_active(maker: Maker, caller_: Caller, cid: int, tool_no: int | None = None,
+               base_no: int | None = None) -> RobotState:
+    """Select the active tool and base: the REST ``PUT .../robot/active``."""
+    caller_.require(SET_ACTIVE)
+    for n, table, loc in ((tool_no, "tool", "tool_no"), (base_no, "base", "base_no")):
+        if n is not None and not 0 <= n <= crud.SLOTS[table]:
+            raise CalibrationError((loc,), f"must be 0..{crud.SLOTS[table]}, got {n}")
+    with audit.acting_as(caller_.who()), write_session(maker) as db:
+        crud.lock_controller(db, cid)
+        c = crud.get_controller(db, cid)
+        if tool_no is not None:
+            c.active_tool_no = tool_no
+        if base_no is not None:
+            c.active_base_no = base_no
+        db.commit()
+    return robot(maker, caller_, cid)
+
+
+def import_file(maker: Maker, caller_: Caller, cid: int, fmt: str, text: str) -> int:
+    """A controller file import, as ``pendant import`` and ``POST .../import`` do it: the
+    whole file is read first (FormatError naming the line), then every slot it names is
+    replaced. Returns how many slots it wrote."""
+    caller_.require(IMPORT)
+    parsed = controller_files.parse_file(fmt, text)
+    with audit.acting_as(caller_.who()), write_session(maker) as db:
+        crud.lock_controller(db, cid)
+        c = crud.get_controller(db, cid)
+        result = controller_files.apply_import(db, c, fmt, text, parsed)
+        db.commit()
+        return result.entries
+
+
+def entry_body(fe: formats.FrameEntry, name: str | None = None) -> tuple[EntryIn, bool]:
+    """The hand edit (and whether it clears the load) that writes ``fe``'s pose, kind, load and
+    unit into its slot; ``name`` replaces the name when given."""
+    p = fe.pose
+    load = None
+    if fe.load is not None:
+        ld = fe.load
+        load = {"mass_kg": ld.mass_kg, "com_mm": list(ld.com_mm),
+                "inertia_kgm2": list(ld.inertia_kgm2), "inertia_axes_deg": list(ld.inertia_axes_deg)}
+    body = EntryIn(name=name, kind=fe.kind, pose={"x": p.x, "y": p.y, "z": p.z, "a": p.a,
+                                                  "b": p.b, "c": p.c},
+                   load=load, mech_unit=fe.mech_unit)
+    return body, fe.load is None and fe.kind in formats.LOADED
+

@@ -1,0 +1,231 @@
+"""The KVP face driven by the unmodified ``py-openshowvar`` client, as cell software talks to a
+KRC4 through KUKAVARPROXY: jog through REST and read $AXIS_ACT, write BASE_DATA and read it
+through REST; the acting user's role decides writes; bad messages get the protocol's error
+and never stall the face."""
+
+from __future__ import annotations
+
+import socket
+import struct
+import time
+from collections.abc import Iterator
+
+import pytest
+from api_helpers import C, edit_slot, make_client, ok
+from browser_helpers import free_port
+
+from server.kvp import server as kvp
+from server.kvp.server import KvpFace, serve_in_thread
+
+openshowvar = pytest.importorskip("py_openshowvar").openshowvar
+
+
+@pytest.fixture(scope="module")
+def cell(tmp_path_factory: pytest.TempPathFactory) -> Iterator[dict]:
+    """REST (TestClient) and the KVP face on loopback, acting as the Expert "cellpc", on the
+    demo KUKA controller."""
+    from db_backends import fresh_url
+
+    db_url = fresh_url(tmp_path_factory.mktemp("kvp"))
+    with make_client(db_url) as rest:
+        ok(rest.post("/users", json={"name": "cellpc", "role": "Expert"}))
+        maker = rest.app.state.sessionmaker
+        port = free_port()
+        face = KvpFace(maker, "cellpc")
+        running = serve_in_thread(face, "127.0.0.1", port)
+        try:
+            yield {"rest": rest, "port": port, "face": face}
+        finally:
+            running.stop()
+
+
+def connect(cell: dict) -> openshowvar:
+    c = openshowvar("127.0.0.1", cell["port"])
+    return c
+
+
+def numbers(krl: bytes, keys: str | list[str]) -> list[float]:
+    """The components ``keys`` of a KRL aggregate as printed (``{E6AXIS: A1 1.0, ...}``)."""
+    text = krl.decode()
+    parts = dict(p.strip().split(" ", 1) for p in text[text.index(":") + 1:-1].split(","))
+    return [float(parts[k]) for k in keys]
+
+
+def test_jog_through_rest_read_axis_act_through_kvp(cell: dict) -> None:
+    rest = cell["rest"]
+    ok(rest.post(f"{C}/robot/jog", json={"mode": "joint", "axis": "A2", "increment": -7.25}))
+    joints = ok(rest.get(f"{C}/robot"))["joints_deg"]
+    c = connect(cell)
+    try:
+        value = c.read("$AXIS_ACT", debug=False)
+        assert value.startswith(b"{E6AXIS: A1 ")
+        assert numbers(value, ["A1", "A2", "A3", "A4", "A5", "A6"]) == \
+            pytest.approx(joints, abs=1e-9)
+        tcp = ok(rest.get(f"{C}/robot"))["tcp_pose"]
+        pos = c.read("$POS_ACT", debug=False)
+        assert numbers(pos, list("XYZABC")) == pytest.approx([tcp[k] for k in "xyzabc"],
+                                                             abs=1e-6)
+        assert c.read("$OV_PRO", debug=False) == b"100"
+    finally:
+        c.close()
+
+
+def test_write_base_data_through_kvp_read_through_rest(cell: dict) -> None:
+    """BASE_DATA[4] written as KRL; REST shows it with the audit source kvp; a partial
+    aggregate changes only what it names; BASE_NAME too."""
+    rest = cell["rest"]
+    c = connect(cell)
+    try:
+        back = c.write("BASE_DATA[4]", "{X 650.5,Y -120.0,Z 12.0,A 90.0,B 0.0,C 180.0}",
+                       debug=False)
+        assert back == b"{FRAME: X 650.5, Y -120.0, Z 12.0, A 90.0, B 0.0, C 180.0}"
+        slot = ok(rest.get(f"{C}/bases/4"))
+        assert [slot["pose"][k] for k in "xyzabc"] == \
+            pytest.approx([650.5, -120.0, 12.0, 90.0, 0.0, 180.0])
+        assert slot["provenance"]["updated_by"] == "cellpc"
+        audit = [a for a in ok(rest.get("/audit", params={"controller_id": 1}))
+                 if a["table"] == "base" and a["number"] == 4]
+        assert (audit[-1]["source"], audit[-1]["user"]) == ("kvp", "cellpc")
+        c.write("BASE_DATA[4]", "{FRAME: Z 20.5}", debug=False)
+        assert ok(rest.get(f"{C}/bases/4"))["pose"]["z"] == 20.5
+        assert ok(rest.get(f"{C}/bases/4"))["pose"]["x"] == 650.5
+        assert c.write("BASE_NAME[4,]", '"fixture A"', debug=False) == b'"fixture A"'
+        assert ok(rest.get(f"{C}/bases/4"))["name"] == "fixture A"
+    finally:
+        c.close()
+
+
+def test_rest_edit_tool_and_load_read_through_kvp(cell: dict) -> None:
+    rest = cell["rest"]
+    ok(edit_slot(rest, f"{C}/tools/2", {"name": "gripper", "pose": {"z": 155.5, "a": 45},
+                                        "load": {"mass_kg": 3.2, "com_mm": [0, 0, 80]}}))
+    ok(rest.put(f"{C}/robot/active", json={"tool_no": 2}))
+    c = connect(cell)
+    try:
+        assert c.read("TOOL_DATA[2]", debug=False) == \
+            b"{FRAME: X 0.0, Y 0.0, Z 155.5, A 45.0, B 0.0, C 0.0}"
+        assert c.read("$TOOL", debug=False) == c.read("TOOL_DATA[2]", debug=False)
+        assert c.read("TOOL_NAME[2,]", debug=False) == b'"gripper"'
+        assert c.read("$ACT_TOOL", debug=False) == b"2"
+        assert c.read("LOAD_DATA[2]", debug=False).startswith(b"{LOAD: M 3.2, CM {FRAME: X 0.0,")
+        c.write("LOAD_DATA[2]", "{M 4.0,CM {X 0,Y 0,Z 90,A 0,B 0,C 0},J {X 0.1,Y 0.1,Z 0.05}}",
+                debug=False)
+        assert ok(rest.get(f"{C}/tools/2"))["load"]["mass_kg"] == 4.0
+        assert c.write("$ACT_BASE", "4", debug=False) == b"4"
+        assert ok(rest.get(f"{C}/robot"))["active_base_no"] == 4
+    finally:
+        c.close()
+
+
+def raw(port: int, msg_id: int, mode: int, name: bytes, value: bytes | None = None) -> bytes:
+    content = struct.pack("!BH", mode, len(name)) + name
+    if value is not None:
+        content += struct.pack("!H", len(value)) + value
+    return struct.pack("!HH", msg_id, len(content)) + content
+
+
+def answer_of(sock: socket.socket) -> tuple[int, str, bool]:
+    head = b""
+    while len(head) < 4:
+        chunk = sock.recv(4 - len(head))
+        if not chunk:
+            raise ConnectionError("closed")
+        head += chunk
+    msg_id, length = struct.unpack("!HH", head)
+    body = b""
+    while len(body) < length:
+        body += sock.recv(length - len(body))
+    (value_len,) = struct.unpack_from("!H", body, 1)
+    return msg_id, body[3:3 + value_len].decode(), body[-1] == 1
+
+
+def test_bad_input_gets_the_protocols_error(cell: dict) -> None:
+    """Unknown variable, malformed literal, write-protected variable: status 0 with the
+    reason; nothing changed; the connection goes on."""
+    before = ok(cell["rest"].get(f"{C}/tools/5"))
+    with socket.create_connection(("127.0.0.1", cell["port"]), timeout=10) as s:
+        s.sendall(raw(cell["port"], 7, 0, b"$NO_SUCH_VAR"))
+        msg_id, text, good = answer_of(s)
+        assert (msg_id, good) == (7, False) and "not a variable pendant serves" in text
+        s.sendall(raw(cell["port"], 8, 1, b"TOOL_DATA[5]", b"{X 1,Y 2,Z}"))
+        msg_id, text, good = answer_of(s)
+        assert (msg_id, good) == (8, False) and "TOOL_DATA[5].Z" in text
+        s.sendall(raw(cell["port"], 9, 1, b"TOOL_DATA[5]", b"{X 1e9}"))
+        msg_id, text, good = answer_of(s)
+        assert not good and "TOOL_DATA[5].X" in text
+        s.sendall(raw(cell["port"], 10, 1, b"$AXIS_ACT", b"{A1 0}"))
+        assert "write-protected" in answer_of(s)[1]
+        s.sendall(raw(cell["port"], 11, 0, b"TOOL_DATA[99]"))
+        assert "out of range" in answer_of(s)[1]
+        s.sendall(raw(cell["port"], 12, 0, b"$OV_PRO"))
+        assert answer_of(s) == (12, "100", True)
+    assert ok(cell["rest"].get(f"{C}/tools/5")) == before
+
+
+def test_oversize_and_half_sent_messages_never_stall_the_face(cell: dict, monkeypatch) -> None:
+    """An oversize message gets its error and the connection closes; a half-sent one is
+    closed after the frame timeout; meanwhile another client is served."""
+    monkeypatch.setattr(kvp, "FRAME_TIMEOUT_S", 1.0)
+    with socket.create_connection(("127.0.0.1", cell["port"]), timeout=10) as big:
+        big.sendall(struct.pack("!HH", 3, 60000) + b"\x00" * 100)
+        msg_id, text, good = answer_of(big)
+        assert (msg_id, good) == (3, False) and "at most 4096" in text
+        assert big.recv(1) == b""  # closed
+    half = socket.create_connection(("127.0.0.1", cell["port"]), timeout=10)
+    half.sendall(raw(cell["port"], 4, 0, b"$OV_PRO")[:6])  # header and part of the content
+    c = connect(cell)
+    try:
+        t0 = time.monotonic()
+        assert c.read("$OV_PRO", debug=False) == b"100"  # served while the other one hangs
+        assert time.monotonic() - t0 < 1.0
+    finally:
+        c.close()
+    half.settimeout(10)
+    assert half.recv(1) == b""  # the face closed the half-sent message's connection
+    half.close()
+
+
+def test_operator_user_reads_but_cannot_write(cell: dict) -> None:
+    """The face acts as its configured user: as an Operator, reads pass, writes are refused
+    (py-openshowvar answers None for a refusal) and the slot is unchanged."""
+    rest = cell["rest"]
+    ok(rest.post("/users", json={"name": "viewer", "role": "Operator"}))
+    port = free_port()
+    running = serve_in_thread(KvpFace(rest.app.state.sessionmaker, "viewer"), "127.0.0.1", port)
+    try:
+        c = openshowvar("127.0.0.1", port)
+        before = ok(rest.get(f"{C}/bases/6"))
+        assert c.read("BASE_DATA[6]", debug=False).startswith(b"{FRAME: X ")
+        assert c.write("BASE_DATA[6]", "{X 1}", debug=False) is None
+        assert ok(rest.get(f"{C}/bases/6")) == before
+        c.close()
+        with socket.create_connection(("127.0.0.1", port), timeout=10) as s:
+            s.sendall(raw(port, 5, 1, b"BASE_DATA[6]", b"{X 1}"))
+            assert "frames:commit" in answer_of(s)[1]
+    finally:
+        running.stop()
+
+
+def test_only_allowed_clients_are_served(cell: dict) -> None:
+    face = KvpFace(None, "cellpc", allowed=("10.1.2.3",))  # type: ignore[arg-type]
+    assert face.allows("127.0.0.1") and face.allows("::1") and face.allows("10.1.2.3")
+    assert not face.allows("10.1.2.4") and not face.allows(None)
+
+
+def test_a_revoked_user_ends_the_faces_answers(cell: dict) -> None:
+    """The face acts as its user as the database has it now: revoked, every message is
+    refused naming why."""
+    rest = cell["rest"]
+    ok(rest.post("/users", json={"name": "leaver", "role": "Expert"}))
+    port = free_port()
+    running = serve_in_thread(KvpFace(rest.app.state.sessionmaker, "leaver"), "127.0.0.1", port)
+    try:
+        with socket.create_connection(("127.0.0.1", port), timeout=10) as s:
+            s.sendall(raw(port, 1, 0, b"$OV_PRO"))
+            assert answer_of(s) == (1, "100", True)
+            assert rest.delete("/users/leaver").status_code < 300
+            s.sendall(raw(port, 2, 0, b"$OV_PRO"))
+            msg_id, text, good = answer_of(s)
+            assert (msg_id, good) == (2, False) and "revoked" in text
+    finally:
+        running.stop()

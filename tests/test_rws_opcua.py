@@ -1,0 +1,69 @@
+"""A tooldata written through the RWS face (abb-robot-client) reads back through OPC UA's
+ReadFrame: the faces share the service's slots, versions and database."""
+
+from __future__ import annotations
+
+import asyncio
+import threading
+from collections.abc import Iterator
+
+import pytest
+
+from api_helpers import make_client, ok
+from browser_helpers import free_port
+from server.rws import digest, ops
+from server.rws.app import RwsFace, create_rws_app
+from server.rws.service import serve_asgi
+
+rws = pytest.importorskip("abb_robot_client.rws")
+pytest.importorskip("asyncua")
+
+from test_opcua import poll  # noqa: E402  (its helpers, not its fixtures)
+from test_opcua import pendant as pendant_object  # noqa: E402
+
+
+@pytest.fixture(scope="module")
+def face(tmp_path_factory: pytest.TempPathFactory) -> Iterator[dict]:
+    from db_backends import fresh_url
+
+    from server.opcua.service import PendantOpcUa
+
+    db_url = fresh_url(tmp_path_factory.mktemp("rws-opcua"))
+    loop = asyncio.new_event_loop()
+    thread = threading.Thread(target=loop.run_forever, name="opcua", daemon=True)
+    thread.start()
+    with make_client(db_url) as rest:
+        cid = ok(rest.post("/controllers", json={"name": "abb-1", "robot": "abb_irb120"}))["id"]
+        ok(rest.post("/users", json={"name": "expert", "role": "Expert"}))
+        maker = rest.app.state.sessionmaker
+        with maker() as db:
+            ops.set_rws_ha1(db, "expert", digest.ha1("expert", "expert-secret"))
+            db.commit()
+        server = PendantOpcUa(maker, f"opc.tcp://127.0.0.1:{free_port()}/pendant/", poll_s=0.1,
+                              pki_dir=tmp_path_factory.mktemp("pki"))
+        asyncio.run_coroutine_threadsafe(server.start(), loop).result(timeout=120)
+        port = free_port()
+        running = serve_asgi(create_rws_app(RwsFace(maker)), "127.0.0.1", port, "rws-test")
+        try:
+            yield {"rest": rest, "server": server, "cid": cid, "url": f"http://127.0.0.1:{port}"}
+        finally:
+            running.stop()
+            asyncio.run_coroutine_threadsafe(server.stop(), loop).result(timeout=30)
+    loop.call_soon_threadsafe(loop.stop)
+    thread.join(timeout=10)
+
+
+def test_tooldata_set_through_rws_reads_back_through_opcua(face: dict) -> None:
+    c = rws.RWS(face["url"], "expert", "expert-secret")
+    c.set_rapid_variable("tool2", "[TRUE,[[10,-20,150.5],[1,0,0,0]],[1.5,[0,0,40],[1,0,0,0],0,0,0]]")
+    version = int(face["rest"].get(f"/controllers/{face['cid']}/tools/2").headers["ETag"]
+                  .strip('W/"'))
+
+    async def body(client, ns):  # noqa: ANN001, ANN202
+        obj = await pendant_object(client, ns, "abb-1")
+        return await obj.call_method(f"{ns['pendant']}:ReadFrame", "tool", 2)
+
+    out = poll(face, body, lambda o: not isinstance(o, Exception) and o[3] == version)
+    name, kind, xyzabc, seen = out
+    assert seen == version and kind == "tool"
+    assert xyzabc == pytest.approx([10.0, -20.0, 150.5, 0.0, 0.0, 0.0], abs=1e-9)
