@@ -6,6 +6,7 @@ face see each other's writes at once."""
 from __future__ import annotations
 
 import queue
+import time
 import subprocess
 import sys
 from collections.abc import Iterator
@@ -224,19 +225,24 @@ def test_subscription_sees_a_rest_edit(cell: dict) -> None:
                                                        "tool4")], got.put)
     try:
         path = f"/controllers/{cell['cid']}/tools/4"
-        value = None
+        opened = False
         for k in range(50):  # until the socket is open, every edit is a new value
             ok(edit_slot(cell["rest"], path, {"pose": {"z": 40.0 + k}}))
             try:
-                event = got.get(timeout=1.0)
+                opened = isinstance(got.get(timeout=1.0), rws.VariableValue)
             except queue.Empty:
                 continue
-            if isinstance(event, rws.VariableValue):
-                value = event.value
+            if opened:
                 break
-        assert value is not None and value.startswith("[TRUE,[[0,0,")
-        z = float(value.split("[[0,0,")[1].split("]")[0])
-        assert z == ok(cell["rest"].get(path))["pose"]["z"]
+        assert opened, "no subscription event arrived"
+        ok(edit_slot(cell["rest"], path, {"pose": {"z": 123.25}}))  # the edit to see
+        deadline, z = time.monotonic() + 10.0, None
+        while z != 123.25 and time.monotonic() < deadline:
+            event = got.get(timeout=max(deadline - time.monotonic(), 0.01))
+            if isinstance(event, rws.VariableValue):
+                assert event.value.startswith("[TRUE,[[0,0,"), event.value
+                z = float(event.value.split("[[0,0,")[1].split("]")[0])
+        assert z == 123.25 == ok(cell["rest"].get(path))["pose"]["z"]
     finally:
         sub.close()
 
