@@ -117,6 +117,51 @@ def _view(values: dict[str, Any] | None, used: bool) -> dict[str, Any] | None:
             "load": load, "mech_unit": values["mech_unit"]}
 
 
+def _text(v: Any) -> str:
+    if v is None:
+        return "-"
+    if isinstance(v, float):
+        return repr(v + 0.0)
+    if isinstance(v, list):
+        return "[" + ", ".join(_text(x) for x in v) + "]"
+    return repr(v) if isinstance(v, str) else str(v)
+
+
+def value_changes(before: dict[str, Any] | None, after: dict[str, Any] | None
+                  ) -> list[tuple[str, str, str]]:
+    """(field, before, after) of every value of a preview slot (:func:`_view`) that differs,
+    with every digit: what ``pendant import --dry-run`` prints under each slot.
+
+    >>> value_changes(None, {"name": "pen", "kind": "tool", "mech_unit": None, "load": None,
+    ...                      "pose": dict(x=0.0, y=0.0, z=180.5, a=0.0, b=0.0, c=0.0)})
+    [('name', '-', "'pen'"), ('kind', '-', 'tool'), ('z', '-', '180.5')]
+    """
+    def flat(v: dict[str, Any] | None) -> dict[str, Any]:
+        if v is None:
+            return {}
+        out: dict[str, Any] = {"name": v["name"], "kind": v["kind"]}
+        out.update({k: x for k, x in v["pose"].items()})
+        load = v["load"] or {}
+        out.update({"mass_kg": load.get("mass_kg"), "com_mm": load.get("com_mm"),
+                    "inertia": load.get("inertia_kgm2"), "axes_deg": load.get("inertia_axes_deg"),
+                    "unit": v["mech_unit"]})
+        return out
+
+    a, b = flat(before), flat(after)
+    keys = list(dict.fromkeys([*a, *b]))
+    out = []
+    for k in keys:
+        old, new = a.get(k), b.get(k)
+        if before is None and new in (0.0, None, ""):
+            continue  # an unused slot had nothing: show only what the file gives
+        if after is None and old in (0.0, None, ""):
+            continue
+        if old != new:
+            show = (lambda v: "-" if v is None else v) if k == "kind" else _text
+            out.append((k, show(old), show(new)))
+    return out
+
+
 @dataclass
 class SlotChange:
     table: str
