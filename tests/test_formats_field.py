@@ -219,3 +219,29 @@ def test_an_import_of_chosen_slots_keeps_the_calibrated_ones(client):
     r = imp(client, "kuka", "kuka_krc4_crlf_cp1252.dat", slots=[{"table": "tool", "number": 17}])
     assert r.status_code == 422 and r.json()["detail"][0]["loc"] == ["body", "slots", 0]
     assert "does not name tool 17" in r.json()["detail"][0]["msg"]
+
+
+# ---------------------------------------------------------------- FANUC and UR
+
+@pytest.mark.parametrize("fmt, name, changed_lines", [("fanuc", "fanuc_crlf.txt", 4),
+                                                      ("ur", "ur_crlf.script", 2)])
+def test_fanuc_and_ur_imports_come_back_whole_with_only_the_changed_lines(client, fmt, name,
+                                                                         changed_lines):
+    """pendant's own FANUC listing and UR script: a no-change export is the file, byte for
+    byte (CR LF kept); a change rewrites only the lines that carry the changed values."""
+    raw = (CORPUS / name).read_bytes()
+    text = raw.decode()
+    ok(client.post(f"{C}/import", json={"format": fmt, "text": text}))
+    assert client.get(f"{C}/export", params={"format": fmt}).content == raw
+    before = read = formats.READERS[fmt](text).entries
+    tool = next(e for e in before if e.kind == "tool")
+    base = next(e for e in before if e.kind == "base")
+    put(client, f"/tools/{tool.number}", {"pose": {"x": tool.pose.x + 1}})
+    put(client, f"/bases/{base.number}", {"pose": {"a": base.pose.a + 1}})
+    out = client.get(f"{C}/export", params={"format": fmt}).content.decode()
+    assert re.findall(r"\r\n|\n", out) == re.findall(r"\r\n|\n", text)
+    diff = [(a, b) for a, b in zip(text.splitlines(), out.splitlines()) if a != b]
+    assert len(diff) == changed_lines
+    read = {(e.kind, e.number): e for e in formats.READERS[fmt](out).entries}
+    assert read[("tool", tool.number)].pose.x == pytest.approx(tool.pose.x + 1, abs=1e-6)
+    assert read[("base", base.number)].pose.a == pytest.approx(base.pose.a + 1, abs=1e-6)

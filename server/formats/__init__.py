@@ -12,6 +12,8 @@ Pure functions (text in, dataclasses out; no database, no web):
 See docs/formats.md for the mapping of entry kinds onto each controller.
 """
 
+import difflib
+import re
 from typing import Callable, Iterable, Literal
 
 from server.formats.abb import export_abb, import_abb, read_abb
@@ -68,10 +70,44 @@ def _bom_read(read: Callable[[str], ParsedFile]) -> Callable[[str], ParsedFile]:
     return reader
 
 
+def _regenerating(export: Callable[[Iterable[FrameEntry]], str],
+                  read: Callable[[str], ParsedFile]) -> Callable[[Iterable[FrameEntry], str], str]:
+    """A patcher for a format pendant writes whole (FANUC's listing, UR's script): with no
+    change the imported text itself; else pendant's listing of the new entries, in which
+    every line that the listing of the imported entries also has, in the same place, keeps
+    the imported file's text and line ending (a hand-edited line of an unchanged slot stays
+    too), and a new or changed line takes the ending of the line it replaces."""
+    def patch(entries: Iterable[FrameEntry], text: str) -> str:
+        entries = canonical_order(entries)
+        old = read(text).entries
+        if entries == old:
+            return text
+        parts = re.split(r"(\r\n|\r|\n)", text)
+        lines, ends = parts[0::2], parts[1::2] + [""]
+        common = max(("\n", "\r\n", "\r"), key=ends.count)
+        was = export(old).split("\n")
+        now = export(entries).split("\n")
+        out: list[str] = []
+        same = difflib.SequenceMatcher(a=was, b=now, autojunk=False)
+        mapped = len(was) == len(lines)  # the file is pendant's listing, line for line
+        for op, a0, a1, b0, b1 in same.get_opcodes():
+            if op == "equal" and mapped:
+                out += [lines[i] + ends[i] for i in range(a0, a1)]
+                continue
+            for k, j in enumerate(range(b0, b1)):
+                i = min(a0 + k, len(ends) - 1)
+                end = (ends[i] or common) if mapped else common
+                out.append(now[j] + (end if j < len(now) - 1 else ""))
+        return "".join(out)
+    return patch
+
+
 #: format -> writer into an imported file (entries, the imported text -> patched text).
 PATCHERS: dict[str, Callable[[Iterable[FrameEntry], str], str]] = {
     "kuka": _bom_kept(lambda entries, text: export_kuka(entries, template=text)),
     "abb": _bom_kept(lambda entries, text: export_abb(entries, template=text)),
+    "fanuc": _bom_kept(_regenerating(export_fanuc, read_fanuc)),
+    "ur": _bom_kept(_regenerating(export_ur, read_ur)),
 }
 #: format -> reader of a whole file (text in, ParsedFile out).
 READERS: dict[str, Callable[[str], ParsedFile]] = {

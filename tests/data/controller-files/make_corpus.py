@@ -13,7 +13,9 @@ are committed, this is how they were made.
   parameter (PERS tooldata Tool), a routine-local VAR tooldata, a quaternion
   [0.99998,0.00625,0,0], a work object defined by its oframe, a tool of mass -1;
 - abb_mixed_endings.mod: LF with some CRLF lines, tagged declarations;
-- abb_backup_36_tools.sys: a RobotWare-style system module with 36 tooldata.
+- abb_backup_36_tools.sys: a RobotWare-style system module with 36 tooldata;
+- fanuc_crlf.txt, ur_crlf.script: pendant's own FANUC listing and UR script
+  (tests/data/fanuc_cell7.txt, ur_cell7.script) with CR LF line ends.
 """
 
 from pathlib import Path
@@ -125,6 +127,10 @@ def main() -> None:
     backup += ["  PERS wobjdata wobj_station:=[FALSE,TRUE,\"\",[[1500,0,300],[1,0,0,0]],"
                "[[0,0,0],[1,0,0,0]]];", "ENDMODULE", ""]
     write("abb_backup_36_tools.sys", backup, lambda i, s: "\r\n", "cp1252")
+    data = HERE.parent
+    for src, dst in (("fanuc_cell7.txt", "fanuc_crlf.txt"), ("ur_cell7.script", "ur_crlf.script")):
+        lf = (data / src).read_bytes().replace(b"\r\n", b"\n")
+        (HERE / dst).write_bytes(lf.replace(b"\n", b"\r\n"))
 
 
 if __name__ == "__main__":
