@@ -638,7 +638,15 @@ def main(argv: Sequence[str] | None = None) -> int:
             app = _open_app(args.db)
             with app.state.sessionmaker() as db:
                 controller = crud.find_controller(db, args.controller)
-                sys.stdout.write(export_text(db, controller.id, args.format))
+                if args.format in ("kuka", "abb", "fanuc", "ur"):  # the file's own encoding
+                    from server.controller_files import export_file_bytes
+
+                    raw, _ = export_file_bytes(db, controller.id, args.format)
+                    sys.stdout.flush()
+                    sys.stdout.buffer.write(raw)
+                    sys.stdout.buffer.flush()
+                else:
+                    sys.stdout.write(export_text(db, controller.id, args.format))
             return 0
         if args.command == "import":
             return import_file(args)

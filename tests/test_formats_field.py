@@ -245,3 +245,23 @@ def test_fanuc_and_ur_imports_come_back_whole_with_only_the_changed_lines(client
     read = {(e.kind, e.number): e for e in formats.READERS[fmt](out).entries}
     assert read[("tool", tool.number)].pose.x == pytest.approx(tool.pose.x + 1, abs=1e-6)
     assert read[("base", base.number)].pose.a == pytest.approx(base.pose.a + 1, abs=1e-6)
+
+
+def test_the_backup_keeps_the_files_encoding_and_the_cli_exports_its_bytes(client, db_url, capsysbinary):
+    """The kept Windows-1252 file goes through a JSON backup and restore, and ``pendant
+    export`` writes its bytes (not UTF-8)."""
+    from api_helpers import finish_job
+    from server.cli import main
+
+    raw = (CORPUS / "kuka_krc4_crlf_cp1252.dat").read_bytes()
+    ok(imp(client, "kuka", "kuka_krc4_crlf_cp1252.dat"))
+    backup = client.get(f"{C}/export", params={"format": "json"}).text
+    r = client.post(f"{C}/import", json={"format": "json", "text": backup,
+                                         "slots": [{"table": "tool", "number": 1}]})
+    assert r.status_code == 422 and r.json()["detail"][0]["loc"] == ["body", "slots"]
+    other = f"/controllers/{ok(client.post('/controllers', json={'name': 'restored'}))['id']}"
+    finish_job(client, client.post(f"{other}/import", json={"format": "json", "text": backup}))
+    assert client.get(f"{other}/export", params={"format": "kuka"}).content == raw
+    capsysbinary.readouterr()
+    assert main(["export", "cell-1", "--format", "kuka", "--db", db_url]) == 0
+    assert capsysbinary.readouterr().out == raw

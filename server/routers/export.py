@@ -92,6 +92,9 @@ def import_tables(controller_id: int, body: ImportIn, db: SessionDep, request: R
     from server.routers.controllers import changing
 
     c = changing(db, controller_id, if_match)
+    if body.format == "json" and body.slots is not None:
+        raise CalibrationError(("slots",), "a JSON backup restores the whole controller; "
+                               "slots choose among a controller file's slots")
     if body.format == "json":
         require(request, "backup:restore")
         mark_operation("backup.restore")
