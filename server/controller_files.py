@@ -71,7 +71,7 @@ def export_file_encoded(db: Session, controller_id: int, fmt: str) -> tuple[str,
     entries = to_frame_entries(crud.list_entries(db, controller_id))
     kept = crud.get_controller_file(db, controller_id, fmt)
     if kept is not None and fmt in formats.PATCHERS:
-        text, encoding = formats.unwrap_kept(kept.text)
+        encoding = formats.unwrap_kept(kept.text)[1]
         return formats.PATCHERS[fmt](entries, kept.text), encoding
     return formats.EXPORTERS[fmt](entries), "utf-8"
 

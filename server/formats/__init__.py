@@ -17,8 +17,6 @@ import re
 from typing import Callable, Iterable, Literal
 
 from server.formats.abb import export_abb, import_abb, read_abb
-from server.formats.fanuc import export_fanuc, read_fanuc
-from server.formats.kuka import export_kuka, import_kuka, read_kuka
 from server.formats.encoding import (
     ENCODINGS,
     decode_file,
@@ -26,6 +24,8 @@ from server.formats.encoding import (
     unwrap_kept,
     wrap_kept,
 )
+from server.formats.fanuc import export_fanuc, read_fanuc
+from server.formats.kuka import export_kuka, import_kuka, read_kuka
 from server.formats.model import (
     FRAME_KINDS,
     LOADED,

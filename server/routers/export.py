@@ -11,11 +11,16 @@ import json
 from fastapi import APIRouter, Request, Response
 
 from db import crud, jobs
+from server import external
 from server.auth.audit import actor, mark_operation
 from server.auth.guard import require
-from server import external
-from server.controller_files import (ImportResult, apply_import, export_file,
-                                     export_file_bytes, parse_file)
+from server.controller_files import (
+    ImportResult,
+    apply_import,
+    export_file,
+    export_file_bytes,
+    parse_file,
+)
 from server.deps import SessionDep
 from server.preconditions import IfMatch
 from server.routers.jobs import JobOut, accepted
