@@ -284,7 +284,10 @@ def build_parser() -> argparse.ArgumentParser:
     i.add_argument("--format", choices=["kuka", "abb", "fanuc", "ur"],
                    help="default from the file name: .dat kuka, .mod/.modx/.sys abb, "
                         ".txt/.ls fanuc, .script ur")
-    i.add_argument("--dry-run", action="store_true", help="write nothing")
+    i.add_argument("--dry-run", action="store_true",
+                   help="write nothing; print per slot its values before -> after")
+    i.add_argument("--slots", help="apply only these slots of the file, e.g. tool3,base1 "
+                                   "(the others keep what they hold)")
     i.add_argument("--db", help="database URL")
 
     add_analysis_commands(sub)
@@ -308,15 +311,18 @@ def import_file(args: argparse.Namespace) -> int:
     if fmt is None:
         raise CalibrationError(("--format",), f"cannot tell the format of {args.file.name}; "
                                "give --format kuka|abb|fanuc|ur")
-    raw = args.file.read_bytes()
-    try:
-        text = raw.decode("utf-8")
-    except UnicodeDecodeError:
-        text = raw.decode("cp1252")  # KSS and RobotWare write ANSI files on Windows
+    from server.controller_files import value_changes
+    from server.formats import decode_file
+
+    text, encoding = decode_file(args.file.read_bytes())  # KSS, RobotWare: Windows-1252
+    slots = None
+    if args.slots:
+        slots = [_slot_ref(ref) for ref in args.slots.split(",")]
     app = create_app(_settings(args.db))
     with app.state.sessionmaker() as db:
         controller = crud.find_controller(db, args.controller)
-        result = apply_import(db, controller, fmt, text, parse_file(fmt, text), args.dry_run)
+        result = apply_import(db, controller, fmt, text, parse_file(fmt, text), args.dry_run,
+                              encoding, slots)
         if not args.dry_run:
             db.commit()
     for c in result.slots:
@@ -327,6 +333,8 @@ def import_file(args: argparse.Namespace) -> int:
         what = f"  kind {c.kind_change}" if c.kind_change else ""
         print(f"{c.table} {c.number:>2}: {before['name']!r} -> {after['name']!r} "
               f"({after['kind'] or 'emptied'}){what}")
+        for label, old, new in value_changes(c.before, c.after):
+            print(f"    {label:<8} {old} -> {new}")
     for k in result.skipped:
         print(f"skipped line {k.line}: {k.field}: {k.reason}")
     changed = sum(c.changed for c in result.slots)
@@ -334,6 +342,16 @@ def import_file(args: argparse.Namespace) -> int:
     print(f"{args.file.name}: {changed} slot(s) {verb}, {len(result.skipped)} declaration(s) "
           f"skipped{' (dry run: nothing written)' if args.dry_run else ''}")
     return 0
+
+
+def _slot_ref(ref: str) -> tuple[str, int]:
+    """``tool3`` / ``base12`` (as --slots gives them) -> ("tool", 3)."""
+    import re
+
+    m = re.fullmatch(r"\s*(tool|base)\s*(\d+)\s*", ref)
+    if not m:
+        raise CalibrationError(("--slots",), f"expected tool<n> or base<n>, got {ref!r}")
+    return m.group(1), int(m.group(2))
 
 
 def _job_limits(p: argparse.ArgumentParser) -> None:
@@ -642,7 +660,15 @@ def main(argv: Sequence[str] | None = None) -> int:
             app = _open_app(args.db)
             with app.state.sessionmaker() as db:
                 controller = crud.find_controller(db, args.controller)
-                sys.stdout.write(export_text(db, controller.id, args.format))
+                if args.format in ("kuka", "abb", "fanuc", "ur"):  # the file's own encoding
+                    from server.controller_files import export_file_bytes
+
+                    raw, _ = export_file_bytes(db, controller.id, args.format)
+                    sys.stdout.flush()
+                    sys.stdout.buffer.write(raw)
+                    sys.stdout.buffer.flush()
+                else:
+                    sys.stdout.write(export_text(db, controller.id, args.format))
             return 0
         if args.command == "import":
             return import_file(args)

@@ -30,8 +30,14 @@ LOAD_FIELDS = ("mass_kg", "com_x_mm", "com_y_mm", "com_z_mm", "inertia_x_kgm2",
                "inertia_c_deg")
 
 
+IMPORTED_USED = "import."  # method prefix of a slot a file declared used (even if all zero)
+
+
 def is_used(e: SlotRow) -> bool:
-    return bool(e.name) or any(v != 0.0 for v in e.pose_values()) or e.mass_kg is not None
+    """A slot with a name, a frame or a load, or one a controller file declared used: KUKA's
+    ``TOOL_TYPE[2]=#BASE`` with a zero frame and a blank name is a tool all the same."""
+    return (bool(e.name) or any(v != 0.0 for v in e.pose_values()) or e.mass_kg is not None
+            or (e.method or "").startswith(IMPORTED_USED))
 
 
 def to_frame_entry(e: SlotRow) -> formats.FrameEntry:
@@ -57,11 +63,23 @@ def to_frame_entries(rows: list[SlotRow]) -> list[formats.FrameEntry]:
 
 def export_file(db: Session, controller_id: int, fmt: str) -> str:
     """The tables in ``fmt``: patched into the file last imported in that format, if any."""
+    return export_file_encoded(db, controller_id, fmt)[0]
+
+
+def export_file_encoded(db: Session, controller_id: int, fmt: str) -> tuple[str, str]:
+    """(text, encoding) of :func:`export_file`: the kept file's own encoding, else UTF-8."""
     entries = to_frame_entries(crud.list_entries(db, controller_id))
     kept = crud.get_controller_file(db, controller_id, fmt)
     if kept is not None and fmt in formats.PATCHERS:
-        return formats.PATCHERS[fmt](entries, kept.text)
-    return formats.EXPORTERS[fmt](entries)
+        encoding = formats.unwrap_kept(kept.text)[1]
+        return formats.PATCHERS[fmt](entries, kept.text), encoding
+    return formats.EXPORTERS[fmt](entries), "utf-8"
+
+
+def export_file_bytes(db: Session, controller_id: int, fmt: str) -> tuple[bytes, str]:
+    """(bytes, encoding) of :func:`export_file`, in the imported file's encoding."""
+    text, encoding = export_file_encoded(db, controller_id, fmt)
+    return formats.encode_file(text, encoding), encoding
 
 
 def slot_values(fe: formats.FrameEntry | None, table: str) -> dict[str, Any]:
@@ -84,10 +102,9 @@ def slot_values(fe: formats.FrameEntry | None, table: str) -> dict[str, Any]:
     return values
 
 
-def _view(values: dict[str, Any] | None) -> dict[str, Any] | None:
+def _view(values: dict[str, Any] | None, used: bool) -> dict[str, Any] | None:
     """A slot for the preview: None when unused, else name, kind, pose, load, unit."""
-    if values is None or not (values["name"] or any(values[f] for f in POSE_FIELDS)
-                              or values["mass_kg"] is not None):
+    if values is None or not used:
         return None
     load = None
     if values["mass_kg"] is not None:
@@ -98,6 +115,51 @@ def _view(values: dict[str, Any] | None) -> dict[str, Any] | None:
     return {"name": values["name"], "kind": values["kind"],
             "pose": dict(zip("xyzabc", (values[f] for f in POSE_FIELDS))),
             "load": load, "mech_unit": values["mech_unit"]}
+
+
+def _text(v: Any) -> str:
+    if v is None:
+        return "-"
+    if isinstance(v, float):
+        return repr(v + 0.0)
+    if isinstance(v, list):
+        return "[" + ", ".join(_text(x) for x in v) + "]"
+    return repr(v) if isinstance(v, str) else str(v)
+
+
+def value_changes(before: dict[str, Any] | None, after: dict[str, Any] | None
+                  ) -> list[tuple[str, str, str]]:
+    """(field, before, after) of every value of a preview slot (:func:`_view`) that differs,
+    with every digit: what ``pendant import --dry-run`` prints under each slot.
+
+    >>> value_changes(None, {"name": "pen", "kind": "tool", "mech_unit": None, "load": None,
+    ...                      "pose": dict(x=0.0, y=0.0, z=180.5, a=0.0, b=0.0, c=0.0)})
+    [('name', '-', "'pen'"), ('kind', '-', 'tool'), ('z', '-', '180.5')]
+    """
+    def flat(v: dict[str, Any] | None) -> dict[str, Any]:
+        if v is None:
+            return {}
+        out: dict[str, Any] = {"name": v["name"], "kind": v["kind"]}
+        out.update({k: x for k, x in v["pose"].items()})
+        load = v["load"] or {}
+        out.update({"mass_kg": load.get("mass_kg"), "com_mm": load.get("com_mm"),
+                    "inertia": load.get("inertia_kgm2"), "axes_deg": load.get("inertia_axes_deg"),
+                    "unit": v["mech_unit"]})
+        return out
+
+    a, b = flat(before), flat(after)
+    keys = list(dict.fromkeys([*a, *b]))
+    out = []
+    for k in keys:
+        old, new = a.get(k), b.get(k)
+        if before is None and new in (0.0, None, ""):
+            continue  # an unused slot had nothing: show only what the file gives
+        if after is None and old in (0.0, None, ""):
+            continue
+        if old != new:
+            show = (lambda v: "-" if v is None else v) if k == "kind" else _text
+            out.append((k, show(old), show(new)))
+    return out
 
 
 @dataclass
@@ -124,31 +186,46 @@ class ImportResult:
 
 
 def parse_file(fmt: str, text: str) -> ParsedFile:
-    """The controller file ``text`` in ``fmt`` read (FormatError names the line and field)."""
+    """The controller file ``text`` in ``fmt`` read (FormatError names the line and field).
+
+    A file that lists its slots as unused (a new robot's ``$config.dat``) imports: it
+    empties them. A file with no slot at all is refused."""
     parsed = formats.READERS[fmt](text)
-    if not parsed.entries:
-        raise CalibrationError(("text",), "no tool, base, workpiece or fixed-tool entry found "
+    if not parsed.entries and not parsed.unused:
+        raise CalibrationError(("text",), "no tool, base, workpiece or fixed-tool slot found "
                                f"in this {fmt} text")
     return parsed
 
 
 def apply_import(db: Session, controller: Controller, fmt: str, text: str,
-                 parsed: ParsedFile, dry_run: bool = False) -> ImportResult:
+                 parsed: ParsedFile, dry_run: bool = False, encoding: str = "utf-8",
+                 slots: list[tuple[str, int]] | None = None) -> ImportResult:
     """Replace every slot ``parsed`` names by the file's values (or say what would change).
 
     Each named slot is written whole: pose, name, kind, load (none when the file has none,
     e.g. KUKA ``M -1``) and mechanical unit. Slots the file lists as unused are emptied.
-    Nothing is written before every slot has been checked against the tables; ``dry_run``
-    writes nothing at all. ``text`` is kept for :func:`export_file`.
+    ``slots`` (``(table, number)`` pairs) applies only those: every other slot keeps what it
+    holds (a calibrated TOOL 1 survives importing the controller's file), and a later export
+    patches it into the file. Nothing is written before every slot has been checked against
+    the tables; ``dry_run`` writes nothing at all. ``text`` is kept for :func:`export_file`,
+    with ``encoding``, the one it was decoded from.
 
     Raises
     ------
     CalibrationError
-        ``("text", "line N", "<slot>")`` for a slot number the tables do not have.
+        ``("text", "line N", "<slot>")`` for a slot number the tables do not have;
+        ``("slots", i)`` for a chosen slot the file does not name.
     """
     planned: list[tuple[SlotRow, dict[str, Any], SlotChange]] = []
     named = [(family_of(fe.kind), fe.number, fe) for fe in parsed.entries]
     named += [(family, n, None) for family, n in parsed.unused]
+    if slots is not None:
+        in_file = {(TABLE_OF_FAMILY[f], n) for f, n, _ in named}
+        for i, ref in enumerate(slots):
+            if tuple(ref) not in in_file:
+                raise CalibrationError(("slots", i), f"the file does not name {ref[0]} {ref[1]}")
+        chosen = {tuple(ref) for ref in slots}
+        named = [x for x in named if (TABLE_OF_FAMILY[x[0]], x[1]) in chosen]
     for family, number, fe in sorted(named, key=lambda x: (x[0] != "robot_held", x[1])):
         table = TABLE_OF_FAMILY[family]
         line = parsed.slot_lines.get((family, number))
@@ -162,23 +239,25 @@ def apply_import(db: Session, controller: Controller, fmt: str, text: str,
         row = crud.get_entry(db, controller.id, table, number)
         before = {f: getattr(row, f) for f in slot_values(None, table)}
         after = slot_values(fe, table)
-        changed = any(before[k] != v for k, v in after.items())
+        changed = (any(before[k] != v for k, v in after.items())
+                   or is_used(row) != (fe is not None))
         if fe is None and not is_used(row):
             continue
         kind_change = None
         if is_used(row) and fe is not None and row.kind != fe.kind:
             kind_change = f"{row.kind} -> {fe.kind}"
-        planned.append((row, after, SlotChange(table, number, line, _view(before), _view(after),
+        planned.append((row, after, SlotChange(table, number, line, _view(before, is_used(row)),
+                                               _view(after, fe is not None),
                                                kind_change, changed)))
     result = ImportResult(fmt, dry_run, [c for _, _, c in planned], list(parsed.skipped))
     if dry_run:
         return result
     for row, after, change in planned:
         if change.changed:
-            after.update(method=f"import.{fmt}", session_id=None, error_max_mm=None,
-                         error_rms_mm=None)
+            after.update(method=f"{IMPORTED_USED}{fmt}" if change.after is not None else None,
+                         session_id=None, error_max_mm=None, error_rms_mm=None)
             crud.change_entry(db, row, after, reason="import")
-    crud.store_controller_file(db, controller.id, fmt, text)
+    crud.store_controller_file(db, controller.id, fmt, formats.wrap_kept(text, encoding))
     emit(db, "import-applied", controller, {
         "format": fmt, "entries": result.entries, "skipped": len(result.skipped),
         "changed": [{"table": c.table, "number": c.number, "kind_change": c.kind_change}

@@ -69,6 +69,13 @@ class PoseOut(Out):
         return cls(x=v[0], y=v[1], z=v[2], a=v[3], b=v[4], c=v[5])
 
     @classmethod
+    def exact(cls, values: object) -> "PoseOut":
+        """A stored slot's pose with every digit (a client that writes it back changes
+        nothing; JSON numbers carry the double exactly)."""
+        v = [float(x) + 0.0 for x in values]  # type: ignore[union-attr]
+        return cls(x=v[0], y=v[1], z=v[2], a=v[3], b=v[4], c=v[5])
+
+    @classmethod
     def of_matrix(cls, T: object) -> "PoseOut":
         p = Pose.from_matrix(np.asarray(T, dtype=float))
         return cls.of(p.as_array())
@@ -274,13 +281,43 @@ class ProvenanceOut(Out):
     updated_by: str | None = Field(None, description="the user who last changed the slot")
 
 
+class PosePatchIn(In):
+    """A slot's pose in a partial update: the components given replace the stored ones; the
+    others keep their stored value to the last digit (JSON Merge Patch, RFC 7396)."""
+
+    x: Mm | None = None
+    y: Mm | None = None
+    z: Mm | None = None
+    a: Deg | None = None
+    b: Deg | None = None
+    c: Deg | None = None
+
+    def merged(self, stored: tuple[float, ...]) -> tuple[float, ...]:
+        """The stored x, y, z, a, b, c with the given components replaced."""
+        given = (self.x, self.y, self.z, self.a, self.b, self.c)
+        return tuple(float(s) if g is None else float(g) for g, s in zip(given, stored))
+
+
+class LoadPatchIn(In):
+    """A slot's load in a partial update: what is given replaces, the rest stays (a slot
+    without a load starts from mass 0 with zero centre of mass and inertia)."""
+
+    mass_kg: Kg | None = None
+    com_mm: Vec3 | None = None
+    inertia_kgm2: Annotated[list[Kgm2], Field(min_length=3, max_length=3)] | None = None
+    inertia_axes_deg: Annotated[list[Deg], Field(min_length=3, max_length=3)] | None = None
+
+
 class EntryIn(In):
-    """Edit a slot by hand (numeric input without a session). Omitted fields stay."""
+    """Edit a slot by hand (numeric input without a session): JSON Merge Patch semantics.
+
+    Omitted fields stay as they are, also inside ``pose`` and ``load`` (``{"pose": {"x":
+    12.5}}`` changes X alone); ``"load": null`` removes the load ("not set")."""
 
     name: SlotName | None = None
     kind: EntryKind | None = None
-    pose: PoseIn | None = None
-    load: LoadIn | None = None
+    pose: PosePatchIn | None = None
+    load: LoadPatchIn | None = None
     mech_unit: str | None = Field(None, min_length=1, max_length=MECH_UNIT_CHARS,
                                   description="coordinated_base: the mechanical unit moving it")
 
@@ -534,10 +571,21 @@ class RunCycleOut(Out):
 
 # ------------------------------------------------------------------------------ import/export
 
+class SlotRefIn(In):
+    table: TableName
+    number: int = Field(ge=1)
+
+
 class ImportIn(In):
     format: ImportFormat
     text: str = Field(min_length=1, max_length=5_000_000)
     dry_run: bool = Field(False, description="say what would change; write nothing")
+    encoding: Literal["utf-8", "cp1252"] = Field(
+        "utf-8", description="the file's own encoding (the text as decoded from it): an "
+        "export in this format writes the file back in it")
+    slots: list[SlotRefIn] | None = Field(
+        None, description="apply only these slots of the file (the preview's tick boxes); "
+        "the others keep what they hold. Default: every slot the file names")
 
 
 class SlotChangeOut(Out):

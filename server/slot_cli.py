@@ -3,6 +3,7 @@ service, with If-Match.
 
     pendant slot tool 3 [--url http://127.0.0.1:8000] [--controller 1]
     pendant slot tool 3 --name pointer --pose 1.5,-2,180,0,0,0 [--etag '"4"']
+    pendant slot tool 3 --x 1.75                    # X alone: y, z, a, b, c keep every digit
     pendant slot ext 1 --pose 520,380,80,0,0,0     # EX_KIN 1: --pose is its root frame
 
 It reads the slot (and its ``ETag``), then writes it with ``If-Match`` so an edit never
@@ -80,6 +81,13 @@ def run_slot(args: argparse.Namespace) -> int:
         body["kind"] = args.kind
     if args.pose is not None:
         body["root" if args.table == "ext" else "pose"] = _pose(args.pose)
+    one = {k: getattr(args, k) for k in "xyzabc" if getattr(args, k, None) is not None}
+    if one:  # PUT merges (JSON Merge Patch): the other components stay as stored
+        if args.table == "ext" or args.pose is not None:
+            print("pendant: --x .. --c: give them instead of --pose, for a tool or base",
+                  file=sys.stderr)
+            return 2
+        body["pose"] = one
     if not body:
         print(_show(slot, headers.get("ETag")))
         return 0
@@ -113,6 +121,8 @@ def add_slot_command(subparsers: Any) -> None:
     s.add_argument("--kind", choices=["tool", "workpiece", "base", "fixed_tool", "turntable",
                                       "positioner", "linear_unit", "none"])
     s.add_argument("--pose", help="x,y,z,a,b,c (mm, deg); ext: its root frame")
+    for k, unit in zip("xyzabc", ("mm",) * 3 + ("deg",) * 3):
+        s.add_argument(f"--{k}", type=float, help=f"{k} alone ({unit}); the others stay")
     s.add_argument("--etag", help='If-Match to send (an ETag you read earlier, e.g. \'"4"\'); '
                                   "default: the one read just now")
     s.set_defaults(func=run_slot)

@@ -208,3 +208,46 @@ def test_the_json_backup_keeps_the_imported_file(client):
                     json={"format": "json", "text": json.dumps(doc)})
     assert r.status_code == 422 and r.json()["detail"][0]["loc"][:4] == ["body", "text", "files", 0]
     assert "ENDDAT" in r.json()["detail"][0]["msg"]
+
+
+def test_cli_dry_run_shows_values_before_and_after_and_slots_choose(db_url, tmp_path, capsys):
+    """Issue 23: ``pendant import --dry-run`` lists per slot the values before -> after with
+    every digit; ``--slots`` applies only those; a Windows-1252 file keeps its encoding."""
+    with make_client(db_url) as client:
+        ok(client.put(f"{C}/tools/1", json={"name": "pointer", "pose": {"z": 180}}, headers={"If-Match": "*"}))
+    f = tmp_path / "$config.dat"
+    raw = (DATA / "controller-files" / "kuka_krc4_crlf_cp1252.dat").read_bytes()
+    f.write_bytes(raw)
+    assert main(["import", str(f), "--controller", "cell-1", "--dry-run", "--db", db_url]) == 0
+    out = capsys.readouterr().out
+    assert "tool  1: 'pointer' -> 'Greifer Öl' (tool)" in out
+    assert "    x        0.0 -> 148.320007" in out and "    y        0.0 -> 3.01155138" in out
+    assert "    z        180.0 -> 357.125" in out and "    mass_kg  - -> 6.80000019" in out
+    assert main(["import", str(f), "--controller", "cell-1", "--slots", "tool3,base1",
+                 "--db", db_url]) == 0
+    assert "2 slot(s) changed" in capsys.readouterr().out
+    with make_client(db_url) as client:
+        assert ok(client.get(f"{C}/tools/1"))["name"] == "pointer"
+        assert ok(client.get(f"{C}/bases/1"))["pose"]["b"] == 0.238999218
+    assert main(["import", str(f), "--controller", "cell-1", "--db", db_url]) == 0
+    with make_client(db_url) as client:
+        assert client.get(f"{C}/export", params={"format": "kuka"}).content == raw
+
+
+def test_pendant_slot_changes_one_component_and_keeps_every_digit_of_the_others(tmp_path, monkeypatch):
+    """Issue 23 (1): ``pendant slot tool 1 --x ...`` sends X alone; Y keeps 3.01155138."""
+    import httpx
+
+    from api_helpers import ADMIN_TOKEN
+    from browser_helpers import serve
+    from db_backends import fresh_url
+
+    monkeypatch.setenv("PENDANT_TOKEN", ADMIN_TOKEN)
+    auth = {"Authorization": f"Bearer {ADMIN_TOKEN}"}
+    with serve(fresh_url(tmp_path)) as url:
+        r = httpx.put(f"{url}{C}/tools/1", headers={**auth, "If-Match": "*"},
+                      json={"pose": {"x": 1, "y": 3.01155138, "z": 357.125, "b": 0.238999218}})
+        assert r.status_code == 200, r.text
+        assert main(["slot", "tool", "1", "--url", url, "--x", "2.5"]) == 0
+        pose = httpx.get(f"{url}{C}/tools/1", headers=auth).json()["pose"]
+        assert pose == {"x": 2.5, "y": 3.01155138, "z": 357.125, "a": 0.0, "b": 0.238999218, "c": 0.0}

@@ -180,11 +180,14 @@ def test_kuka_reads_any_spacing_case_comments_and_crlf():
 def test_kuka_skips_unused_slots_but_keeps_a_tool_at_the_flange():
     unused = "{M -1,CM {X 0,Y 0,Z 0,A 0,B 0,C 0},J {X 0,Y 0,Z 0}}"
     text = ("DEFDAT $CONFIG\nTOOL_DATA[1]={X 0.0,Y 0.0,Z 0.0,A 0.0,B 0.0,C 0.0}\n"
-            "TOOL_NAME[1,]=\"spare\"\nTOOL_TYPE[1]=#NONE\nLOAD_DATA[1]=" + unused + "\n"
+            "TOOL_NAME[1,]=\" \"\nTOOL_TYPE[1]=#NONE\nLOAD_DATA[1]=" + unused + "\n"
             "TOOL_DATA[2]={X 0.0,Y 0.0,Z 0.0,A 0.0,B 0.0,C 0.0}\nTOOL_NAME[2,]=\" \"\n"
-            "TOOL_TYPE[2]=#BASE\nLOAD_DATA[2]=" + unused + "\nENDDAT\n")
+            "TOOL_TYPE[2]=#BASE\nLOAD_DATA[2]=" + unused + "\n"
+            "TOOL_DATA[3]={X 0.0,Y 0.0,Z 0.0,A 0.0,B 0.0,C 0.0}\nTOOL_NAME[3,]=\"spare\"\n"
+            "TOOL_TYPE[3]=#NONE\nLOAD_DATA[3]=" + unused + "\nENDDAT\n")
     parsed = read_kuka(text)
-    assert parsed.entries == [FrameEntry(2, "", "tool", Pose())]
+    # issue 23 (9): a #NONE zero slot with a name keeps it (the slot is not unused)
+    assert parsed.entries == [FrameEntry(2, "", "tool", Pose()), FrameEntry(3, "spare", "tool", Pose())]
     assert parsed.unused == [("robot_held", 1)]  # listed, so that an import empties it
 
 

@@ -4,6 +4,7 @@ until they confirm."""
 
 from __future__ import annotations
 
+import re
 from pathlib import Path
 
 import pytest
@@ -66,3 +67,30 @@ def test_import_preview_then_confirm(page, site):
     err = form.locator("#import-err")
     page.wait_for_function("() => document.querySelector('#import-err').textContent.length > 0")
     assert "ENDMODULE" in err.inner_text() and "cut short" in err.inner_text()
+
+
+def test_partial_import_keeps_the_calibrated_slots(page, site):
+    """Issue 24 (3): the preview's tick boxes choose the slots; an unticked TOOL 1 keeps its
+    calibration. The Windows-1252 file shows its names right and comes back byte for byte."""
+    r = page.request.put(site + "/controllers/1/tools/1", headers={"If-Match": "*"},
+                         data={"name": "calibrated", "pose": {"x": 1.25, "z": 201.5}})
+    assert r.ok, r.text()
+    open_pendant(page, site)
+    form = page.locator("#import-form")
+    path = DATA / "controller-files" / "kuka_krc4_crlf_cp1252.dat"
+    form.locator("#import-file").set_input_files(str(path))
+    form.get_by_role("button", name="Preview").click()
+    preview = form.locator("#import-preview")
+    preview.wait_for(state="visible")
+    assert "Greifer Öl" in preview.locator("#import-diff").inner_text()
+    preview.get_by_label("apply tool 1").uncheck()
+    commit = form.get_by_role("button", name=re.compile(r"Import \d+ ticked slot"))
+    commit.click()
+    page.wait_for_function(
+        "() => document.querySelector('#import-summary').textContent.startsWith('Imported')")
+    idle(page)
+    tool1 = slot(page, site, "/tools/1")
+    assert tool1["name"] == "calibrated" and tool1["pose"]["x"] == 1.25
+    assert slot(page, site, "/tools/3")["name"] == "Tür links"
+    out = page.request.get(site + "/controllers/1/export?format=kuka").body()
+    assert b'TOOL_NAME[3,]="T\xfcr links"' in out and b'TOOL_NAME[1,]="calibrated"' in out

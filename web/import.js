@@ -1,13 +1,35 @@
 // pendant: import a controller file into the selected controller, with a preview first.
 // Self-contained: reads the controller from #controller, asks the service for a dry run
 // (POST .../import with dry_run), shows per slot before -> after, kind changes and the
-// declarations the file has that pendant skips, and imports only when asked.
+// declarations the file has that pendant skips, and imports only when asked. Each slot has
+// a tick box: only the ticked ones are imported (the others keep what they hold, e.g. a TOOL 1
+// calibrated before). The file is read as bytes: UTF-8 if it is, else Windows-1252, and the
+// service is told which, so that its export writes the file back in the same encoding.
 
 import { request, ApiError } from "/api.js";
 
 const $ = (s) => document.querySelector(s);
 const SUFFIX = { dat: "kuka", mod: "abb", modx: "abb", sys: "abb", txt: "fanuc", ls: "fanuc", script: "ur" };
-let pending = null; // {path, format, text} of the previewed file
+let pending = null; // {path, format, text, encoding} of the previewed file
+
+async function readFile(file) {
+  const bytes = await file.arrayBuffer();
+  try {
+    return { text: new TextDecoder("utf-8", { fatal: true, ignoreBOM: true }).decode(bytes), encoding: "utf-8" };
+  } catch {
+    return { text: new TextDecoder("windows-1252").decode(bytes), encoding: "cp1252" };
+  }
+}
+
+function ticked() {
+  return [...document.querySelectorAll("#import-diff tbody input[type=checkbox]")];
+}
+
+function updateCommit() {
+  const n = ticked().filter((b) => b.checked).length;
+  $("#import-commit").disabled = n === 0;
+  $("#import-commit").textContent = n === ticked().length ? "Import these changes" : `Import ${n} ticked slot(s)`;
+}
 
 function describe(slot) {
   if (!slot) return "(unused)";
@@ -27,10 +49,28 @@ function showError(err) {
 function render(res) {
   const body = $("#import-diff tbody");
   body.replaceChildren();
+  const head = $("#import-diff thead tr");
+  if (head && !head.querySelector(".apply")) {
+    const th = document.createElement("th");
+    th.className = "apply";
+    th.textContent = "Apply";
+    head.prepend(th);
+  }
   const changed = res.slots.filter((s) => s.changed);
   for (const s of changed) {
     const tr = document.createElement("tr");
     if (s.kind_change) tr.className = "kind-change";
+    const box = document.createElement("input");
+    box.type = "checkbox";
+    box.checked = true;
+    box.name = `${s.table}-${s.number}`;
+    box.dataset.table = s.table;
+    box.dataset.number = String(s.number);
+    box.setAttribute("aria-label", `apply ${s.table} ${s.number}`);
+    box.addEventListener("change", updateCommit);
+    const td0 = document.createElement("td");
+    td0.append(box);
+    tr.append(td0);
     for (const text of [`${s.table} ${s.number}`, s.line ?? "", describe(s.before), describe(s.after), s.kind_change || ""]) {
       const td = document.createElement("td");
       td.textContent = String(text);
@@ -46,7 +86,7 @@ function render(res) {
   }));
   $("#import-summary").textContent = `${changed.length} slot(s) would change` +
     (res.skipped.length ? `, ${res.skipped.length} declaration(s) skipped` : "") + ". Nothing is written yet.";
-  $("#import-commit").disabled = changed.length === 0;
+  updateCommit();
   $("#import-preview").hidden = false;
 }
 
@@ -60,9 +100,9 @@ async function preview(ev) {
   const format = $("#import-format").value || SUFFIX[ext];
   if (!format) { $("#import-err").textContent = `format: cannot tell the format of ${file.name}; choose one`; return; }
   const path = `/controllers/${$("#controller").value}/import`;
-  pending = { path, format, text: await file.text() };
+  pending = { path, format, ...(await readFile(file)) };
   try {
-    render(await request("POST", path, { body: { format, text: pending.text, dry_run: true } }));
+    render(await request("POST", path, { body: { format, text: pending.text, encoding: pending.encoding, dry_run: true } }));
   } catch (err) { pending = null; showError(err); }
 }
 
@@ -70,7 +110,12 @@ async function commit() {
   if (!pending) return;
   $("#import-err").textContent = "";
   try {
-    const res = await request("POST", pending.path, { body: { format: pending.format, text: pending.text } });
+    const boxes = ticked();
+    const body = { format: pending.format, text: pending.text, encoding: pending.encoding };
+    if (boxes.some((b) => !b.checked)) {
+      body.slots = boxes.filter((b) => b.checked).map((b) => ({ table: b.dataset.table, number: Number(b.dataset.number) }));
+    }
+    const res = await request("POST", pending.path, { body });
     $("#import-summary").textContent = `Imported: ${res.slots.filter((s) => s.changed).length} slot(s) changed.`;
     $("#import-commit").disabled = true;
     pending = null;

@@ -256,6 +256,13 @@ _DECL = re.compile(
     r"\b(?:(?:LOCAL|TASK)\s+)*(PERS|CONST|VAR)\s+(tooldata|wobjdata|loaddata)\s+"
     r"([A-Za-z]\w*)\s*(\{[^}]*\})?\s*",
     re.IGNORECASE)
+#: words that start a declaration, a routine or the module's end: never inside a value, so a
+#: value that reaches one lacks its ';'
+_STATEMENT_WORDS = frozenset({"PERS", "VAR", "CONST", "LOCAL", "TASK", "PROC", "FUNC", "TRAP",
+                              "RECORD", "ALIAS", "ENDMODULE", "ENDPROC", "ENDFUNC", "ENDTRAP"})
+_ROUTINE = re.compile(r"^[ \t]*(?:LOCAL[ \t]+)?(PROC|TRAP|FUNC[ \t]+\w+)[ \t]+([A-Za-z]\w*)",
+                      re.IGNORECASE | re.MULTILINE)
+_ENDROUTINE = re.compile(r"^[ \t]*(ENDPROC|ENDTRAP|ENDFUNC)\b", re.IGNORECASE | re.MULTILINE)
 _MODULE = re.compile(r"^[ \t]*MODULE\s+([A-Za-z]\w*)", re.IGNORECASE | re.MULTILINE)
 _ENDMODULE = re.compile(r"^[ \t]*ENDMODULE\b", re.IGNORECASE | re.MULTILINE)
 
@@ -326,6 +333,11 @@ def _tokens(text: str, start: int, line_of, decl_line: int, name: str) -> tuple[
         pos = m.end()
         if kind == "other" and m.group(k) == ";":
             return toks, pos
+        if kind == "word" and m.group(k).upper() in _STATEMENT_WORDS:
+            end_line = toks[-1].line if toks else decl_line
+            raise FormatError.at_line(end_line, name, f"no ';' ends this declaration (begun on "
+                                      f"line {decl_line}): line {line_of(m.start(k))} starts "
+                                      f"with {m.group(k)} before it")
         toks.append(_Tok(kind, m.group(k), line_of(m.start(k)), m.start(k), m.end(k)))
 
 
@@ -406,6 +418,7 @@ def _declarations(text: str) -> tuple[list[_Decl], list[Skipped], int]:
             tags[n] = (m.group(1).lower(), int(m.group(2)), m.group(3).strip(), n)
     code = _strip_comments(text)
     begin, endmodule = _module_span(text, code)
+    routines = _routines(code, begin, endmodule)
     decls: list[_Decl] = []
     skipped: list[Skipped] = []
     pos, last_line = begin, 0
@@ -416,6 +429,20 @@ def _declarations(text: str) -> tuple[list[_Decl], list[Skipped], int]:
         line = line_of(m.start())
         dtype, name, array = m.group(2).lower(), m.group(3), m.group(4)
         after = m.end()
+        inside = next((r for r in routines if r[0] <= m.start() < r[2]), None)
+        if inside is not None:
+            start, header_end, _, kind, routine = inside
+            if m.start() < header_end:
+                pos = after
+                skipped.append(Skipped(line, name, f"a parameter of {kind} {routine}: the "
+                                       "routine's argument, not a frame of the controller"))
+            else:
+                end = code.find(";", after)
+                pos = after if end < 0 else end + 1
+                skipped.append(Skipped(line, name, f"{dtype} declared inside {kind} {routine}: "
+                                       "routine data, not a frame of the controller"))
+            last_line = line
+            continue
         if array:
             end = code.find(";", after)
             pos = after if end < 0 else end + 1
@@ -444,6 +471,26 @@ def _declarations(text: str) -> tuple[list[_Decl], list[Skipped], int]:
         leaves = [t for t in toks if t.kind in ("num", "str", "word")]
         decls.append(_Decl(dtype, name, line, value, tag, m.start(), pos, leaves))
         last_line = line
+
+
+def _routines(code: str, begin: int, endmodule: int) -> list[tuple[int, int, int, str, str]]:
+    """(start, end of the header, end, kind, name) of each PROC, FUNC and TRAP."""
+    out = []
+    pos = begin
+    while True:
+        m = _ROUTINE.search(code, pos, endmodule)
+        if not m:
+            return out
+        kind = m.group(1).split()[0].upper()
+        header_end = m.end()
+        rest = code[m.end():endmodule]
+        if rest.lstrip().startswith("("):
+            close = code.find(")", m.end(), endmodule)
+            header_end = endmodule if close < 0 else close + 1
+        e = _ENDROUTINE.search(code, header_end, endmodule)
+        end = endmodule if e is None else e.end()
+        out.append((m.start(), header_end, end, kind, m.group(2)))
+        pos = end
 
 
 def _nums(v: object, n: int, line: int, field: str, unit: str | None = None) -> list[float]:
@@ -478,7 +525,8 @@ def _pose_of(T: np.ndarray) -> Pose:
     return Pose(*(float(x) for x in T[:3, 3]), *(float(a) for a in abc))
 
 
-def _read_load(v: object, line: int, field: str) -> LoadData | None:
+def _read_load(v: object, line: int, field: str,
+               warnings: list[Skipped] | None = None) -> LoadData | None:
     shape = "[mass,[cx,cy,cz],[q1,q2,q3,q4],ix,iy,iz]"
     if not (isinstance(v, list) and len(v) == 6):
         raise FormatError.at_line(line, field, f"expected {shape}")
@@ -489,6 +537,12 @@ def _read_load(v: object, line: int, field: str) -> LoadData | None:
     if not isinstance(mass, float):
         raise FormatError.at_line(line, f"{field}.mass", "expected a number")
     if (mass, tuple(cog), tuple(aom), *inertia) == _UNKNOWN:
+        return None
+    if mass < 0:
+        if warnings is not None:
+            warnings.append(Skipped(line, f"{field}.mass", f"mass {rapid_num(mass)}: no load "
+                                    "RobotWare takes; read as a load not set (as KUKA's M -1), "
+                                    "the frame is imported"))
         return None
     for fld, x, unit in ((f"{field}.mass", mass, "kg"), (f"{field}.ix", inertia[0], "kgm2"),
                          (f"{field}.iy", inertia[1], "kgm2"), (f"{field}.iz", inertia[2], "kgm2")):
@@ -514,7 +568,7 @@ def _read(text: str) -> tuple[list[_Found], list[FrameEntry], list[Skipped], lis
                 raise FormatError.at_line(line, name,
                                           "expected [robhold,[[x,y,z],[q1,q2,q3,q4]],[tload]]")
             pose = _pose_of(_read_pose(v[1], line, f"{name}.tframe"))
-            load = _read_load(v[2], line, f"{name}.tload")
+            load = _read_load(v[2], line, f"{name}.tload", skipped)
             found.append(_Found(d, "tool" if v[0] else "fixed_tool", pose, load))
         elif d.dtype == "wobjdata":
             if not (isinstance(v, list) and len(v) == 5 and isinstance(v[0], bool)
@@ -533,7 +587,7 @@ def _read(text: str) -> tuple[list[_Found], list[FrameEntry], list[Skipped], lis
             T = _read_pose(v[3], line, f"{name}.uframe") @ oframe
             load, load_decl = None, loads.get(f"{name.upper()}_LOAD")
             if v[0] and load_decl is not None:
-                load = _read_load(load_decl.value, load_decl.line, load_decl.name)
+                load = _read_load(load_decl.value, load_decl.line, load_decl.name, skipped)
             kind = "workpiece" if v[0] else ("coordinated_base" if unit else "base")
             found.append(_Found(d, kind, _pose_of(T), load, unit, oframe,
                                 load_decl if v[0] else None))
@@ -563,7 +617,7 @@ def read_abb(text: str) -> ParsedFile:
     text = text.replace("\r\n", "\n").replace("\r", "\n") if isinstance(text, str) else text
     found, entries, skipped, _, _ = _read(text)  # type: ignore[arg-type]
     where = {(family_of(e.kind), e.number): f.decl.line for f, e in zip(found, entries)}
-    return ParsedFile(canonical_order(entries), skipped, [], where)
+    return ParsedFile(canonical_order(entries), sorted(skipped, key=lambda k: k.line), [], where)
 
 
 def import_abb(text: str) -> list[FrameEntry]:
@@ -627,8 +681,8 @@ def _numbered(found: list[_Found]) -> list[FrameEntry]:
 
 def _leaf_text(tok: _Tok, want: object) -> str:
     """The literal for ``want`` if it differs from the token's value, else the token."""
-    if tok.kind == "num":
-        return tok.text if float(tok.text) == want else rapid_num(want)  # type: ignore[arg-type]
+    if tok.kind == "num":  # an unchanged number (or one off by float dust) keeps its digits
+        return tok.text if abs(float(tok.text) - want) <= NOISE else rapid_num(want)  # type: ignore
     if tok.kind == "str":
         return tok.text if tok.text[1:-1] == want else _string(str(want))
     return tok.text if (tok.text.upper() == "TRUE") == want else ("TRUE" if want else "FALSE")
@@ -642,9 +696,21 @@ def _old_leaf_values(d: _Decl) -> list[object]:
     return out
 
 
+NOISE = 1e-9  # mm, or a quaternion component: a difference below it is float dust
+
+
+def _clean(x: float) -> float:
+    """``x`` with float dust (|x| < 1e-9) written as the zero it is."""
+    return 0.0 if abs(x) < NOISE else float(x) + 0.0
+
+
 def _pose_leaves(T: np.ndarray, old: list[object], same_rotation: bool) -> list[object]:
-    q = list(old[3:7]) if same_rotation else [float(x) for x in _quat(T)]
-    return [float(x) + 0.0 for x in T[:3, 3]] + q
+    q = list(old[3:7]) if same_rotation else [_clean(x) for x in _quat(T)]
+    return [_clean(x) for x in T[:3, 3]] + q
+
+
+def _is_identity(leaves: list[object]) -> bool:
+    return leaves == [0.0, 0.0, 0.0, 1.0, 0.0, 0.0, 0.0]
 
 
 def _load_leaves(load: LoadData | None, old: list[object], old_load: LoadData | None) -> list:
@@ -670,14 +736,17 @@ def _target_leaves(f: _Found, old_entry: FrameEntry, e: FrameEntry) -> list[obje
         return [e.kind == "tool", *pose, *_load_leaves(e.load, old[8:], old_entry.load)]
     if f.decl.dtype == "wobjdata" and e.kind not in ("tool", "fixed_tool") and (
             (e.kind == "workpiece") == (f.kind == "workpiece")):
-        if old_entry.pose == e.pose:
-            uframe = old[3:10]
-        else:
+        uframe, oframe_leaves = old[3:10], old[10:]
+        if old_entry.pose != e.pose and _is_identity(old[3:10]) and not _is_identity(old[10:]):
+            # a work object defined by its oframe (uframe the identity): the change goes there
+            oframe_leaves = _pose_leaves(e.pose.as_matrix(), old[10:17], same_rot)
+        elif old_entry.pose != e.pose:
             oframe = np.eye(4) if f.oframe is None else f.oframe
             T = e.pose.as_matrix() @ np.linalg.inv(oframe)
-            uframe = _pose_leaves(T, old[3:10], same_rot)
+            uframe = _pose_leaves(T, old[3:10], same_rot and _is_identity(old[10:]))
         unit = e.mech_unit if e.kind == "coordinated_base" else ""
-        return [e.kind == "workpiece", e.kind != "coordinated_base", unit, *uframe, *old[10:]]
+        return [e.kind == "workpiece", e.kind != "coordinated_base", unit, *uframe,
+                *oframe_leaves]
     return None
 
 
@@ -690,9 +759,34 @@ def _line_end(text: str, offset: int) -> int:
     return len(text) if end < 0 else end + 1
 
 
+class _Lines:
+    """The template's own line ends: offsets in its ``\\n`` text mapped back to the template,
+    and the ending of each line (a mixed file keeps every line's own)."""
+
+    def __init__(self, template: str):
+        parts = re.split(r"(\r\n|\r|\n)", template)
+        self.contents, self.ends = parts[0::2], parts[1::2] + [""]
+        self.text = "\n".join(self.contents)
+        self.norm = np.cumsum([0] + [len(c) + 1 for c in self.contents])
+        self.orig = np.cumsum([0] + [len(c) + len(e) for c, e in zip(self.contents, self.ends)])
+        counts = {e: self.ends.count(e) for e in ("\r\n", "\n", "\r")}
+        self.common = max(counts, key=counts.get) if any(counts.values()) else "\n"  # type: ignore
+
+    def _line(self, offset: int) -> int:
+        return int(np.searchsorted(self.norm, offset, side="right")) - 1
+
+    def offset(self, offset: int) -> int:
+        i = self._line(offset)
+        return int(self.orig[i]) + offset - int(self.norm[i])
+
+    def ending(self, offset: int) -> str:
+        """The ending of the line at ``offset`` (the file's most common for the last line)."""
+        return self.ends[self._line(offset)] or self.common
+
+
 def _patch(template: str, entries: list[FrameEntry]) -> str:
-    crlf = template.count("\r\n") > template.count("\n") / 2
-    text = template.replace("\r\n", "\n").replace("\r", "\n")
+    src = _Lines(template)
+    text = src.text
     found, old_entries, _, decls, endmodule = _read(text)
     check_unique_slots(entries, {"robot_held": 10**9, "stationary": 10**9}, "ABB")
     new = {(family_of(e.kind), e.number): e for e in entries}
@@ -767,10 +861,11 @@ def _patch(template: str, entries: list[FrameEntry]) -> str:
         for e in canonical_order(added):
             body += _declaration(e, _ident_for(e, taken))
         edits.append((at, at, "\n".join(body) + "\n"))
-    out = text
+    out = template
     for start, end, repl in sorted(edits, key=lambda x: (x[0], x[1]), reverse=True):
-        out = out[:start] + repl + out[end:]
-    return out.replace("\n", "\r\n") if crlf else out
+        eol = src.ending(start)
+        out = out[:src.offset(start)] + repl.replace("\n", eol) + out[src.offset(end):]
+    return out
 
 
 def _offset_of_line(text: str, line: int) -> int:

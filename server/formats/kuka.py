@@ -527,8 +527,8 @@ def _slot(p: _Parsed, family: str, index: int) -> FrameEntry | None:
     pose: Pose = data[index].value if index in data else Pose()  # type: ignore[assignment]
     kind_type = types[index].value if index in types else "#NONE"
     name = names[index].value if index in names else ""
-    if kind_type == "#NONE" and not pose.as_array().any():
-        return None
+    if kind_type == "#NONE" and not pose.as_array().any() and not name:
+        return None  # a #NONE slot keeps a name it has (BASE_NAME[10,]="KukaReburn")
     kind = _KINDS[family][kind_type]  # type: ignore[index]
     unit = None
     if family == "BASE" and index in v["MACHINE_FRAME_DAT"]:
@@ -561,8 +561,10 @@ def read_kuka(text: str) -> ParsedFile:
     (and MACHINE_FRAME_DAT) arrays between ``DEFDAT`` and ``ENDDAT``; everything else
     (``&ACCESS``/``&REL`` headers, ``;FOLD`` lines, ``;`` comments, other declarations) is
     kept out. Keywords are case-insensitive and spacing is free. A slot whose type is
-    ``#NONE`` and whose frame is all zeros is unused (listed in ``unused``); a ``#NONE``
-    slot with a frame is read as a tool / base. A load of mass -1 is "not set".
+    ``#NONE``, whose frame is all zeros and whose name is blank is unused (listed in
+    ``unused``); a ``#NONE`` slot with a frame or a name is read as a tool / base, and a
+    ``#BASE`` or ``#TCP`` slot is used whatever its frame and name. A load of mass -1 is
+    "not set". A file whose every slot is unused (a new robot's) reads, with no entry.
 
     Raises
     ------
@@ -705,8 +707,11 @@ def _patch(template: str, entries: list[FrameEntry]) -> str:
     out: list[str] = []
     for i, raw in enumerate(lines, 1):
         out.append(raw)
+        own = raw[len(raw.rstrip("\r\n")):] or eol  # the line's own ending, as its neighbours
+        if i in inserts and not raw.endswith(("\n", "\r")):
+            out[-1] = raw + own
         for extra in inserts.get(i, []):
-            out.append(extra + eol)
+            out.append(extra + own)
     if 0 in inserts:
         out = [x + eol for x in inserts[0]] + out
     return "".join(out)

@@ -86,7 +86,7 @@ def entry_out(e: FrameEntry) -> EntryOut:
                                error_max_mm=e.error_max_mm, error_rms_mm=e.error_rms_mm,
                                updated_at=e.updated_at, updated_by=e.updated_by)
     return EntryOut(table=e.entry_table, number=e.number, name=e.name,  # type: ignore[arg-type]
-                    kind=e.kind, pose=PoseOut.of(e.pose_values()),  # type: ignore[arg-type]
+                    kind=e.kind, pose=PoseOut.exact(e.pose_values()),  # type: ignore[arg-type]
                     load=load, mech_unit=e.mech_unit, provenance=provenance)
 
 

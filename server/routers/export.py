@@ -11,10 +11,16 @@ import json
 from fastapi import APIRouter, Request, Response
 
 from db import crud, jobs
+from server import external
 from server.auth.audit import actor, mark_operation
 from server.auth.guard import require
-from server import external
-from server.controller_files import ImportResult, apply_import, export_file, parse_file
+from server.controller_files import (
+    ImportResult,
+    apply_import,
+    export_file,
+    export_file_bytes,
+    parse_file,
+)
 from server.deps import SessionDep
 from server.preconditions import IfMatch
 from server.routers.jobs import JobOut, accepted
@@ -60,9 +66,14 @@ def export(controller_id: int, db: SessionDep, request: Request,
     ``backup:write``)."""
     if format == "json":
         require(request, "backup:write")
-    text = export_text(db, controller_id, format)
     media, filename = MEDIA[format]
     name = crud.get_controller(db, controller_id).name
+    if format in ("kuka", "abb", "fanuc", "ur"):  # in the imported file's own encoding
+        raw, encoding = export_file_bytes(db, controller_id, format)
+        charset = "windows-1252" if encoding == "cp1252" else "utf-8"
+        return Response(raw, media_type=f"{media}; charset={charset}", headers={
+            "Content-Disposition": f'attachment; filename="{name}-{filename}"'})
+    text = export_text(db, controller_id, format)
     return Response(text, media_type=media,
                     headers={"Content-Disposition": f'attachment; filename="{name}-{filename}"'})
 
@@ -74,8 +85,9 @@ def import_tables(controller_id: int, body: ImportIn, db: SessionDep, request: R
     """Read a controller file (KUKA ``$config.dat``, ABB RAPID module, pendant's FANUC or UR
     export) or a JSON backup into the tables.
 
-    A controller file replaces each slot it names whole (each change recorded in history)
-    and is kept, so that a later export in that format patches only changed values into it;
+    A controller file replaces each slot it names whole (each change recorded in history),
+    or only the ``slots`` chosen (the others keep what they hold), and is kept, with its
+    ``encoding``, so that a later export in that format patches only changed values into it;
     the answer is 200. ``dry_run`` returns, per slot, before -> after, kind changes and
     skipped declarations, and writes nothing. A JSON backup replaces the tables, history and
     sessions (needs ``backup:restore``; the audit keeps every earlier change): it is checked
@@ -85,6 +97,9 @@ def import_tables(controller_id: int, body: ImportIn, db: SessionDep, request: R
     from server.routers.controllers import changing
 
     c = changing(db, controller_id, if_match)
+    if body.format == "json" and body.slots is not None:
+        raise CalibrationError(("slots",), "a JSON backup restores the whole controller; "
+                               "slots choose among a controller file's slots")
     if body.format == "json":
         require(request, "backup:restore")
         mark_operation("backup.restore")
@@ -109,6 +124,7 @@ def import_tables(controller_id: int, body: ImportIn, db: SessionDep, request: R
         response.status_code = 202  # the restore itself is a job (server.job_kinds)
         return accepted(response, jobs.enqueue(db, "restore", {"controller_id": c.id,
                                                                "doc": doc, "actor": actor()}))
+    slots = None if body.slots is None else [(s.table, s.number) for s in body.slots]
     result = apply_import(db, c, body.format, body.text, parse_file(body.format, body.text),
-                          body.dry_run)
+                          body.dry_run, body.encoding, slots)
     return import_out(result)

@@ -2,6 +2,8 @@
 
 from __future__ import annotations
 
+from types import SimpleNamespace
+
 from fastapi import APIRouter, Response
 
 from db import crud
@@ -9,7 +11,7 @@ from db.models import EntryHistory, FrameEntry
 from server.deps import SessionDep
 from server.preconditions import IfMatch, check, etag, set_etag
 from server.routers.common import entry_out, load_values
-from server.schemas import EntryIn, EntryOut, HistoryOut
+from server.schemas import EntryIn, EntryOut, HistoryOut, LoadPatchIn
 from solvers.errors import CalibrationError
 
 
@@ -46,11 +48,39 @@ def edit_values(e: FrameEntry, body: EntryIn) -> dict:
         raise CalibrationError(("mech_unit",), "a coordinated_base names the mechanical "
                                "unit that moves it")
     if body.pose is not None:
-        values.update(zip(("x_mm", "y_mm", "z_mm", "a_deg", "b_deg", "c_deg"),
-                          body.pose.to_pose().as_array().tolist()))
-        values.update(method="numeric", session_id=None, error_max_mm=None, error_rms_mm=None)
-    values.update(load_values(body.load))
+        pose = body.pose.merged(tuple(e.pose_values()))
+        if pose != tuple(e.pose_values()):
+            values.update(zip(POSE_FIELDS, pose))
+            values.update(method="numeric", session_id=None, error_max_mm=None,
+                          error_rms_mm=None)
+    if "load" in body.model_fields_set:
+        values.update(_load_values(e, body.load))
     return values
+
+
+POSE_FIELDS = ("x_mm", "y_mm", "z_mm", "a_deg", "b_deg", "c_deg")
+
+
+def _load_values(e: FrameEntry, patch: LoadPatchIn | None) -> dict:
+    """A load merged into the slot's (JSON Merge Patch): ``None`` removes it; the fields given
+    replace the stored ones; a slot without a load needs ``mass_kg``."""
+    if patch is None:
+        return dict.fromkeys(("mass_kg", "com_x_mm", "com_y_mm", "com_z_mm", "inertia_x_kgm2",
+                              "inertia_y_kgm2", "inertia_z_kgm2", "inertia_a_deg",
+                              "inertia_b_deg", "inertia_c_deg"))
+    if e.mass_kg is None and patch.mass_kg is None:
+        raise CalibrationError(("load", "mass_kg"), "the slot has no load yet: give its mass")
+
+    def stored(*names: str) -> list[float]:
+        return [getattr(e, n) or 0.0 for n in names]
+
+    return load_values(SimpleNamespace(
+        mass_kg=e.mass_kg if patch.mass_kg is None else patch.mass_kg,
+        com_mm=patch.com_mm or stored("com_x_mm", "com_y_mm", "com_z_mm"),
+        inertia_kgm2=patch.inertia_kgm2 or stored("inertia_x_kgm2", "inertia_y_kgm2",
+                                                  "inertia_z_kgm2"),
+        inertia_axes_deg=patch.inertia_axes_deg or stored("inertia_a_deg", "inertia_b_deg",
+                                                          "inertia_c_deg")))
 
 
 def table_router(table: str, path: str, tag: str) -> APIRouter:
