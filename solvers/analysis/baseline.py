@@ -51,6 +51,7 @@ class Baseline:
     w: FloatArray | None = None   # row weights already applied to g, B and S (beam), else None
     ident: Identifiability | None = None   # which parameters the poses determine
     setup: dict = field(default_factory=dict)   # raw fitted setup (``model.py`` predicts with it)
+    B_full: FloatArray | None = None   # B before the undetermined directions were dropped
 
     @property
     def row_scale(self) -> FloatArray:
@@ -168,11 +169,12 @@ def fit_tracker(rec, state: State | None = None) -> Baseline:
     params = {f"instrument_{k}": float(val) for k, val in zip(
         ("x_mm", "y_mm", "z_mm", "a_deg", "b_deg", "c_deg"), v)}
     params.update({"tcp_x_mm": x[6], "tcp_y_mm": x[7], "tcp_z_mm": x[8]})
-    return Baseline("tracker", (pred - meas).ravel(), jac(x), S, 3, sens, tool,
+    Jx = jac(x)
+    return Baseline("tracker", (pred - meas).ravel(), Jx if ident.full else Jx @ P, S, 3, sens, tool,
                     {k: float(v) for k, v in params.items()}, R,
                     {"the instrument frame": slice(0, 6), "the TCP": slice(6, 9)},
                     ident=ident, setup={"R_instrument_base": R, "t_instrument_base": x[3:6].copy(),
-                                        "tcp_mm": x[6:9].copy()})
+                                        "tcp_mm": x[6:9].copy()}, B_full=Jx)
 
 
 def fit_touch(rec, state: State | None = None) -> Baseline:
@@ -204,10 +206,12 @@ def fit_touch(rec, state: State | None = None) -> Baseline:
     S[:, :, :3] = np.eye(3)
     params = {"tcp_x_mm": x[0], "tcp_y_mm": x[1], "tcp_z_mm": x[2],
               "point_x_mm": x[3], "point_y_mm": x[4], "point_z_mm": x[5]}
-    return Baseline("touch", fun(x), jac(x), S, 3, sens, tool,
+    Jx = jac(x)
+    return Baseline("touch", fun(x), Jx if ident.full else Jx @ P, S, 3, sens, tool,
                     {k: float(v) for k, v in params.items()},
                     blocks={"the TCP": slice(0, 3), "the fixed point": slice(3, 6)},
-                    ident=ident, setup={"tcp_mm": x[:3].copy(), "point_mm": x[3:6].copy()})
+                    ident=ident, setup={"tcp_mm": x[:3].copy(), "point_mm": x[3:6].copy()},
+                    B_full=Jx)
 
 
 def _beam_constraint(c, u, b, v, w, edge, radius):

@@ -347,16 +347,64 @@ def model_document(prep: Prepared, f: Fit, report_parameters: list[dict] | None 
                           **({"recorded_at": rec.recorded_at} if rec.recorded_at else {})}}
 
 
+KNOWN = ("joint_offset", "link_length", "link_twist", "joint_compliance", "backlash",
+         "gear_transmission_error", "thermal_drift", "trigger_latency", "tool_deflection")
+SETUP_KEYS = {"tracker": {"R_instrument_base": (3, 3), "t_instrument_base": (3,), "tcp_mm": (3,)},
+              "touch": {"tcp_mm": (3,), "point_mm": (3,)}, "beam": {"tool": (4, 4)}}
+
+
+def _numbers(v, shape, loc) -> None:
+    try:
+        a = np.asarray(v, dtype=float)
+    except (TypeError, ValueError):
+        raise CalibrationError(loc, "must hold numbers") from None
+    if a.shape != shape or not np.all(np.isfinite(a)):
+        raise CalibrationError(loc, f"must be finite numbers of shape {list(shape)}")
+
+
 def _check_model(model: dict) -> None:
+    """A clear error naming the field for anything :func:`predict` cannot use."""
     if not isinstance(model, dict) or model.get("format") != MODEL_FORMAT:
         raise CalibrationError(("format",), f"must be {MODEL_FORMAT!r} (a model written by "
                                "pendant analyze --save-model)")
     for key in ("kind", "robot", "effects", "setup"):
         if key not in model:
             raise CalibrationError((key,), "missing from the model")
+    if model["kind"] not in SETUP_KEYS:
+        raise CalibrationError(("kind",), "must be touch, tracker or beam")
+    if not isinstance(model["robot"], dict) or not isinstance(model["robot"].get("joints"), list):
+        raise CalibrationError(("robot", "joints"), "must be the DH table of the robot")
+    if not isinstance(model["effects"], list):
+        raise CalibrationError(("effects",), "must be a list")
+    n = len(model["robot"]["joints"])
     for i, e in enumerate(model["effects"]):
-        if not isinstance(e, dict) or "effect" not in e or "beta" not in e:
-            raise CalibrationError(("effects", i), "needs 'effect' and 'beta'")
+        if not isinstance(e, dict) or e.get("effect") not in KNOWN:
+            raise CalibrationError(("effects", i, "effect"), "must be one of " + ", ".join(KNOWN))
+        j = e.get("joint")
+        if j is not None and (not isinstance(j, int) or not 1 <= j <= n):
+            raise CalibrationError(("effects", i, "joint"), f"must be 1..{n} or null")
+        needs_joint = e["effect"] not in ("thermal_drift", "trigger_latency", "tool_deflection")
+        if needs_joint and j is None:
+            raise CalibrationError(("effects", i, "joint"), f"{e['effect']} needs a joint")
+        if e["effect"] == "link_length" and e.get("dh_parameter") not in ("a", "d"):
+            raise CalibrationError(("effects", i, "dh_parameter"), "must be 'a' or 'd'")
+        if e["effect"] == "gear_transmission_error" and (
+                not isinstance(e.get("periods_per_turn"), int) or e["periods_per_turn"] < 1):
+            raise CalibrationError(("effects", i, "periods_per_turn"), "must be an integer >= 1")
+        tau = e.get("tau_s")
+        if tau is not None and (not isinstance(tau, (int, float)) or not tau > 0):
+            raise CalibrationError(("effects", i, "tau_s"), "must be a positive number or null")
+        size = Effect(e["effect"]).size
+        _numbers(e.get("beta"), (size,), ("effects", i, "beta"))
+    setup = model["setup"]
+    if not isinstance(setup, dict):
+        raise CalibrationError(("setup",), "must be an object")
+    for key, shape in SETUP_KEYS[model["kind"]].items():
+        if key not in setup:
+            raise CalibrationError(("setup", key), "missing from the model")
+        _numbers(setup[key], shape, ("setup", key))
+    if "time_span_s" in setup:
+        _numbers(setup["time_span_s"], (2,), ("setup", "time_span_s"))
 
 
 def _same_robot(model: dict, rec) -> None:
@@ -364,6 +412,12 @@ def _same_robot(model: dict, rec) -> None:
     if len(joints) != rec.robot.dof:
         raise CalibrationError(("robot", "joints"), f"the model's robot has {len(joints)} "
                                f"joints, the recording's {rec.robot.dof}: not the same robot")
+    mine = _robot_doc(rec)["robot"]["joints"]
+    for i, (a, b) in enumerate(zip(joints, mine)):
+        for k in ("a_mm", "alpha_deg", "d_mm", "offset_deg"):
+            if not isinstance(a, dict) or abs(float(a.get(k, 0.0)) - float(b.get(k, 0.0))) > 1e-6:
+                raise CalibrationError(("robot", "joints", i, k), "differs between the model and "
+                                       "the recording: not the same robot's nominal model")
     if model["kind"] != rec.kind:
         raise CalibrationError(("kind",), f"the model was fitted on a {model['kind']} recording; "
                                f"this one is {rec.kind}: the setup does not carry over")
