@@ -196,7 +196,7 @@ def run_predict(args: argparse.Namespace) -> int:
         from solvers.analysis.blas import single_thread
         from solvers.analysis.model import predict
 
-        rec = parse_recording(doc)
+        rec = parse_recording(doc, measurements_optional=True)
         with single_thread():
             out = predict(model, rec, refit_setup=args.refit_setup)
     if args.json:

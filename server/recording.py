@@ -14,6 +14,7 @@ Regenerate the committed JSON Schema with::
 
 from __future__ import annotations
 
+import dataclasses
 import json
 import re
 from datetime import datetime
@@ -330,13 +331,16 @@ def _robot_model(r: RobotIn) -> RobotModel:
                       source="robot-recording/1 file")
 
 
-def parse_recording(doc: dict | str | bytes) -> RecordingData:
+def parse_recording(doc: dict | str | bytes, measurements_optional: bool = False) -> RecordingData:
     """Read a ``robot-recording/1`` document into a :class:`RecordingData`.
 
     Parameters
     ----------
     doc : dict, str or bytes
         The parsed JSON object, or its UTF-8 text.
+    measurements_optional : bool
+        A tracker recording whose samples carry no ``measured_mm`` at all is read, with
+        ``measured_mm`` None (``pendant predict`` predicts poses not measured yet).
 
     Raises
     ------
@@ -358,6 +362,19 @@ def parse_recording(doc: dict | str | bytes) -> RecordingData:
     ...
     server.recording.RecordingError: kind: must be 'touch', 'tracker' or 'beam', got dance
     """
+    if measurements_optional:
+        if isinstance(doc, (str, bytes)):
+            try:
+                doc = json.loads(doc)
+            except ValueError:
+                pass
+        samples_in = doc.get("samples") if isinstance(doc, dict) else None
+        if (doc.get("kind") == "tracker" and isinstance(samples_in, list) and samples_in
+                and all(isinstance(s, dict) and "measured_mm" not in s for s in samples_in)):
+            filled = {**doc, "samples": [{**s, "measured_mm": [0.0, 0.0, 0.0]}
+                                         for s in samples_in]}
+            rec = parse_recording(filled)
+            return dataclasses.replace(rec, measured_mm=None)
     m = validate_document(doc)
     n = len(m.robot.joints)
     samples = m.samples

@@ -110,5 +110,5 @@ def test_stand_ins_are_kept_and_named(report) -> None:
 
 def test_human_report_reads(report) -> None:
     text = render_text(report)
-    assert "Rigid model: RMS 0.77" in text and "joint compliance J2" in text
+    assert "Rigid model: RMS 0.77" in text and "joint_compliance J2" in text
     assert "Not identifiable" in text

@@ -107,7 +107,7 @@ def predict_recording(body: PredictIn) -> dict[str, Any]:
     from solvers.errors import CalibrationError
 
     try:
-        rec = parse_recording(body.recording)
+        rec = parse_recording(body.recording, measurements_optional=True)
     except CalibrationError as err:
         raise CalibrationError(("recording",) + tuple(err.loc), err.reason) from None
     try:

@@ -174,7 +174,9 @@ def render_text(report: dict) -> str:
     if report["findings"]:
         lines.append("Findings (strongest first):")
         for i, f in enumerate(report["findings"], 1):
-            name = f.get("label") or (f["effect"] + (f" J{f['joint']}" if f.get("joint") else ""))
+            k = f["parameters"].get("periods_per_turn")
+            name = (f["effect"] + (f" J{f['joint']}" if f.get("joint") else "")
+                    + (f" ({k} per turn)" if k else ""))
             lines.append(f"  {i}. {name}: {f['explanation']}")
     elif report["verdict"] == "unexplained_structure":
         lines.append("Findings: none — structure remains that no candidate effect explains "
