@@ -149,8 +149,12 @@ function findingTitle(f) {
   const joint = hasJoint ? ` J${f.joint}` : "";
   const p = f.dh_parameter || (f.parameters || {}).dh_parameter;
   const dh = p ? ` (${p}${hasJoint ? f.joint : ""})` : f.effect === "link_twist" && hasJoint ? ` (α${f.joint})` : "";
-  const k = (f.parameters || {}).periods_per_turn;  // one gear finding per harmonic
-  const harmonic = f.effect === "gear_transmission_error" && isNum(k) ? ` (${k} per turn)` : "";
+  // one gear finding per harmonic; a not-identifiable note carries its harmonic (or the
+  // list of harmonics left out) at the top level
+  const k = (f.parameters || {}).periods_per_turn ?? f.periods_per_turn;
+  const harmonic = f.effect !== "gear_transmission_error" ? ""
+    : isNum(k) ? ` (${k} per turn)`
+    : Array.isArray(k) && k.length ? ` (${k.length > 1 ? `${k[0]}–${k[k.length - 1]}` : k[0]} per turn)` : "";
   return `${effectName(f.effect)}${joint}${dh}${harmonic}`;
 }
 
@@ -614,10 +618,19 @@ function noteItem(n, extra) {
   return li;
 }
 
+/** The rigid model's parameters the poses cannot determine (report.identifiability). */
+function identItem(n) {
+  const li = el("li", { "data-effect": "rigid_setup", "data-joint": "" });
+  li.append(el("strong", { text: (n.parameters || []).join(", ") }), `: ${n.reason || ""}. `,
+    el("span", { text: `Would determine it: ${n.poses_that_would_determine_it || ""}.` }));
+  return li;
+}
+
 function renderNotes(rep) {
   const ni = rep.not_identifiable || [];
-  $("#not-identifiable").replaceChildren(...ni.map((n) => noteItem(n)));
-  $("#notes-panel").hidden = ni.length === 0;
+  const setup = ((rep.identifiability || {}).not_identifiable) || [];
+  $("#not-identifiable").replaceChildren(...setup.map(identItem), ...ni.map((n) => noteItem(n)));
+  $("#notes-panel").hidden = ni.length + setup.length === 0;
   const wh = rep.withheld || [];
   $("#withheld").replaceChildren(...wh.map((n) => noteItem(n,
     isNum(n.p_value_with_structure) ? `p with the structure = ${pValue(n.p_value_with_structure)}` : "")));
@@ -632,6 +645,29 @@ function renderMore(rep) {
     a.href = `/analysis/${rep.id}`;
     a.textContent = `GET /analysis/${rep.id}`;
   }
+  $("#model-download").disabled = rep.id === undefined;
+  $("#model-status").textContent = "";
+}
+
+/** Download the stored report's fitted robot-model/1 (GET /analysis/{id}/model). */
+async function downloadModel() {
+  const id = page.report && page.report.id;
+  if (id === undefined) return;
+  let model;
+  try {
+    model = await request("GET", `/analysis/${encodeURIComponent(id)}/model`);
+  } catch (err) {
+    const d = (err.detail && err.detail[0] && err.detail[0].msg) || err.message;
+    $("#model-status").textContent = `No model: ${d}`;
+    return;
+  }
+  const blob = new Blob([JSON.stringify(model, null, 1)], { type: "application/json" });
+  const link = el("a", { href: URL.createObjectURL(blob), download: `robot-model-${id}.json` });
+  document.body.append(link);
+  link.click();
+  link.remove();
+  setTimeout(() => URL.revokeObjectURL(link.href), 0);
+  $("#model-status").textContent = `robot-model-${id}.json: ${model.effects.length} effects; use it with pendant predict.`;
 }
 
 // ------------------------------------------------------------------------------ wiring
@@ -668,6 +704,7 @@ function init() {
     $("#file").value = "";
     await analyseText(text);
   }));
+  $("#model-download").addEventListener("click", () => busy(downloadModel));
   $("#same-scale").addEventListener("change", () => { if (page.report) renderPlots(page.report); });
   const stored = new URLSearchParams(location.search).get("analysis");
   const done = () => { document.body.dataset.ready = "1"; };

@@ -108,7 +108,7 @@ def _kabsch(A: FloatArray, B: FloatArray) -> tuple[FloatArray, FloatArray]:
     return R, b0 - R @ a0
 
 
-def fit_tracker(rec, state: State | None = None) -> Baseline:
+def fit_tracker(rec, state: State | None = None, ident: Identifiability | None = None) -> Baseline:
     robot, q, meas = rec.robot, rec.joints_deg, np.asarray(rec.measured_mm, float)
     tool0 = np.asarray(rec.tool, float)
     F = state_frames(robot, q, state)
@@ -135,25 +135,29 @@ def fit_tracker(rec, state: State | None = None) -> Baseline:
     x0 = np.concatenate([np.zeros(3), t0, tool0[:3, 3]])
     names = ["instrument_rx", "instrument_ry", "instrument_rz", "instrument_x_mm",
              "instrument_y_mm", "instrument_z_mm", "tcp_x_mm", "tcp_y_mm", "tcp_z_mm"]
-    ident = analyse(jac(x0), names, {"the instrument frame": slice(0, 6),
-                                     "the TCP": slice(6, 9)})
+    if ident is None:
+        ident = analyse(jac(x0), names, {"the instrument frame": slice(0, 6),
+                                         "the TCP": slice(6, 9)})
     P = ident.basis          # the fit moves only along the determined directions
     # Gauss-Newton along the determined directions; the rotation is re-centred after each
     # step, so the left-perturbation Jacobian is exact (quadratic convergence)
-    rss = float(np.sum(fun(x0) ** 2))
     for _ in range(MAX_GN):
-        J = jac(x0) @ P
-        r = fun(x0)
+        R, c, pred = model(x0)
+        r = (pred - meas).ravel()
+        J = np.zeros((len(q), 3, 9))
+        J[:, :, 0:3] = skew_cols(pred - x0[3:6])
+        J[:, :, 3:6] = np.eye(3)
+        J[:, :, 6:9] = R @ Rf
+        J = J.reshape(-1, 9) @ P
         G = J.T @ J
         d = np.sqrt(np.maximum(np.diag(G), 1e-300))
         dz = -np.linalg.lstsq((G / np.outer(d, d)), (J.T @ r) / d, rcond=1e-12)[0] / d
         xs = x0 + P @ dz
         R0 = Rotation.from_rotvec(xs[:3]).as_matrix() @ R0
         x0 = np.concatenate([np.zeros(3), xs[3:]])
-        rss_new = float(np.sum(fun(x0) ** 2))
-        if abs(rss - rss_new) <= 1e-13 * max(rss, 1e-30) and np.max(np.abs(dz * d)) < 1e-6:
+        # the step's size in the residual (mm, root-sum-square over all rows)
+        if np.linalg.norm(J @ dz) < 1e-9 * max(np.sqrt(len(q)), 1.0):
             break
-        rss = rss_new
     x = x0
     R, c, pred = model(x)
     tool = tool0.copy()
@@ -177,7 +181,7 @@ def fit_tracker(rec, state: State | None = None) -> Baseline:
                                         "tcp_mm": x[6:9].copy()}, B_full=Jx)
 
 
-def fit_touch(rec, state: State | None = None) -> Baseline:
+def fit_touch(rec, state: State | None = None, ident: Identifiability | None = None) -> Baseline:
     robot, q = rec.robot, rec.joints_deg
     tool0 = np.asarray(rec.tool, float)
     F = state_frames(robot, q, state)
@@ -194,8 +198,10 @@ def fit_touch(rec, state: State | None = None) -> Baseline:
         return J.reshape(3 * N, 6)
 
     x0 = np.concatenate([tool0[:3, 3], np.mean(pf + Rf @ tool0[:3, 3], axis=0)])
-    ident = analyse(jac(x0), ["tcp_x_mm", "tcp_y_mm", "tcp_z_mm", "point_x_mm", "point_y_mm",
-                              "point_z_mm"], {"the TCP": slice(0, 3), "the fixed point": slice(3, 6)})
+    if ident is None:
+        ident = analyse(jac(x0), ["tcp_x_mm", "tcp_y_mm", "tcp_z_mm", "point_x_mm",
+                                  "point_y_mm", "point_z_mm"],
+                        {"the TCP": slice(0, 3), "the fixed point": slice(3, 6)})
     P = ident.basis
     J = jac(x0) @ P                  # the touch constraint is linear in its parameters
     x = x0 - P @ np.linalg.lstsq(J, fun(x0), rcond=1e-12)[0]
@@ -257,7 +263,7 @@ def beam_sensitivity(c, u, b, v, w, edge, radius) -> FloatArray:
     return S
 
 
-def fit_beam(rec, state: State | None = None) -> Baseline:
+def fit_beam(rec, state: State | None = None, ident: Identifiability | None = None) -> Baseline:
     robot, q = rec.robot, rec.joints_deg
     tool0 = np.asarray(rec.tool, float)
     b, v, w, edge, radius = _beam_inputs(rec)
@@ -322,9 +328,11 @@ def fit_beam(rec, state: State | None = None) -> Baseline:
                     setup={"tool": tool.copy()})
 
 
-def fit_baseline(rec, state: State | None = None) -> Baseline:
-    """The kind's rigid fit (dispatch on ``rec.kind``), optionally with effects applied."""
+def fit_baseline(rec, state: State | None = None, ident: Identifiability | None = None
+                 ) -> Baseline:
+    """The kind's rigid fit (dispatch on ``rec.kind``), optionally with effects applied;
+    ``ident``: the determined directions to fit along (default: found on this recording)."""
     fits = {"tracker": fit_tracker, "touch": fit_touch, "beam": fit_beam}
     if rec.kind not in fits:
         raise CalibrationError(("kind",), f"must be touch, tracker or beam, got {rec.kind!r}")
-    return fits[rec.kind](rec, state)
+    return fits[rec.kind](rec, state, ident)

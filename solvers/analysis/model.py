@@ -228,19 +228,21 @@ class Fit:
 
 
 def fit(prep: Prepared, idx=None, beta0: FloatArray | None = None,
-        free: list[int] | None = None) -> Fit:
+        free: list[int] | None = None, ident=None, max_iter: int = MAX_ITER) -> Fit:
     """Fit the setup and the effects' parameters (``free``: indices of the effects whose
-    parameters move; default all) to the samples ``idx`` (default all)."""
+    parameters move; default all) to the samples ``idx`` (default all); ``ident``: the
+    setup's determined directions (default: found on these samples)."""
     rec = prep.rec if idx is None else subset(prep.rec, idx)
     beta = np.zeros(prep.n_params) if beta0 is None else np.array(beta0, float)
     free = list(range(len(prep.effects))) if free is None else list(free)
     offs = np.cumsum([0] + [e.size for e in prep.effects])
     fcols = np.concatenate([np.arange(offs[i], offs[i + 1]) for i in free]) if free else \
         np.zeros(0, int)
-    base = fit_baseline(rec, prep.state(beta, idx))
+    base = fit_baseline(rec, prep.state(beta, idx), ident)
+    ident = base.ident
     rss = float(np.sum(base.g ** 2))     # weighted rows (beam): what the step minimises
     it = 0
-    for it in range(1, MAX_ITER + 1):
+    for it in range(1, max_iter + 1):
         if not len(fcols):
             break
         X = prep.columns(base, idx, free)
@@ -250,7 +252,7 @@ def fit(prep: Prepared, idx=None, beta0: FloatArray | None = None,
         for _ in range(6):
             trial = beta.copy()
             trial[fcols] += step
-            b2 = fit_baseline(rec, prep.state(trial, idx))
+            b2 = fit_baseline(rec, prep.state(trial, idx), ident)
             rss2 = float(np.sum(b2.g ** 2))
             if rss2 <= rss * (1 + 1e-12):
                 break
@@ -292,15 +294,19 @@ def predict_values(rec, state: State, kind: str, setup: dict) -> FloatArray:
     return c
 
 
+FOLD_ITER = 3   # Gauss-Newton iterations of a fold's refit (it starts at the fit on all)
+
+
 def heldout(prep: Prepared, cv: CV, full: Fit) -> float:
     """sqrt(mean over samples of |held-out residual|^2): the model refitted on each fold's
-    training samples (from the fit on all), the left-out samples predicted."""
+    training samples (from the fit on all, along the same determined setup directions), the
+    left-out samples predicted with the nonlinear model at the fold's fit."""
     m = full.base.m
     sse = 0.0
     for te_rows, tr_rows in zip(cv.test_rows, cv.train_rows):
         te = np.unique(te_rows // m)
         tr = np.unique(tr_rows // m)
-        f = fit(prep, tr, full.beta)
+        f = fit(prep, tr, full.beta, ident=full.base.ident, max_iter=FOLD_ITER)
         r = residual_at(prep, f.beta, f.base, te)
         sse += float(r @ r)
     return float(np.sqrt(sse / prep.rec.n_samples))

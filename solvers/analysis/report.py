@@ -130,14 +130,18 @@ def _analyze(rec, *, folds: int = 5, seed: int = 0, alpha: float = ALPHA,
     if sel.chosen:
         prep = Prepared.make(rec, [Effect.of(c) for c in sel.chosen], torques=lib.torques_nm)
         f = fit(prep)
+        rss_lin = float(np.sum((project_out(orth(model(base, sel.chosen)), y)
+                                * base.row_scale) ** 2))
+        linear = abs(f.rss_mm2 - rss_lin) <= RELIN_TOL * rss_lin
         base = f.base
         lib = build_library(rec, base, torques_nm=lib.torques_nm, include_twist=include_twist)
         by_key = {c.key: c for c in lib.candidates}
         cands = [by_key[c.key] for c in screened.candidates if c.key in by_key]
         y = -base.g + prep.columns(base) @ f.beta
         groups = structure_groups(rec, base)
-        sel2 = backward(y, base, forward(y, base, cands, cv, groups, alpha, max_findings), alpha)
-        sel = sel2 if sel2.chosen else Selection(
+        sel2 = None if linear else backward(
+            y, base, forward(y, base, cands, cv, groups, alpha, max_findings), alpha)
+        sel = sel2 if sel2 is not None and sel2.chosen else Selection(
             [by_key[c.key] for c in sel.chosen if c.key in by_key], sel.steps)
     profiles: dict[str, TauProfile] = {}
     for i, c in enumerate(sel.chosen):
@@ -236,6 +240,7 @@ def _analyze(rec, *, folds: int = 5, seed: int = 0, alpha: float = ALPHA,
 
 
 HELDOUT_BELOW = 0.8   # a held-out RMS this far below the in-sample one is a defect
+RELIN_TOL = 0.02      # the nonlinear fit's RSS this close to the linearised one: no reselection
 
 
 def _checks(base_rms, base_cv, final_rms, final_cv, figures) -> list[dict]:

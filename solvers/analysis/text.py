@@ -80,6 +80,12 @@ def explanation(c, f: dict, same: list[str] | None = None,
         text += f" Phase {p['phase_deg']:+.0f} deg (amplitude · sin({c.periods} q{j} + phase))."
     if c.effect == "thermal_drift":
         text += _warmup(p, ev)
+    masses = ev.get("gravity_masses") or ""
+    if c.effect == "joint_compliance" and masses and not masses.startswith(("Universal Robots",)):
+        text += (f" The gravity torque uses {'a generic' if 'generic' in masses else 'an estimated'}"
+                 f" mass model of the arm ({masses}): the compliance's scale is only as good "
+                 f"as that; give the arm's masses in the recording for a value that carries "
+                 f"over.")
     share = ev.get("angle_term_share", 0.0)
     if share > 0.9:
         text += (f" Caution: {100 * share:.0f}% of this signature is also that of a smooth error of "
