@@ -299,14 +299,15 @@ FOLD_ITER = 3   # Gauss-Newton iterations of a fold's refit (it starts at the fi
 
 def heldout(prep: Prepared, cv: CV, full: Fit) -> float:
     """sqrt(mean over samples of |held-out residual|^2): the model refitted on each fold's
-    training samples (from the fit on all, along the same determined setup directions), the
+    training samples (from the fit on all; the setup directions the training samples determine
+    checked on them, as for any fit), the
     left-out samples predicted with the nonlinear model at the fold's fit."""
     m = full.base.m
     sse = 0.0
     for te_rows, tr_rows in zip(cv.test_rows, cv.train_rows):
         te = np.unique(te_rows // m)
         tr = np.unique(tr_rows // m)
-        f = fit(prep, tr, full.beta, ident=full.base.ident, max_iter=FOLD_ITER)
+        f = fit(prep, tr, full.beta, max_iter=FOLD_ITER)
         r = residual_at(prep, f.beta, f.base, te)
         sse += float(r @ r)
     return float(np.sqrt(sse / prep.rec.n_samples))
