@@ -3,18 +3,23 @@
 Returns the document as a dict ready for JSON; see docs/analysis.md. Each step is a module
 with its own reference:
 
-0. Fit the kind's rigid baseline (``baseline.py``); its residual ``y = -g`` is, to first
-   order, ``B db + sum_e X_e beta_e + noise``; ``locate.py`` says where the mismatch is.
+0. Fit the kind's rigid baseline (``baseline.py``), after checking which of its parameters
+   the poses determine (``identify.py``: the undetermined directions are held at the
+   nominal values, named and not reported); its residual ``y = -g`` is, to first order,
+   ``B db + sum_e X_e beta_e + noise``; ``locate.py`` says where the mismatch is.
 1. *Candidates* (``effects.py``, ``screen.py``): every effect's regressor ``X_e``; a
    candidate invisible in the recording or (almost) inside span(B) is listed as not
-   identifiable, with what data would reveal it.
+   identifiable, with what data would reveal it; a gear harmonic only where the joint's
+   travel covers a full period.
 2. *Selection* (``forward.py``): forward selection by the extra-sum-of-squares F-test with
-   Holm's control over each step's candidates and a held-out (K-fold) gain, then a backward
-   check; re-linearised at the fitted effects until it is stable (``_relinearise``), and a
-   thermal finding's time constant profiled (``thermal.py``).
-3. *Stand-ins* (``verdict.py``): findings that may only stand in for structure no candidate
-   explains are named as such and kept (their held-out gain is real).
-4. *Verdict* (``verdict.py``): a Holm-controlled structure test of the final residual.
+   Holm's control over each step's candidates and a held-out gain, then a backward check;
+   the chosen effects fitted nonlinearly (``model.py``) and the selection run once more,
+   linearised there with only those effects; a thermal finding's time constant profiled
+   (``thermal.py``).
+3. *Figures* (``model.py``): each finding's model fitted nonlinearly on all samples and
+   refitted on each fold (blocked or random split); a finding that does not lower that
+   held-out error is not reported. No figure comes from the linearisation.
+4. *Stand-ins* and *verdict* (``verdict.py``), on the residual of the final model itself.
 """
 
 from __future__ import annotations
