@@ -221,3 +221,66 @@ def test_blocked_split_is_contiguous_and_random_is_offered() -> None:
     assert "random" in render_text(rnd)
     for f in folds_of(30, 5, 0, "blocked"):
         assert np.all(np.diff(f) == 1)
+
+
+def test_held_out_far_below_in_sample_is_printed_as_a_defect() -> None:
+    """Issue 25's impossible report (in-sample 0.316 mm, held-out 0.042): the check fails
+    and the text says the figures are not to be trusted."""
+    from solvers.analysis.report import _checks
+    from solvers.simulate import simulate_recording
+    checks = _checks(0.5, 0.52, 0.316, 0.042, [(0.316, 0.042, 0.52)])
+    assert [c["passed"] for c in checks] == [True, False, False]
+    rep = analyze(parse_recording(simulate_recording("tracker", "ur10",
+                                                     Imperfections(noise_mm=0.02), 30, seed=2)))
+    assert all(c["passed"] for c in rep["checks"])
+    assert "DEFECT" not in render_text(rep)
+    assert "DEFECT" in render_text({**rep, "checks": checks})
+
+
+def test_no_findings_with_structure_never_says_noise() -> None:
+    """The verdict and its sentences agree: unexplained structure without findings is not
+    'consistent with measurement noise'."""
+    from solvers.simulate import simulate_recording
+    rep = analyze(parse_recording(simulate_recording("tracker", "ur10",
+                                                     Imperfections(noise_mm=0.02), 30, seed=2)))
+    assert rep["verdict"] == "no_missing_physics"
+    assert "consistent with measurement noise" in render_text(rep)
+    odd = {**rep, "verdict": "unexplained_structure"}
+    text = render_text(odd)
+    assert "consistent with measurement noise" not in text
+    assert "structure remains" in text
+
+
+def test_link_masses_in_the_recording_set_the_compliance_scale() -> None:
+    """An arm outside the catalogue: its compliance comes out at the scale of a generic mass
+    estimate, and the explanation says so; with the arm's link masses in the recording
+    (``robot.link_masses``) it comes out right."""
+    from solvers.gravity import link_masses
+    from solvers.simulate import simulate_recording
+    doc = simulate_recording("tracker", "ur10",
+                             Imperfections(noise_mm=0.01, compliance_deg_per_Nm=(0, 5e-4, 0, 0, 0, 0)),
+                             80, seed=3, payload=(5.0, [0, 0, 50]))
+    doc["robot"]["model"] = "Acme ten"            # no longer matched to the UR10's masses
+    generic = analyze(parse_recording(doc))
+    comp = next(f for f in generic["findings"] if f["effect"] == "joint_compliance")
+    assert "generic" in generic["gravity_masses"] and "generic" in comp["explanation"]
+    assert comp["parameters"]["compliance_deg_per_Nm"] != pytest.approx(5e-4, rel=0.1)
+    ur10 = link_masses(UR10)
+    doc["robot"]["link_masses"] = {"mass_kg": list(ur10.mass_kg),
+                                   "com_mm": [list(c) for c in ur10.com_mm]}
+    known = analyze(parse_recording(doc))
+    comp = next(f for f in known["findings"] if f["effect"] == "joint_compliance")
+    assert known["gravity_masses"] == "the recording's link masses"
+    assert comp["parameters"]["compliance_deg_per_Nm"] == pytest.approx(5e-4, rel=0.05)
+    assert "generic" not in comp["explanation"]
+    assert known["model"]["robot"]["link_masses"]["mass_kg"] == list(ur10.mass_kg)
+
+
+def test_link_masses_must_match_the_joints() -> None:
+    from server.recording import RecordingError
+    from solvers.simulate import simulate_recording
+    doc = simulate_recording("tracker", "ur10", Imperfections(noise_mm=0.01), 10, seed=3)
+    doc["robot"]["link_masses"] = {"mass_kg": [1.0, 2.0]}
+    with pytest.raises(RecordingError) as e:
+        parse_recording(doc)
+    assert "link_masses" in str(e.value) and "6 joints" in str(e.value)

@@ -129,7 +129,8 @@ def gravity_torques_nm(rec) -> FloatArray:
     """Gravity torque (N, n) in Nm on each joint, from ``solvers.gravity`` (the simulator's)."""
     from solvers.gravity import gravity_torques
     return np.asarray(gravity_torques(rec.robot, rec.joints_deg, rec.payload_mass_kg,
-                                      rec.payload_com_mm), dtype=float)
+                                      rec.payload_com_mm, getattr(rec, "link_masses", None)),
+                      dtype=float)
 
 
 def _apply(base: Baseline, twist: FloatArray) -> FloatArray:

@@ -431,6 +431,13 @@ def _same_robot(model: dict, rec) -> None:
 
 
 def prepared_from_model(model: dict, rec, time_span=None) -> tuple[Prepared, FloatArray]:
+    lm = model["robot"].get("link_masses")
+    if isinstance(lm, dict) and getattr(rec, "link_masses", None) is None:
+        from solvers.gravity import LinkMasses   # the masses the model was fitted with
+        rec = replace(rec, link_masses=LinkMasses(
+            tuple(float(x) for x in lm["mass_kg"]),
+            None if lm.get("com_mm") is None else tuple(tuple(map(float, c)) for c in lm["com_mm"]),
+            "the model's link masses"))
     effects, beta = [], []
     for e in model["effects"]:
         effects.append(Effect(e["effect"], e.get("joint"), e.get("dh_parameter"),

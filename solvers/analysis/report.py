@@ -268,7 +268,8 @@ def _n_identifiable(base: Baseline) -> int:
 def lib_masses(rec) -> str:
     """Where the gravity torques' link masses come from (``solvers.gravity``)."""
     from solvers.gravity import link_masses
-    return link_masses(rec.robot).source
+    lm = getattr(rec, "link_masses", None)
+    return (lm or link_masses(rec.robot)).source
 
 
 def _split_columns(prep: Prepared, base: Baseline) -> list:
