@@ -177,8 +177,10 @@ def gravity_torques(robot: RobotModel, joints_deg: object, payload_mass_kg: floa
 
 
 def potential_energy_j(robot: RobotModel, joints_deg: object, payload_mass_kg: float = 0.0,
-                       payload_com_mm: object = (0.0, 0.0, 0.0)) -> FloatArray:
-    """Potential energy (J) of the links and payload, ``V = sum m g z``; ``tau = -dV/dq``."""
+                       payload_com_mm: object = (0.0, 0.0, 0.0),
+                       masses: LinkMasses | None = None) -> FloatArray:
+    """Potential energy (J) of the links and payload, ``V = sum m g z``; ``tau = -dV/dq``
+    (``masses`` as for :func:`gravity_torques`)."""
     q = joint_values(robot, joints_deg)
     com_pay = as_array(payload_com_mm, "payload_com_mm", (3,))
     masses = link_masses(robot) if masses is None else masses

@@ -99,7 +99,9 @@ def test_compliance_recording_is_explained_with_plots_before_and_after(page, sit
     assert finding.locator('[data-evidence="p_value"] td').inner_text() != ""
 
     notes = page.locator("#not-identifiable li")
-    assert notes.count() == len(rep["not_identifiable"]) > 0
+    # one line per entry, the gear harmonics left out for too little travel on one line
+    short = [n for n in rep["not_identifiable"] if isinstance(n.get("periods_per_turn"), list)]
+    assert notes.count() == len(rep["not_identifiable"]) - len(short) + (1 if short else 0) > 0
     assert rep["not_identifiable"][0]["reason"] in notes.first.inner_text()
 
     # residual plots: one bar per sample of the report's baseline/final.residuals_mm

@@ -275,6 +275,7 @@ async function analyseText(text) {
   showRecording(rec);
   setStatus(`Analysing recording ${rec.id} (${rec.n_samples} ${rec.kind} samples) …`);
   const q = new URLSearchParams({ folds: $("#folds").value || "5", seed: $("#seed").value || "0" });
+  if ($("#split").value) q.set("split", $("#split").value);
   let job;
   try {
     job = await request("POST", `/recordings/${rec.id}/analyze?${q}`);
@@ -304,9 +305,9 @@ async function analyseText(text) {
   setStatus(`Analysis ${rep.id ?? ""} of recording ${rec.id}: ${rep.verdict}.`, "ok");
 }
 
-/** What an analysis ran on: the text, folds and seed. */
+/** What an analysis ran on: the text, folds, seed and split. */
 function inputKey(text = $("#paste").value) {
-  return JSON.stringify([text, $("#folds").value || "5", $("#seed").value || "0"]);
+  return JSON.stringify([text, $("#folds").value || "5", $("#seed").value || "0", $("#split").value]);
 }
 
 function showRecording(rec) {
@@ -364,7 +365,9 @@ function renderVerdict(rep) {
   v.textContent = label;
   v.dataset.verdict = rep.verdict;
   v.className = `verdict v-${rep.verdict}`;
-  $("#verdict-text").textContent = `${text} ${rep.n_samples ?? "?"} ${rep.kind ?? ""} samples.`;
+  const sp = rep.split || {};
+  const how = sp.method ? ` Held-out: ${sp.folds}-fold ${sp.method} split${sp.method === "blocked" ? " (contiguous runs in recorded order)" : ""}.` : "";
+  $("#verdict-text").textContent = `${text} ${rep.n_samples ?? "?"} ${rep.kind ?? ""} samples.${how}`;
   const b = rep.baseline || {};
   const f = rep.final || {};
   const nb = b.parameters ? Object.keys(b.parameters).length : undefined;
@@ -626,11 +629,26 @@ function identItem(n) {
   return li;
 }
 
+/** The gear harmonics left out for too little travel, all joints on one line. */
+function shortTravelItem(notes) {
+  const li = el("li", { "data-effect": "gear_transmission_error", "data-joint": "" });
+  const per = notes.map((n) => {
+    const k = n.periods_per_turn;
+    return `J${n.joint}: ${k.length > 1 ? `${k[0]}–${k[k.length - 1]}` : k[0]}`;
+  }).join(", ");
+  li.append(el("strong", { text: "Gear transmission error, harmonics per turn not tested" }),
+    `: ${per}. Each joint's travel covers less than one period of them: over part of a period a gear error looks like a smooth trend and does not carry over to other poses; spread the joint over a full period (better two) to test them.`);
+  return li;
+}
+
 function renderNotes(rep) {
-  const ni = rep.not_identifiable || [];
+  const all = rep.not_identifiable || [];
+  const short = all.filter((n) => Array.isArray(n.periods_per_turn));
+  const ni = all.filter((n) => !Array.isArray(n.periods_per_turn));
   const setup = ((rep.identifiability || {}).not_identifiable) || [];
-  $("#not-identifiable").replaceChildren(...setup.map(identItem), ...ni.map((n) => noteItem(n)));
-  $("#notes-panel").hidden = ni.length + setup.length === 0;
+  $("#not-identifiable").replaceChildren(...setup.map(identItem), ...ni.map((n) => noteItem(n)),
+    ...(short.length ? [shortTravelItem(short)] : []));
+  $("#notes-panel").hidden = all.length + setup.length === 0;
   const wh = rep.withheld || [];
   $("#withheld").replaceChildren(...wh.map((n) => noteItem(n,
     isNum(n.p_value_with_structure) ? `p with the structure = ${pValue(n.p_value_with_structure)}` : "")));
@@ -685,7 +703,7 @@ function init() {
   });
   $("#analyse").addEventListener("click", () => busy(async () => {
     if (page.report && page.analysed === inputKey()) { // the file choice ran it already
-      setStatus(`Already analysed: analysis ${page.report.id ?? ""}. Change the text, folds or seed to run again.`, "ok");
+      setStatus(`Already analysed: analysis ${page.report.id ?? ""}. Change the text, folds, seed or split to run again.`, "ok");
       return;
     }
     await analyseText($("#paste").value);
