@@ -7,8 +7,8 @@ import json
 
 import numpy as np
 import pytest
-
 from api_helpers import analyze, client, db_url, ok  # noqa: F401
+
 from server.cli import main
 from server.recording import parse_recording
 from solvers.analysis.model import predict

@@ -23,8 +23,13 @@ from dataclasses import dataclass, replace
 
 import numpy as np
 
-from solvers.analysis.baseline import (Baseline, _beam_constraint, _beam_inputs, fit_baseline,
-                                       per_sample_rms)
+from solvers.analysis.baseline import (
+    Baseline,
+    _beam_constraint,
+    _beam_inputs,
+    fit_baseline,
+    per_sample_rms,
+)
 from solvers.analysis.kinematics import State, state_sensitivities
 from solvers.analysis.selection import CV, fit_linear
 from solvers.dh import dh_angles_rad
@@ -53,7 +58,7 @@ class Effect:
     tau_s: float | None = None
 
     @classmethod
-    def of(cls, c) -> "Effect":
+    def of(cls, c) -> Effect:
         return cls(c.effect, c.joint, c.dh_parameter, c.periods, c.tau_s)
 
     @property
@@ -81,7 +86,7 @@ class Units:
     dh: tuple[str, int, float] | None = None
     shift: FloatArray | None = None       # (N, 3, k) TCP translation in base, mm
 
-    def take(self, idx) -> "Units":
+    def take(self, idx) -> Units:
         return Units(None if self.theta is None else self.theta[idx], self.dh,
                      None if self.shift is None else self.shift[idx])
 
@@ -151,7 +156,7 @@ class Prepared:
 
     @classmethod
     def make(cls, rec, effects: list[Effect], torques: FloatArray | None = None,
-             time_span: tuple[float, float] | None = None) -> "Prepared":
+             time_span: tuple[float, float] | None = None) -> Prepared:
         needs_tau = any(e.effect == "joint_compliance" for e in effects)
         tau = (gravity_of(rec) if torques is None else torques) if needs_tau \
             else np.zeros(rec.joints_deg.shape)
@@ -433,7 +438,7 @@ def _same_robot(model: dict, rec) -> None:
 def prepared_from_model(model: dict, rec, time_span=None) -> tuple[Prepared, FloatArray]:
     lm = model["robot"].get("link_masses")
     if isinstance(lm, dict) and getattr(rec, "link_masses", None) is None:
-        from solvers.gravity import LinkMasses   # the masses the model was fitted with
+        from solvers.gravity import LinkMasses  # the masses the model was fitted with
         rec = replace(rec, link_masses=LinkMasses(
             tuple(float(x) for x in lm["mass_kg"]),
             None if lm.get("com_mm") is None else tuple(tuple(map(float, c)) for c in lm["com_mm"]),
@@ -496,5 +501,13 @@ def predict(model: dict, rec, refit_setup: bool = False) -> dict:
     return out
 
 
-__all__ = ["Effect", "Prepared", "Fit", "fit", "heldout", "model_document", "predict",
-           "per_sample_rms"]
+__all__ = [
+    "Effect",
+    "Fit",
+    "Prepared",
+    "fit",
+    "heldout",
+    "model_document",
+    "per_sample_rms",
+    "predict",
+]
