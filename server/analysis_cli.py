@@ -1,6 +1,8 @@
 """``pendant analyze`` and ``pendant simulate``: the analysis from the command line.
 
-    pendant analyze RECORDING.json [--json] [--folds K] [--seed S] [--service URL]
+    pendant analyze RECORDING.json [--json] [--folds K] [--seed S] [--split blocked|random]
+                    [--save-model MODEL.json] [--service URL]
+    pendant predict MODEL.json RECORDING.json [--refit-setup] [--json] [--service URL]
     pendant simulate KIND --robot KEY [--effect NAME[:JOINT]=VALUE ...] [--noise MM]
                      [--payload KG] [--n N] [--seed S] -o FILE
     pendant plan ROBOT --effects EFFECT[:JOINT],... [--n 30] [--workspace X0,Y0,Z0,X1,Y1,Z1]
@@ -114,13 +116,14 @@ def _call(base: str, method: str, path: str, body: bytes | None = None) -> Any:
 
 
 def analyze_on_service(base: str, text: str, folds: int, seed: int,
-                       poll_s: float = 0.3) -> dict[str, Any]:
+                       poll_s: float = 0.3, split: str | None = None) -> dict[str, Any]:
     """Store the recording on the service, queue its analysis (202: a job), follow the job
     with its progress on stderr, and return the stored report. Ctrl-C cancels the job."""
     import time
 
     rec = _call(base, "POST", "/recordings", text.encode("utf-8"))
-    job = _call(base, "POST", f"/recordings/{rec['id']}/analyze?folds={folds}&seed={seed}")
+    query = f"folds={folds}&seed={seed}" + (f"&split={split}" if split else "")
+    job = _call(base, "POST", f"/recordings/{rec['id']}/analyze?{query}")
     try:
         while job["state"] not in ("done", "failed", "cancelled"):
             print(f"job {job['id']}: {job['state']} {100 * job['progress']:.0f} % "
@@ -149,13 +152,59 @@ def run_analyze(args: argparse.Namespace) -> int:
     except json.JSONDecodeError as err:
         raise CalibrationError(("file",), f"not JSON: {err.msg} at line {err.lineno}") from None
     if args.service:
-        report = analyze_on_service(args.service, text, args.folds, args.seed)
+        report = analyze_on_service(args.service, text, args.folds, args.seed, split=args.split)
+        if args.save_model:
+            report["model"] = _call(args.service, "GET", f"/analysis/{report['id']}/model")
     else:
         from server.recording import parse_recording
         from solvers.analysis import analyze
 
-        report = analyze(parse_recording(doc), folds=args.folds, seed=args.seed)
+        report = analyze(parse_recording(doc), folds=args.folds, seed=args.seed,
+                         split=args.split)
+    model = report.pop("model", None)
+    if args.save_model:
+        if model is None:
+            raise CalibrationError(("--save-model",), "the analysis returned no model")
+        Path(args.save_model).write_text(json.dumps(model, indent=1), encoding="utf-8")
+        print(f"wrote {args.save_model}: robot-model/1 with {len(model['effects'])} effects",
+              file=sys.stderr)
     print(json.dumps(report, indent=1) if args.json else render_text(report))
+    return 0
+
+
+def _read_json(path: Path, field: str) -> Any:
+    try:
+        text = Path(path).read_text(encoding="utf-8")
+    except OSError as err:
+        raise CalibrationError((field,), f"cannot read {path}: {err.strerror}") from None
+    try:
+        return json.loads(text)
+    except json.JSONDecodeError as err:
+        raise CalibrationError((field,), f"{path} is not JSON: {err.msg} at line "
+                               f"{err.lineno}") from None
+
+
+def run_predict(args: argparse.Namespace) -> int:
+    model = _read_json(args.model, "model")
+    doc = _read_json(args.file, "recording")
+    if args.service:
+        body = json.dumps({"model": model, "recording": doc,
+                           "refit_setup": bool(args.refit_setup)}).encode("utf-8")
+        out = _call(args.service, "POST", "/predict", body)
+    else:
+        from server.recording import parse_recording
+        from solvers.analysis.blas import single_thread
+        from solvers.analysis.model import predict
+
+        rec = parse_recording(doc, measurements_optional=True)
+        with single_thread():
+            out = predict(model, rec, refit_setup=args.refit_setup)
+    if args.json:
+        print(json.dumps(out))
+    else:
+        rms = f", RMS {out['rms_mm']:.4f} mm against the measurements" if "rms_mm" in out else ""
+        print(f"predicted {out['n_samples']} samples"
+              f"{' (setup refitted)' if out['refit_setup'] else ''}{rms}")
     return 0
 
 
@@ -203,17 +252,36 @@ def run_plan(args: argparse.Namespace) -> int:
 
 
 def add_analysis_commands(subparsers: Any) -> None:
-    """Register ``analyze``, ``simulate`` and ``plan`` on the ``pendant`` command's subparsers."""
+    """Register ``analyze``, ``predict``, ``simulate`` and ``plan`` on the ``pendant`` command's
+    subparsers."""
     a = subparsers.add_parser("analyze", help="name the physics a robot's rigid model leaves out "
                                               "(from a robot-recording/1 file)")
     a.add_argument("file", type=Path, help="robot-recording/1 JSON document")
     a.add_argument("--json", action="store_true", help="print the analysis-report/1 JSON")
     a.add_argument("--folds", type=int, default=5, help="K of the K-fold cross-validation (5)")
     a.add_argument("--seed", type=int, default=0, help="seed of the fold assignment (0)")
+    a.add_argument("--split", choices=["blocked", "random"], default=None,
+                   help="how samples are dealt to the folds: blocked (contiguous runs in "
+                        "recorded order; the default for tracker recordings ordered in time) "
+                        "or random")
+    a.add_argument("--save-model", type=Path, default=None, metavar="MODEL.json",
+                   help="also write the fitted robot-model/1 (for pendant predict)")
     a.add_argument("--service", metavar="URL", help="($PENDANT_TOKEN: its token) analyse on a pendant service (e.g. "
                    "http://127.0.0.1:8000): the recording and report are stored there, the "
                    "analysis runs as a job in its workers (Ctrl-C cancels it)")
     a.set_defaults(func=run_analyze)
+
+    r = subparsers.add_parser("predict", help="predict a recording with a saved robot-model/1 "
+                                              "(pendant analyze --save-model)")
+    r.add_argument("model", type=Path, help="robot-model/1 JSON document")
+    r.add_argument("file", type=Path, help="robot-recording/1 of the same robot")
+    r.add_argument("--refit-setup", action="store_true",
+                   help="another session: fit the instrument frame, tool point and per-session "
+                        "terms to this recording first, the robot's parameters held")
+    r.add_argument("--json", action="store_true", help="print the prediction/1 JSON")
+    r.add_argument("--service", metavar="URL", help="($PENDANT_TOKEN: its token) predict on a "
+                   "pendant service (POST /predict)")
+    r.set_defaults(func=run_predict)
 
     s = subparsers.add_parser("simulate", help="write a simulated robot-recording/1 with hidden effects")
     s.add_argument("kind", choices=["touch", "tracker", "beam"])

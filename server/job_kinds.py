@@ -26,7 +26,7 @@ Apply = Callable[[Session], dict[str, Any]]
 
 
 def run_analysis(sm: sessionmaker[Session], params: dict[str, Any], progress: Progress) -> Apply:
-    """``params``: recording_id, folds, seed. Result: ``{"analysis_id": N}``."""
+    """``params``: recording_id, folds, seed, split. Result: ``{"analysis_id": N}``."""
     from server.recording import parse_recording
     from solvers.analysis import analyze
 
@@ -37,7 +37,8 @@ def run_analysis(sm: sessionmaker[Session], params: dict[str, Any], progress: Pr
     rec = parse_recording(doc)
     del doc
     progress(0.1, f"analysing {rec.n_samples} samples")
-    report = analyze(rec, folds=int(params.get("folds", 5)), seed=int(params.get("seed", 0)))
+    report = analyze(rec, folds=int(params.get("folds", 5)), seed=int(params.get("seed", 0)),
+                     split=params.get("split"))
     report["recording_id"] = rid
 
     def apply(db: Session) -> dict[str, Any]:

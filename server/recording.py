@@ -14,6 +14,7 @@ Regenerate the committed JSON Schema with::
 
 from __future__ import annotations
 
+import dataclasses
 import json
 import re
 from datetime import datetime
@@ -101,6 +102,21 @@ class DHRowIn(_Model):
     direction: Literal[1, -1] = 1
 
 
+class LinkMassesIn(_Model):
+    """The arm's link masses (for its gravity torques): one per joint's link, each link's
+    centre of mass in the link's own DH frame (default: the middle of the DH link)."""
+
+    mass_kg: list[float] = Field(min_length=1, description="link 1 first, kg, each >= 0")
+    com_mm: list[Vec3] | None = Field(None, description="per link, in its DH frame, mm")
+
+    @field_validator("mass_kg")
+    @classmethod
+    def _nonnegative(cls, v: list[float]) -> list[float]:
+        if any(x < 0 for x in v):
+            raise ValueError("every link mass must be >= 0 kg")
+        return v
+
+
 class RobotIn(_Model):
     """The robot's rigid model as the controller knows it."""
 
@@ -109,6 +125,22 @@ class RobotIn(_Model):
     joints: list[DHRowIn] = Field(min_length=1, description="one DH row per joint, joint 1 first")
     base_pose: PoseIn | None = None
     flange_pose: PoseIn | None = None
+    link_masses: LinkMassesIn | None = Field(
+        None, description="optional: the arm's link masses; without them the service uses its "
+                          "catalogue's (or a generic estimate) and says so")
+
+    @model_validator(mode="after")
+    def _masses_per_joint(self) -> "RobotIn":
+        lm = self.link_masses
+        if lm is not None:
+            n = len(self.joints)
+            if len(lm.mass_kg) != n:
+                raise ValueError(f"link_masses.mass_kg has {len(lm.mass_kg)} values; the robot "
+                                 f"has {n} joints")
+            if lm.com_mm is not None and len(lm.com_mm) != n:
+                raise ValueError(f"link_masses.com_mm has {len(lm.com_mm)} values; the robot "
+                                 f"has {n} joints")
+        return self
 
 
 class PayloadIn(_Model):
@@ -330,13 +362,16 @@ def _robot_model(r: RobotIn) -> RobotModel:
                       source="robot-recording/1 file")
 
 
-def parse_recording(doc: dict | str | bytes) -> RecordingData:
+def parse_recording(doc: dict | str | bytes, measurements_optional: bool = False) -> RecordingData:
     """Read a ``robot-recording/1`` document into a :class:`RecordingData`.
 
     Parameters
     ----------
     doc : dict, str or bytes
         The parsed JSON object, or its UTF-8 text.
+    measurements_optional : bool
+        A tracker recording whose samples carry no ``measured_mm`` at all is read, with
+        ``measured_mm`` None (``pendant predict`` predicts poses not measured yet).
 
     Raises
     ------
@@ -358,6 +393,19 @@ def parse_recording(doc: dict | str | bytes) -> RecordingData:
     ...
     server.recording.RecordingError: kind: must be 'touch', 'tracker' or 'beam', got dance
     """
+    if measurements_optional:
+        if isinstance(doc, (str, bytes)):
+            try:
+                doc = json.loads(doc)
+            except ValueError:
+                pass
+        samples_in = doc.get("samples") if isinstance(doc, dict) else None
+        if (doc.get("kind") == "tracker" and isinstance(samples_in, list) and samples_in
+                and all(isinstance(s, dict) and "measured_mm" not in s for s in samples_in)):
+            filled = {**doc, "samples": [{**s, "measured_mm": [0.0, 0.0, 0.0]}
+                                         for s in samples_in]}
+            rec = parse_recording(filled)
+            return dataclasses.replace(rec, measured_mm=None)
     m = validate_document(doc)
     n = len(m.robot.joints)
     samples = m.samples
@@ -374,6 +422,14 @@ def parse_recording(doc: dict | str | bytes) -> RecordingData:
                      edges=np.array([s.edge for s in samples], dtype=str),
                      tcp_velocity_mm_s=np.array([s.tcp_velocity_mm_s for s in samples],
                                                 dtype=float))
+    if m.robot.link_masses is not None:
+        from solvers.gravity import LinkMasses
+        lm = m.robot.link_masses
+        extra["link_masses"] = LinkMasses(
+            mass_kg=tuple(float(x) for x in lm.mass_kg),
+            com_mm=None if lm.com_mm is None else tuple(tuple(float(x) for x in c)
+                                                        for c in lm.com_mm),
+            source="the recording's link masses")
     return RecordingData(
         kind=m.kind, robot=_robot_model(m.robot), tool=m.tool.to_pose().as_matrix(),
         t_s=np.array([s.t_s for s in samples], dtype=float),

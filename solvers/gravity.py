@@ -117,7 +117,8 @@ def link_centres_mm(robot: RobotModel, frames: FloatArray, masses: LinkMasses) -
 
 
 def gravity_torques(robot: RobotModel, joints_deg: object, payload_mass_kg: float = 0.0,
-                    payload_com_mm: object = (0.0, 0.0, 0.0)) -> FloatArray:
+                    payload_com_mm: object = (0.0, 0.0, 0.0),
+                    masses: LinkMasses | None = None) -> FloatArray:
     """Gravity torque (Nm) on each joint, signed in the joint's positive direction.
 
     ``tau_i = sum_{j >= i} (z_i x (c_j - o_i)) . (m_j g)`` over the links and the payload
@@ -131,6 +132,9 @@ def gravity_torques(robot: RobotModel, joints_deg: object, payload_mass_kg: floa
         Controller joint values.
     payload_mass_kg : float
     payload_com_mm : array_like, shape (3,)
+    masses : LinkMasses, optional
+        The arm's link masses (a recording's ``robot.link_masses``); default
+        :func:`link_masses` of the robot (its catalogue entry or a generic estimate).
 
     Returns
     -------
@@ -153,7 +157,7 @@ def gravity_torques(robot: RobotModel, joints_deg: object, payload_mass_kg: floa
     """
     q = joint_values(robot, joints_deg)
     com_pay = as_array(payload_com_mm, "payload_com_mm", (3,))
-    masses = link_masses(robot)
+    masses = link_masses(robot) if masses is None else masses
     frames = joint_frames(robot, q)
     axes, origins = joint_axes(robot, frames)                     # (..., n, 3)
     centres = link_centres_mm(robot, frames, masses)              # (..., n, 3)
@@ -173,11 +177,13 @@ def gravity_torques(robot: RobotModel, joints_deg: object, payload_mass_kg: floa
 
 
 def potential_energy_j(robot: RobotModel, joints_deg: object, payload_mass_kg: float = 0.0,
-                       payload_com_mm: object = (0.0, 0.0, 0.0)) -> FloatArray:
-    """Potential energy (J) of the links and payload, ``V = sum m g z``; ``tau = -dV/dq``."""
+                       payload_com_mm: object = (0.0, 0.0, 0.0),
+                       masses: LinkMasses | None = None) -> FloatArray:
+    """Potential energy (J) of the links and payload, ``V = sum m g z``; ``tau = -dV/dq``
+    (``masses`` as for :func:`gravity_torques`)."""
     q = joint_values(robot, joints_deg)
     com_pay = as_array(payload_com_mm, "payload_com_mm", (3,))
-    masses = link_masses(robot)
+    masses = link_masses(robot) if masses is None else masses
     frames = joint_frames(robot, q)
     centres = link_centres_mm(robot, frames, masses)
     flange = frames[..., -1, :, :] @ robot.flange_pose.as_matrix()

@@ -70,6 +70,8 @@ class RecordingData:
         ``beam`` only: commanded TCP velocity at the trigger, base frame.
     recorded_at : str or None
         ISO 8601 time stamp as written in the file.
+    link_masses : solvers.gravity.LinkMasses or None
+        The arm's link masses as the file gives them (``robot.link_masses``), else None.
     """
 
     kind: RecordingKind
@@ -87,6 +89,7 @@ class RecordingData:
     edges: np.ndarray | None = None
     tcp_velocity_mm_s: FloatArray | None = None
     recorded_at: str | None = None
+    link_masses: Any = None    # solvers.gravity.LinkMasses from the file, or None
 
     @property
     def n_samples(self) -> int:
@@ -168,6 +171,11 @@ def recording_document(rec: RecordingData) -> dict[str, Any]:
         doc["robot"]["base_pose"] = _pose_dict(robot.base_pose)
     if robot.flange_pose != Pose():
         doc["robot"]["flange_pose"] = _pose_dict(robot.flange_pose)
+    if rec.link_masses is not None:
+        lm = {"mass_kg": [float(x) for x in rec.link_masses.mass_kg]}
+        if rec.link_masses.com_mm is not None:
+            lm["com_mm"] = [_floats(c) for c in rec.link_masses.com_mm]
+        doc["robot"]["link_masses"] = lm
     doc["tool"] = _pose_dict(Pose.from_matrix(np.asarray(rec.tool, dtype=float)))
     if rec.payload_mass_kg:
         doc["payload"] = {"mass_kg": float(rec.payload_mass_kg),

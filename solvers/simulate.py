@@ -596,4 +596,59 @@ def simulate_recording(kind: str, robot: RobotModel | str,
     return recording_document(rec)
 
 
-__all__ = ["simulate_recording", "DEFAULT_TOOL", "DEFAULT_INSTRUMENT", "DEFAULT_SAMPLES"]
+def constant_orientation_path(robot: RobotModel | str, n: int, *, tool_mm: object = DEFAULT_TOOL,
+                              seed: int = 0, size_mm: Sequence[float] = (300.0, 200.0, 100.0),
+                              repeats: int = 1, tilt_deg: float = 0.0) -> FloatArray:
+    """Joint values (n, dof) of a machining-like path with the tool orientation constant.
+
+    The TCP sweeps a serpentine raster through a box (``size_mm``) in front of the robot with
+    the tool pointing straight down (tilted by ``tilt_deg`` about base x); each point is
+    solved from its neighbour (damped least squares, ``plan.solve_ik``). ``repeats`` > 1
+    visits each raster point that many times in a row (repeated neighbours). What a laser
+    tracker sees on such a path cannot tell the tool point on the flange from the
+    instrument's position (``analysis.identify``).
+    """
+    from solvers.analysis.plan import reached, solve_ik
+
+    model = ROBOTS[robot] if isinstance(robot, str) else robot
+    tool = _tool_matrix(tool_mm)
+    R = model.reach_mm or 1000.0
+    rng = np.random.default_rng(seed)
+    n_points = -(-int(n) // max(int(repeats), 1))
+    nx = max(int(np.ceil(np.sqrt(n_points * size_mm[0] / max(size_mm[1], 1e-9)))), 1)
+    ny = -(-n_points // nx)
+    xs, ys = np.linspace(-0.5, 0.5, nx), np.linspace(-0.5, 0.5, ny)
+    pts = []
+    for i, yv in enumerate(ys):
+        row = xs if i % 2 == 0 else xs[::-1]
+        for xv in row:
+            pts.append([xv * size_mm[0], yv * size_mm[1], 0.5 * size_mm[2] * np.sin(
+                np.pi * (xv + yv))])
+    pts = np.array(pts[:n_points])
+    centre = np.array([0.55 * R, 0.1 * R * rng.uniform(-1, 1), float(model.base_pose.z) + 0.35 * R])
+    rot = (Rotation.from_euler("x", 180.0 + tilt_deg, degrees=True)).as_matrix()
+    goals = np.tile(np.eye(4), (n_points, 1, 1))
+    goals[:, :3, :3] = rot
+    goals[:, :3, 3] = centre + pts
+    # a start configuration reaching the first point: elbow up, wrist down
+    lim = model.limits_deg()
+    for _ in range(50):
+        seeds = rng.uniform(np.maximum(lim[:, 0], -180) + 5, np.minimum(lim[:, 1], 180) - 5,
+                            (200, model.dof))
+        q0 = solve_ik(model, tool, np.repeat(goals[:1], len(seeds), 0), seeds, 60)
+        ok = reached(model, tool, q0, np.repeat(goals[:1], len(seeds), 0))
+        if np.any(ok):
+            break
+    else:
+        raise KinematicsError(("robot",), f"no pose of {model.name} reaches the path's start")
+    q = [q0[np.flatnonzero(ok)[0]]]
+    for k in range(1, n_points):
+        qk = solve_ik(model, tool, goals[k:k + 1], q[-1][None, :], 30)
+        if not reached(model, tool, qk, goals[k:k + 1])[0]:
+            raise KinematicsError(("robot",), f"the path leaves {model.name}'s reach at point {k}")
+        q.append(qk[0])
+    out = np.repeat(np.array(q), max(int(repeats), 1), axis=0)[:int(n)]
+    return out
+
+
+__all__ = ["simulate_recording", "constant_orientation_path", "DEFAULT_TOOL", "DEFAULT_INSTRUMENT", "DEFAULT_SAMPLES"]

@@ -31,6 +31,7 @@ def idle(page) -> None:  # noqa: ANN001
 
 
 def test_the_ur10_report_reads_plainly(page):  # noqa: ANN001
+    page.get_by_label("Held-out split").select_option("random")   # issue 11's report
     page.get_by_label("Upload a file").set_input_files(str(UR10))
     idle(page)
     assert page.locator("#report").is_visible()
@@ -41,6 +42,7 @@ def test_the_ur10_report_reads_plainly(page):  # noqa: ANN001
     assert "Already analysed" in page.locator("#status").inner_text()
 
     rep = page.evaluate("window.analysisPage.report")
+    assert rep["split"]["method"] == "random" and "split=random" in page.posts[-1]
     page.wait_for_function("() => document.querySelector('.sign-words')")  # the nominal DH arrived
     titles = page.locator("#findings .finding .title").all_inner_texts()
     assert len(titles) == len(set(titles)), titles  # a2 and d2 are two titles, not "Link length J2" twice

@@ -1,10 +1,11 @@
 """Real data: a UR10 measured by a laser tracker (tests/data/ur10-laser-tracker, MIT licence).
 
 The nominal model with a fitted tracker frame and probe leaves ~0.78 mm RMS; a blind
-recalibration of every identifiable DH parameter (~22) predicts held-out poses to ~0.40 mm,
+recalibration of every identifiable DH parameter (15) predicts held-out poses to ~0.40 mm,
 and with a two-joint gravity compliance 0.344 mm (issue 11's reference). The analysis must
 name what the model leaves out and predict held-out poses to 0.34 mm (all 632 poses) and
-0.30 mm (the first 200).
+0.30 mm (the first 200) under issue 11's random 5-fold split, and beat the blind fit under
+the blocked split too (issue 25: the default for samples ordered in time).
 """
 
 from __future__ import annotations
@@ -33,7 +34,7 @@ def report(rec):
     # orthogonalisation pass of a rank-deficient model, seen on this very recording)
     with warnings.catch_warnings():
         warnings.simplefilter("error", RuntimeWarning)
-        return analyze(rec)
+        return analyze(rec, split="random")
 
 
 def test_licence_travels_with_the_data() -> None:
@@ -44,17 +45,37 @@ def test_rigid_baseline_leaves_about_078_mm(report) -> None:
     assert report["n_samples"] == 632
     assert report["baseline"]["rms_mm"] == pytest.approx(0.78, abs=0.03)
     assert report["baseline"]["heldout_rms_mm"] >= report["baseline"]["rms_mm"]
-    assert report["baseline"]["parameters"]["tcp_z_mm"] == pytest.approx(131.5, abs=2.0)
+    # the series turns the probe too little about axes across it to place it along its own
+    # axis (relative singular value ~1e-4: a standard deviation of tens of mm): named as
+    # not identifiable and not reported, the others are
+    bad = report["identifiability"]["not_identifiable"]
+    assert bad and "tcp_z_mm" in bad[0]["parameters"]
+    assert "tcp_z_mm" not in report["baseline"]["parameters"]
+    assert report["baseline"]["parameters"]["tcp_x_mm"] == pytest.approx(0.0, abs=2.0)
 
 
 def test_blind_dh_recalibration_is_the_yardstick(rec) -> None:
-    blind = blind_dh(rec)
-    assert 18 <= len(blind["dh_parameters"]) <= 24
+    blind = blind_dh(rec, split="random")
+    # only identifiable parameters count: not the J1 offset, d1 or the J6 row the instrument
+    # frame and the TCP absorb (issue 25: 31 were counted)
+    assert len(blind["dh_parameters"]) == 15
+    assert not {"joint_offset_j1", "link_length_j1_d", "joint_offset_j6", "link_length_j6_d",
+                "link_length_j6_a", "link_twist_j6_alpha"} & set(blind["dh_parameters"])
+    assert blind["n_parameters"] == 15 + 8
     assert blind["heldout_rms_mm"] == pytest.approx(0.40, abs=0.02)
 
 
-def test_analysis_names_the_physics_and_beats_the_blind_fit(rec, report) -> None:
+def test_blocked_split_beats_the_blind_fit_under_the_same_split(rec) -> None:
+    rep = analyze(rec)
+    assert rep["split"]["method"] == "blocked"
     blind = blind_dh(rec)
+    assert blind["split"] == "blocked"
+    assert rep["final"]["heldout_rms_mm"] <= blind["heldout_rms_mm"]
+    assert all(c["passed"] for c in rep["checks"])
+
+
+def test_analysis_names_the_physics_and_beats_the_blind_fit(rec, report) -> None:
+    blind = blind_dh(rec, split="random")
     findings = {(f["effect"], f["joint"]) for f in report["findings"]}
     # what this UR10's nominal table leaves out: the upper-arm and forearm lengths, the
     # non-parallel shoulder/elbow axes, and joints 2 and 3 yielding under gravity
@@ -74,7 +95,7 @@ def test_analysis_names_the_physics_and_beats_the_blind_fit(rec, report) -> None
 def test_first_200_poses_reach_030_mm_held_out() -> None:
     doc = json.loads(DATA.read_text(encoding="utf-8"))
     doc["samples"] = doc["samples"][:200]
-    rep = analyze(parse_recording(doc))
+    rep = analyze(parse_recording(doc), split="random")
     assert rep["final"]["heldout_rms_mm"] <= 0.30
     assert {f["effect"] for f in rep["findings"]} >= {"link_length", "gear_transmission_error"}
 

@@ -149,8 +149,12 @@ function findingTitle(f) {
   const joint = hasJoint ? ` J${f.joint}` : "";
   const p = f.dh_parameter || (f.parameters || {}).dh_parameter;
   const dh = p ? ` (${p}${hasJoint ? f.joint : ""})` : f.effect === "link_twist" && hasJoint ? ` (α${f.joint})` : "";
-  const k = (f.parameters || {}).periods_per_turn;  // one gear finding per harmonic
-  const harmonic = f.effect === "gear_transmission_error" && isNum(k) ? ` (${k} per turn)` : "";
+  // one gear finding per harmonic; a not-identifiable note carries its harmonic (or the
+  // list of harmonics left out) at the top level
+  const k = (f.parameters || {}).periods_per_turn ?? f.periods_per_turn;
+  const harmonic = f.effect !== "gear_transmission_error" ? ""
+    : isNum(k) ? ` (${k} per turn)`
+    : Array.isArray(k) && k.length ? ` (${k.length > 1 ? `${k[0]}–${k[k.length - 1]}` : k[0]} per turn)` : "";
   return `${effectName(f.effect)}${joint}${dh}${harmonic}`;
 }
 
@@ -271,6 +275,7 @@ async function analyseText(text) {
   showRecording(rec);
   setStatus(`Analysing recording ${rec.id} (${rec.n_samples} ${rec.kind} samples) …`);
   const q = new URLSearchParams({ folds: $("#folds").value || "5", seed: $("#seed").value || "0" });
+  if ($("#split").value) q.set("split", $("#split").value);
   let job;
   try {
     job = await request("POST", `/recordings/${rec.id}/analyze?${q}`);
@@ -300,9 +305,9 @@ async function analyseText(text) {
   setStatus(`Analysis ${rep.id ?? ""} of recording ${rec.id}: ${rep.verdict}.`, "ok");
 }
 
-/** What an analysis ran on: the text, folds and seed. */
+/** What an analysis ran on: the text, folds, seed and split. */
 function inputKey(text = $("#paste").value) {
-  return JSON.stringify([text, $("#folds").value || "5", $("#seed").value || "0"]);
+  return JSON.stringify([text, $("#folds").value || "5", $("#seed").value || "0", $("#split").value]);
 }
 
 function showRecording(rec) {
@@ -360,7 +365,9 @@ function renderVerdict(rep) {
   v.textContent = label;
   v.dataset.verdict = rep.verdict;
   v.className = `verdict v-${rep.verdict}`;
-  $("#verdict-text").textContent = `${text} ${rep.n_samples ?? "?"} ${rep.kind ?? ""} samples.`;
+  const sp = rep.split || {};
+  const how = sp.method ? ` Held-out: ${sp.folds}-fold ${sp.method} split${sp.method === "blocked" ? " (contiguous runs in recorded order)" : ""}.` : "";
+  $("#verdict-text").textContent = `${text} ${rep.n_samples ?? "?"} ${rep.kind ?? ""} samples.${how}`;
   const b = rep.baseline || {};
   const f = rep.final || {};
   const nb = b.parameters ? Object.keys(b.parameters).length : undefined;
@@ -614,10 +621,34 @@ function noteItem(n, extra) {
   return li;
 }
 
+/** The rigid model's parameters the poses cannot determine (report.identifiability). */
+function identItem(n) {
+  const li = el("li", { "data-effect": "rigid_setup", "data-joint": "" });
+  li.append(el("strong", { text: (n.parameters || []).join(", ") }), `: ${n.reason || ""}. `,
+    el("span", { text: `Would determine it: ${n.poses_that_would_determine_it || ""}.` }));
+  return li;
+}
+
+/** The gear harmonics left out for too little travel, all joints on one line. */
+function shortTravelItem(notes) {
+  const li = el("li", { "data-effect": "gear_transmission_error", "data-joint": "" });
+  const per = notes.map((n) => {
+    const k = n.periods_per_turn;
+    return `J${n.joint}: ${k.length > 1 ? `${k[0]}–${k[k.length - 1]}` : k[0]}`;
+  }).join(", ");
+  li.append(el("strong", { text: "Gear transmission error, harmonics per turn not tested" }),
+    `: ${per}. Each joint's travel covers less than one period of them: over part of a period a gear error looks like a smooth trend and does not carry over to other poses; spread the joint over a full period (better two) to test them.`);
+  return li;
+}
+
 function renderNotes(rep) {
-  const ni = rep.not_identifiable || [];
-  $("#not-identifiable").replaceChildren(...ni.map((n) => noteItem(n)));
-  $("#notes-panel").hidden = ni.length === 0;
+  const all = rep.not_identifiable || [];
+  const short = all.filter((n) => Array.isArray(n.periods_per_turn));
+  const ni = all.filter((n) => !Array.isArray(n.periods_per_turn));
+  const setup = ((rep.identifiability || {}).not_identifiable) || [];
+  $("#not-identifiable").replaceChildren(...setup.map(identItem), ...ni.map((n) => noteItem(n)),
+    ...(short.length ? [shortTravelItem(short)] : []));
+  $("#notes-panel").hidden = all.length + setup.length === 0;
   const wh = rep.withheld || [];
   $("#withheld").replaceChildren(...wh.map((n) => noteItem(n,
     isNum(n.p_value_with_structure) ? `p with the structure = ${pValue(n.p_value_with_structure)}` : "")));
@@ -632,6 +663,29 @@ function renderMore(rep) {
     a.href = `/analysis/${rep.id}`;
     a.textContent = `GET /analysis/${rep.id}`;
   }
+  $("#model-download").disabled = rep.id === undefined;
+  $("#model-status").textContent = "";
+}
+
+/** Download the stored report's fitted robot-model/1 (GET /analysis/{id}/model). */
+async function downloadModel() {
+  const id = page.report && page.report.id;
+  if (id === undefined) return;
+  let model;
+  try {
+    model = await request("GET", `/analysis/${encodeURIComponent(id)}/model`);
+  } catch (err) {
+    const d = (err.detail && err.detail[0] && err.detail[0].msg) || err.message;
+    $("#model-status").textContent = `No model: ${d}`;
+    return;
+  }
+  const blob = new Blob([JSON.stringify(model, null, 1)], { type: "application/json" });
+  const link = el("a", { href: URL.createObjectURL(blob), download: `robot-model-${id}.json` });
+  document.body.append(link);
+  link.click();
+  link.remove();
+  setTimeout(() => URL.revokeObjectURL(link.href), 0);
+  $("#model-status").textContent = `robot-model-${id}.json: ${model.effects.length} effects; use it with pendant predict.`;
 }
 
 // ------------------------------------------------------------------------------ wiring
@@ -649,7 +703,7 @@ function init() {
   });
   $("#analyse").addEventListener("click", () => busy(async () => {
     if (page.report && page.analysed === inputKey()) { // the file choice ran it already
-      setStatus(`Already analysed: analysis ${page.report.id ?? ""}. Change the text, folds or seed to run again.`, "ok");
+      setStatus(`Already analysed: analysis ${page.report.id ?? ""}. Change the text, folds, seed or split to run again.`, "ok");
       return;
     }
     await analyseText($("#paste").value);
@@ -668,6 +722,7 @@ function init() {
     $("#file").value = "";
     await analyseText(text);
   }));
+  $("#model-download").addEventListener("click", () => busy(downloadModel));
   $("#same-scale").addEventListener("change", () => { if (page.report) renderPlots(page.report); });
   const stored = new URLSearchParams(location.search).get("analysis");
   const done = () => { document.body.dataset.ready = "1"; };

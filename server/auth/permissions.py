@@ -100,6 +100,8 @@ ROUTES: Final[dict[tuple[str, str], str]] = {
     ("GET", "/recordings/{recording_id}"): "frames:read",
     ("POST", "/recordings/{recording_id}/analyze"): "sessions:run",
     ("GET", "/analysis/{analysis_id}"): "frames:read",
+    ("GET", "/analysis/{analysis_id}/model"): "frames:read",  # the fitted robot-model/1
+    ("POST", "/predict"): "sessions:run",  # a computation with a saved model
     ("POST", "/plan"): "sessions:run",  # which poses to measure (a computation)
     ("POST", "/plan/recording"): "sessions:run",  # a simulated recording at a plan's poses
     ("GET", "/jobs/{job_id}"): "frames:read",

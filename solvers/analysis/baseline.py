@@ -24,9 +24,13 @@ import numpy as np
 from scipy.optimize import least_squares
 from scipy.spatial.transform import Rotation
 
-from solvers.analysis.kinematics import Sensitivities, State, state_sensitivities
+from solvers.analysis.identify import Identifiability, analyse
+from solvers.analysis.kinematics import (Sensitivities, State, flange_of, state_frames,
+                                         state_sensitivities)
 from solvers.errors import CalibrationError
 from solvers.validate import FloatArray
+
+MAX_GN = 12     # Gauss-Newton steps of the tracker's setup
 
 
 @dataclass
@@ -45,6 +49,9 @@ class Baseline:
     R_instrument_base: FloatArray = field(default_factory=lambda: np.eye(3))
     blocks: dict[str, slice] = field(default_factory=dict)  # columns of B by what they fit
     w: FloatArray | None = None   # row weights already applied to g, B and S (beam), else None
+    ident: Identifiability | None = None   # which parameters the poses determine
+    setup: dict = field(default_factory=dict)   # raw fitted setup (``model.py`` predicts with it)
+    B_full: FloatArray | None = None   # B before the undetermined directions were dropped
 
     @property
     def row_scale(self) -> FloatArray:
@@ -101,11 +108,11 @@ def _kabsch(A: FloatArray, B: FloatArray) -> tuple[FloatArray, FloatArray]:
     return R, b0 - R @ a0
 
 
-def fit_tracker(rec, state: State | None = None) -> Baseline:
+def fit_tracker(rec, state: State | None = None, ident: Identifiability | None = None) -> Baseline:
     robot, q, meas = rec.robot, rec.joints_deg, np.asarray(rec.measured_mm, float)
     tool0 = np.asarray(rec.tool, float)
-    sens0 = state_sensitivities(robot, q, np.eye(4), state)
-    Rf, pf = sens0.R_base_flange, sens0.tcp_mm          # flange pose in base
+    F = state_frames(robot, q, state)
+    Rf, pf = flange_of(robot, F, state)                # flange pose in base
     R0, t0 = _kabsch(pf + Rf @ tool0[:3, 3], meas)
 
     def model(x):
@@ -126,15 +133,36 @@ def fit_tracker(rec, state: State | None = None) -> Baseline:
         return J.reshape(3 * N, 9)
 
     x0 = np.concatenate([np.zeros(3), t0, tool0[:3, 3]])
-    for _ in range(3):   # re-centre the rotation so the left-perturbation Jacobian is exact
-        sol = least_squares(fun, x0, jac=jac, method="lm", xtol=1e-12, ftol=1e-12, gtol=1e-12)
-        R0 = Rotation.from_rotvec(sol.x[:3]).as_matrix() @ R0
-        x0 = np.concatenate([np.zeros(3), sol.x[3:]])
+    names = ["instrument_rx", "instrument_ry", "instrument_rz", "instrument_x_mm",
+             "instrument_y_mm", "instrument_z_mm", "tcp_x_mm", "tcp_y_mm", "tcp_z_mm"]
+    if ident is None:
+        ident = analyse(jac(x0), names, {"the instrument frame": slice(0, 6),
+                                         "the TCP": slice(6, 9)})
+    P = ident.basis          # the fit moves only along the determined directions
+    # Gauss-Newton along the determined directions; the rotation is re-centred after each
+    # step, so the left-perturbation Jacobian is exact (quadratic convergence)
+    for _ in range(MAX_GN):
+        R, c, pred = model(x0)
+        r = (pred - meas).ravel()
+        J = np.zeros((len(q), 3, 9))
+        J[:, :, 0:3] = skew_cols(pred - x0[3:6])
+        J[:, :, 3:6] = np.eye(3)
+        J[:, :, 6:9] = R @ Rf
+        J = J.reshape(-1, 9) @ P
+        G = J.T @ J
+        d = np.sqrt(np.maximum(np.diag(G), 1e-300))
+        dz = -np.linalg.lstsq((G / np.outer(d, d)), (J.T @ r) / d, rcond=1e-12)[0] / d
+        xs = x0 + P @ dz
+        R0 = Rotation.from_rotvec(xs[:3]).as_matrix() @ R0
+        x0 = np.concatenate([np.zeros(3), xs[3:]])
+        # the step's size in the residual (mm, root-sum-square over all rows)
+        if np.linalg.norm(J @ dz) < 1e-9 * max(np.sqrt(len(q)), 1.0):
+            break
     x = x0
     R, c, pred = model(x)
     tool = tool0.copy()
     tool[:3, 3] = x[6:9]
-    sens = state_sensitivities(robot, q, tool, state)
+    sens = state_sensitivities(robot, q, tool, state, frames=F)
     N = len(q)
     S = np.zeros((N, 3, 6))
     S[:, :, :3] = R
@@ -145,16 +173,19 @@ def fit_tracker(rec, state: State | None = None) -> Baseline:
     params = {f"instrument_{k}": float(val) for k, val in zip(
         ("x_mm", "y_mm", "z_mm", "a_deg", "b_deg", "c_deg"), v)}
     params.update({"tcp_x_mm": x[6], "tcp_y_mm": x[7], "tcp_z_mm": x[8]})
-    return Baseline("tracker", (pred - meas).ravel(), jac(x), S, 3, sens, tool,
+    Jx = jac(x)
+    return Baseline("tracker", (pred - meas).ravel(), Jx if ident.full else Jx @ P, S, 3, sens, tool,
                     {k: float(v) for k, v in params.items()}, R,
-                    {"the instrument frame": slice(0, 6), "the TCP": slice(6, 9)})
+                    {"the instrument frame": slice(0, 6), "the TCP": slice(6, 9)},
+                    ident=ident, setup={"R_instrument_base": R, "t_instrument_base": x[3:6].copy(),
+                                        "tcp_mm": x[6:9].copy()}, B_full=Jx)
 
 
-def fit_touch(rec, state: State | None = None) -> Baseline:
+def fit_touch(rec, state: State | None = None, ident: Identifiability | None = None) -> Baseline:
     robot, q = rec.robot, rec.joints_deg
     tool0 = np.asarray(rec.tool, float)
-    sens0 = state_sensitivities(robot, q, np.eye(4), state)
-    Rf, pf = sens0.R_base_flange, sens0.tcp_mm
+    F = state_frames(robot, q, state)
+    Rf, pf = flange_of(robot, F, state)
     N = len(q)
 
     def fun(x):
@@ -167,18 +198,26 @@ def fit_touch(rec, state: State | None = None) -> Baseline:
         return J.reshape(3 * N, 6)
 
     x0 = np.concatenate([tool0[:3, 3], np.mean(pf + Rf @ tool0[:3, 3], axis=0)])
-    sol = least_squares(fun, x0, jac=jac, method="lm", xtol=1e-12, ftol=1e-12, gtol=1e-12)
-    x = sol.x
+    if ident is None:
+        ident = analyse(jac(x0), ["tcp_x_mm", "tcp_y_mm", "tcp_z_mm", "point_x_mm",
+                                  "point_y_mm", "point_z_mm"],
+                        {"the TCP": slice(0, 3), "the fixed point": slice(3, 6)})
+    P = ident.basis
+    J = jac(x0) @ P                  # the touch constraint is linear in its parameters
+    x = x0 - P @ np.linalg.lstsq(J, fun(x0), rcond=1e-12)[0]
     tool = tool0.copy()
     tool[:3, 3] = x[:3]
-    sens = state_sensitivities(robot, q, tool, state)
+    sens = state_sensitivities(robot, q, tool, state, frames=F)
     S = np.zeros((N, 3, 6))
     S[:, :, :3] = np.eye(3)
     params = {"tcp_x_mm": x[0], "tcp_y_mm": x[1], "tcp_z_mm": x[2],
               "point_x_mm": x[3], "point_y_mm": x[4], "point_z_mm": x[5]}
-    return Baseline("touch", fun(x), jac(x), S, 3, sens, tool,
+    Jx = jac(x)
+    return Baseline("touch", fun(x), Jx if ident.full else Jx @ P, S, 3, sens, tool,
                     {k: float(v) for k, v in params.items()},
-                    blocks={"the TCP": slice(0, 3), "the fixed point": slice(3, 6)})
+                    blocks={"the TCP": slice(0, 3), "the fixed point": slice(3, 6)},
+                    ident=ident, setup={"tcp_mm": x[:3].copy(), "point_mm": x[3:6].copy()},
+                    B_full=Jx)
 
 
 def _beam_constraint(c, u, b, v, w, edge, radius):
@@ -224,7 +263,7 @@ def beam_sensitivity(c, u, b, v, w, edge, radius) -> FloatArray:
     return S
 
 
-def fit_beam(rec, state: State | None = None) -> Baseline:
+def fit_beam(rec, state: State | None = None, ident: Identifiability | None = None) -> Baseline:
     robot, q = rec.robot, rec.joints_deg
     tool0 = np.asarray(rec.tool, float)
     b, v, w, edge, radius = _beam_inputs(rec)
@@ -282,12 +321,18 @@ def fit_beam(rec, state: State | None = None) -> Baseline:
     return Baseline("beam", fun(x) * wt, B, S, 1, sens, tool,
                     {k: float(val) for k, val in params.items()},
                     blocks={"the TCP position": slice(0, 3), "the tool axis": slice(3, 5)},
-                    w=wt)
+                    w=wt, ident=analyse(B, ["tcp_x_mm", "tcp_y_mm", "tcp_z_mm", "axis_tilt_1",
+                                            "axis_tilt_2"],
+                                        {"the TCP position": slice(0, 3),
+                                         "the tool axis": slice(3, 5)}),
+                    setup={"tool": tool.copy()})
 
 
-def fit_baseline(rec, state: State | None = None) -> Baseline:
-    """The kind's rigid fit (dispatch on ``rec.kind``), optionally with effects applied."""
+def fit_baseline(rec, state: State | None = None, ident: Identifiability | None = None
+                 ) -> Baseline:
+    """The kind's rigid fit (dispatch on ``rec.kind``), optionally with effects applied;
+    ``ident``: the determined directions to fit along (default: found on this recording)."""
     fits = {"tracker": fit_tracker, "touch": fit_touch, "beam": fit_beam}
     if rec.kind not in fits:
         raise CalibrationError(("kind",), f"must be touch, tracker or beam, got {rec.kind!r}")
-    return fits[rec.kind](rec, state)
+    return fits[rec.kind](rec, state, ident)

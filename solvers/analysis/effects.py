@@ -35,6 +35,10 @@ from solvers.validate import FloatArray
 
 DEG = np.pi / 180.0
 GEAR_HARMONICS = 12          # periods per joint turn offered for a gear's transmission error
+GEAR_MIN_PERIODS = 1.0       # a harmonic is a candidate only where the joint's travel covers
+                             # at least this many of its periods (else it is a smooth trend
+                             # any other effect of that joint fits as well, and it does not
+                             # carry over to poses outside the travel)
 TAU_GRID = (1 / 16, 1 / 8, 1 / 4, 1 / 2, 1.0, 2.0, None)   # warm-up tau / recording span
 
 
@@ -125,7 +129,8 @@ def gravity_torques_nm(rec) -> FloatArray:
     """Gravity torque (N, n) in Nm on each joint, from ``solvers.gravity`` (the simulator's)."""
     from solvers.gravity import gravity_torques
     return np.asarray(gravity_torques(rec.robot, rec.joints_deg, rec.payload_mass_kg,
-                                      rec.payload_com_mm), dtype=float)
+                                      rec.payload_com_mm, getattr(rec, "link_masses", None)),
+                      dtype=float)
 
 
 def _apply(base: Baseline, twist: FloatArray) -> FloatArray:
@@ -141,6 +146,7 @@ class Library:
     candidates: list[Candidate] = field(default_factory=list)
     torques_nm: FloatArray | None = None
     signs: FloatArray | None = None
+    skipped: list[dict] = field(default_factory=list)   # not offered, with the reason
 
 
 def build_library(rec, base: Baseline, torques_nm: FloatArray | None = None,
@@ -182,11 +188,26 @@ def build_library(rec, base: Baseline, torques_nm: FloatArray | None = None,
                                regressor=f"the direction joint {j + 1} last moved in",
                                feature=sg[:, j], theta_per_unit=ctrl_unit * (-0.5 * sg[:, j:j + 1])))
     theta_deg = np.degrees(dh_angles_rad(rec.robot, rec.joints_deg))
+    skipped: list[dict] = []
     for j in range(n):
-        if np.ptp(theta_deg[:, j]) < 1e-6:
+        travel = float(np.ptp(theta_deg[:, j]))
+        if travel < 1e-6:
             continue
+        short = []
         for k in range(1, GEAR_HARMONICS + 1):
-            cands.append(gear_candidate(base, theta_deg[:, j], j, k))
+            if travel * k / 360.0 >= GEAR_MIN_PERIODS:
+                cands.append(gear_candidate(base, theta_deg[:, j], j, k))
+            else:
+                short.append(k)
+        if short:
+            skipped.append({"effect": "gear_transmission_error", "joint": j + 1,
+                            "periods_per_turn": short,
+                            "reason": f"joint {j + 1} travels {travel:.3g} deg, less than one "
+                                      f"period of these harmonics ({360.0 / short[-1]:.3g} deg "
+                                      f"and longer): over part of a period a gear error looks "
+                                      f"like a smooth trend and does not carry over to other "
+                                      f"poses; spread joint {j + 1} over at least one full "
+                                      f"period (better two) to test them"})
     t = np.asarray(rec.t_s, float)
     span = float(t.max() - t.min())
     if span > 0:
@@ -208,7 +229,7 @@ def build_library(rec, base: Baseline, torques_nm: FloatArray | None = None,
         cands.append(Candidate("tool_deflection", None, _apply(base, tw), "deflection_mm_per_N",
                                regressor="the payload weight across the tool axis",
                                feature=np.linalg.norm(fperp, axis=1), shift_per_unit=tw[:, :3, None]))
-    return Library(cands, tau, sg)
+    return Library(cands, tau, sg, skipped)
 
 
 def gear_candidate(base: Baseline, theta_deg: FloatArray, j: int, k: int) -> Candidate:

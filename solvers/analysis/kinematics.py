@@ -70,9 +70,11 @@ def frames_of(robot: RobotModel, q_deg: FloatArray, dtheta_rad: FloatArray | Non
 
 def sensitivities(robot: RobotModel, q_deg: FloatArray, tool: FloatArray,
                   dtheta_rad: FloatArray | None = None,
-                  ddh: dict[str, FloatArray] | None = None) -> Sensitivities:
-    """TCP pose and twist columns of every DH parameter at each sample (vectorised)."""
-    F = frames_of(robot, q_deg, dtheta_rad, ddh)
+                  ddh: dict[str, FloatArray] | None = None,
+                  frames: FloatArray | None = None) -> Sensitivities:
+    """TCP pose and twist columns of every DH parameter at each sample (vectorised);
+    ``frames``: :func:`frames_of` of the same arguments, if already computed."""
+    F = frames_of(robot, q_deg, dtheta_rad, ddh) if frames is None else frames
     T = F[:, -1] @ robot.flange_pose.as_matrix() @ tool
     c = T[:, :3, 3]
     n = F.shape[1] - 1
@@ -116,10 +118,26 @@ class State:
                    {k: np.zeros(n_joints) for k in ("a", "d", "alpha")})
 
 
+def state_frames(robot: RobotModel, q_deg: FloatArray, state: State | None = None) -> FloatArray:
+    """:func:`frames_of` with ``state``'s joint-angle and DH-row changes."""
+    if state is None:
+        return frames_of(robot, q_deg)
+    return frames_of(robot, q_deg, state.dtheta_rad, state.ddh)
+
+
+def flange_of(robot: RobotModel, F: FloatArray, state: State | None = None
+              ) -> tuple[FloatArray, FloatArray]:
+    """(R_base_flange (N, 3, 3), flange position (N, 3) plus ``state``'s shift) from frames."""
+    T = F[:, -1] @ robot.flange_pose.as_matrix()
+    p = T[:, :3, 3] if state is None else T[:, :3, 3] + state.shift_mm
+    return T[:, :3, :3], p
+
+
 def state_sensitivities(robot: RobotModel, q_deg: FloatArray, tool: FloatArray,
-                        state: State | None = None) -> Sensitivities:
+                        state: State | None = None, frames: FloatArray | None = None
+                        ) -> Sensitivities:
     """:func:`sensitivities` of the model with ``state``'s effects applied."""
     if state is None:
-        return sensitivities(robot, q_deg, tool)
-    s = sensitivities(robot, q_deg, tool, state.dtheta_rad, state.ddh)
+        return sensitivities(robot, q_deg, tool, frames=frames)
+    s = sensitivities(robot, q_deg, tool, state.dtheta_rad, state.ddh, frames=frames)
     return replace(s, tcp_mm=s.tcp_mm + state.shift_mm)

@@ -3,33 +3,42 @@
 Returns the document as a dict ready for JSON; see docs/analysis.md. Each step is a module
 with its own reference:
 
-0. Fit the kind's rigid baseline (``baseline.py``); its residual ``y = -g`` is, to first
-   order, ``B db + sum_e X_e beta_e + noise``; ``locate.py`` says where the mismatch is.
+0. Fit the kind's rigid baseline (``baseline.py``), after checking which of its parameters
+   the poses determine (``identify.py``: the undetermined directions are held at the
+   nominal values, named and not reported); its residual ``y = -g`` is, to first order,
+   ``B db + sum_e X_e beta_e + noise``; ``locate.py`` says where the mismatch is.
 1. *Candidates* (``effects.py``, ``screen.py``): every effect's regressor ``X_e``; a
    candidate invisible in the recording or (almost) inside span(B) is listed as not
-   identifiable, with what data would reveal it.
+   identifiable, with what data would reveal it; a gear harmonic only where the joint's
+   travel covers a full period.
 2. *Selection* (``forward.py``): forward selection by the extra-sum-of-squares F-test with
-   Holm's control over each step's candidates and a held-out (K-fold) gain, then a backward
-   check; re-linearised at the fitted effects until it is stable (``_relinearise``), and a
-   thermal finding's time constant profiled (``thermal.py``).
-3. *Stand-ins* (``verdict.py``): findings that may only stand in for structure no candidate
-   explains are named as such and kept (their held-out gain is real).
-4. *Verdict* (``verdict.py``): a Holm-controlled structure test of the final residual.
+   Holm's control over each step's candidates and a held-out gain, then a backward check;
+   the chosen effects fitted nonlinearly (``model.py``) and the selection run once more,
+   linearised there with only those effects; a thermal finding's time constant profiled
+   (``thermal.py``).
+3. *Figures* (``model.py``): each finding's model fitted nonlinearly on all samples and
+   refitted on each fold (blocked or random split); a finding that does not lower that
+   held-out error is not reported. No figure comes from the linearisation.
+4. *Stand-ins* and *verdict* (``verdict.py``), on the residual of the final model itself.
 """
 
 from __future__ import annotations
 
 import numpy as np
 
-from solvers.analysis.baseline import Baseline, fit_baseline, per_sample_rms, rms_mm
+from solvers.analysis.baseline import Baseline, fit_baseline, per_sample_rms
 from solvers.analysis.blas import single_thread
-from solvers.analysis.effects import Candidate, Library, build_library
-from solvers.analysis.forward import ALPHA, Selection, StepStats, backward, forward, model
-from solvers.analysis.kinematics import State
+from solvers.analysis.effects import Candidate, build_library
+from solvers.analysis.forward import (ALPHA, MIN_CV_GAIN, Selection, StepStats, backward,
+                                     forward, model)
 from solvers.analysis.locate import (correlations, features, joint_angle_terms, locate,
                                      structure_groups)
 from solvers.analysis.screen import screen
-from solvers.analysis.selection import CV, fit_linear, orth, project_out, residual_ratio
+from solvers.analysis.identify import report_block
+from solvers.analysis.model import Effect, Fit, Prepared, fit, model_document
+from solvers.analysis.model import heldout as model_heldout
+from solvers.analysis.selection import (CV, SPLITS, default_split, fit_linear, orth,
+                                        project_out, residual_ratio)
 from solvers.analysis.text import explanation
 from solvers.analysis.thermal import TauProfile, profile_tau
 from solvers.analysis.verdict import StandIn, stand_ins, structure_test, verdict_of
@@ -37,22 +46,23 @@ from solvers.errors import CalibrationError
 from solvers.recording import MIN_SAMPLES
 
 FORMAT = "analysis-report/1"
-MAX_RELINEARISE = 3     # re-linearisations at the fitted effects (nonlinear refinement)
 
 
 def analyze(rec, *, folds: int = 5, seed: int = 0, alpha: float = ALPHA,
-            max_findings: int = 16, include_twist: bool = True) -> dict:
+            max_findings: int = 16, include_twist: bool = True, split: str | None = None,
+            with_model: bool = True) -> dict:
     """Compare a recording with the rigid model and name the physics it leaves out.
 
     See :func:`_analyze` (this wrapper runs it on one BLAS thread: faster here).
     """
     with single_thread():
         return _analyze(rec, folds=folds, seed=seed, alpha=alpha, max_findings=max_findings,
-                        include_twist=include_twist)
+                        include_twist=include_twist, split=split, with_model=with_model)
 
 
 def _analyze(rec, *, folds: int = 5, seed: int = 0, alpha: float = ALPHA,
-             max_findings: int = 16, include_twist: bool = True) -> dict:
+             max_findings: int = 16, include_twist: bool = True, split: str | None = None,
+             with_model: bool = True) -> dict:
     """Compare a recording with the rigid model and name the physics it leaves out.
 
     Parameters
@@ -60,20 +70,26 @@ def _analyze(rec, *, folds: int = 5, seed: int = 0, alpha: float = ALPHA,
     rec : RecordingData
         A parsed ``robot-recording/1`` (``server.recording.parse_recording``).
     folds : int
-        K of the K-fold cross-validation by sample.
+        K of the K-fold cross-validation.
     seed : int
-        Seed of the fold assignment.
+        Seed of the fold assignment (``random`` split).
     alpha : float
         Family-wise error level of each selection step (Holm).
     max_findings : int
         Stop after this many findings.
     include_twist : bool
         Offer ``link_twist`` (a DH alpha error) as a candidate.
+    split : {'blocked', 'random'} or None
+        How samples are dealt to the folds; None: ``blocked`` where the samples are ordered
+        in time (``selection.default_split``), else ``random``.
+    with_model : bool
+        Add the fitted ``robot-model/1`` under ``model``.
 
     Returns
     -------
     dict
-        The ``analysis-report/1`` document (plus ``not_identifiable`` and ``stand_ins``).
+        The ``analysis-report/1`` document (plus ``identifiability``, ``not_identifiable``,
+        ``stand_ins``, ``checks`` and ``model``).
 
     Raises
     ------
@@ -85,46 +101,102 @@ def _analyze(rec, *, folds: int = 5, seed: int = 0, alpha: float = ALPHA,
     if N < need:
         raise CalibrationError(("samples",), f"{N} samples are too few to analyse; "
                                f"record at least {need}")
-    base = fit_baseline(rec)
+    split = default_split(rec.t_s, rec.kind) if split is None else split
+    if split not in SPLITS:
+        raise CalibrationError(("split",), f"must be one of {', '.join(SPLITS)}, got {split!r}")
+    base0 = base = fit_baseline(rec)
     m = base.m
     y = -base.g
     n_rows = y.size
     lib = build_library(rec, base, include_twist=include_twist)
-    cv = CV.make(N, m, folds, seed)
+    cv = CV.make(N, m, folds, seed, split)
+    cv.scale = base.row_scale
     groups = structure_groups(rec, base)
     feats = features(rec, base, lib.torques_nm, lib.signs)
     QB = orth(base.B)
-    base_rms = rms_mm(base.g_mm, m)
     base_residuals = per_sample_rms(base.g_mm, m)
-    cv.scale = base.row_scale
-    base_cv = cv.heldout_rms(y, base.B, QB)
     locate_block = locate(rec, base, y, QB, feats)
-    rigid_parameters = dict(base.parameters)
+    hidden = set(base.ident.involved) if base.ident is not None else set()
+    if hidden & {"instrument_rx", "instrument_ry", "instrument_rz"}:
+        hidden |= {"instrument_a_deg", "instrument_b_deg", "instrument_c_deg"}
+    rigid_parameters = {k: v for k, v in base.parameters.items() if k not in hidden}
+    # the rigid model's own figures: refitted on each fold
+    rigid_prep = Prepared.make(rec, [], torques=lib.torques_nm)
+    rigid_fit = Fit(np.zeros(0), base, float(np.sum(base.g_mm ** 2)), N, 0)
+    base_rms = rigid_fit.rms_mm
+    base_cv = model_heldout(rigid_prep, cv, rigid_fit)
 
     # 1. candidates
     screened = screen(rec, base, QB, lib.candidates)
-    # 2. selection, re-linearised at the fitted effects, thermal time constants profiled
+    # 2. selection on the residual linearised at the rigid fit; then once more, linearised at
+    #    the nonlinear fit of what was chosen (only those effects: none dropped lingers)
     sel = backward(y, base, forward(y, base, screened.candidates, cv, groups, alpha,
                                     max_findings), alpha)
-    base, y, lib, sel, groups = _relinearise(rec, base, y, lib, screened.candidates, sel, cv,
-                                             alpha, max_findings, include_twist)
+    if sel.chosen:
+        prep = Prepared.make(rec, [Effect.of(c) for c in sel.chosen], torques=lib.torques_nm)
+        f = fit(prep)
+        rss_lin = float(np.sum((project_out(orth(model(base, sel.chosen)), y)
+                                * base.row_scale) ** 2))
+        linear = abs(f.rss_mm2 - rss_lin) <= RELIN_TOL * rss_lin
+        base = f.base
+        lib = build_library(rec, base, torques_nm=lib.torques_nm, include_twist=include_twist)
+        by_key = {c.key: c for c in lib.candidates}
+        cands = [by_key[c.key] for c in screened.candidates if c.key in by_key]
+        y = -base.g + prep.columns(base) @ f.beta
+        groups = structure_groups(rec, base)
+        sel2 = None if linear else backward(
+            y, base, forward(y, base, cands, cv, groups, alpha, max_findings), alpha)
+        sel = sel2 if sel2 is not None and sel2.chosen else Selection(
+            [by_key[c.key] for c in sel.chosen if c.key in by_key], sel.steps)
     profiles: dict[str, TauProfile] = {}
     for i, c in enumerate(sel.chosen):
         if c.effect == "thermal_drift":
             sel.chosen[i], prof = profile_tau(rec, base, y, sel.chosen, i)
             profiles[sel.chosen[i].key] = prof
+    # 3. every figure from the model itself: fitted nonlinearly, refitted on each fold; a
+    #    finding that does not lower the held-out error of the model itself is not reported
+    kept, figures, dropped = [], [], []
+    prev_cv, prev_beta, cur = base_cv, np.zeros(0), rigid_fit
+    for i, c in enumerate(sel.chosen):
+        trial = kept + [i]
+        prep = Prepared.make(rec, [Effect.of(sel.chosen[j]) for j in trial],
+                             torques=lib.torques_nm)
+        f = fit(prep, beta0=np.concatenate([prev_beta, np.zeros(prep.effects[-1].size)]))
+        h = model_heldout(prep, cv, f)
+        if h < prev_cv * (1.0 - MIN_CV_GAIN):
+            kept.append(i)
+            figures.append((f.rms_mm, h, prev_cv))
+            prev_cv, prev_beta, cur = h, f.beta, f
+        else:
+            dropped.append({"effect": c.effect, "joint": c.joint, "key": c.key,
+                            "heldout_rms_mm": round(h, 5),
+                            "reason": "lowered the linearised residual but not the held-out "
+                                      "error of the model itself (refitted on each fold)"})
+    sel = Selection([sel.chosen[i] for i in kept], [sel.steps[i] for i in kept])
+    prep = Prepared.make(rec, [Effect.of(c) for c in sel.chosen], torques=lib.torques_nm)
+    final_fit = cur
+    base = final_fit.base
+    # regressors at the final fit (parameter uncertainties, stand-ins, the structure test)
+    if sel.chosen:
+        lib = build_library(rec, base, torques_nm=lib.torques_nm, include_twist=include_twist)
+        by_key = {c.key: c for c in lib.candidates}
+        sel.chosen = [by_key.get(c.key, c) for c in sel.chosen]
+        for c, col in zip(sel.chosen, _split_columns(prep, base)):
+            c.columns = col
+    y = -base.g + (prep.columns(base) @ final_fit.beta if sel.chosen else 0.0)
+    groups = structure_groups(rec, base)
     feats = features(rec, base, lib.torques_nm, lib.signs)
-    # 3. stand-ins (kept, named)
     standing = {s.key: s for s in stand_ins(y, base, sel.chosen, groups, n_rows, alpha)}
-    findings, M, beta, rank = _findings(rec, base, y, cv, sel, base_cv, standing, profiles)
+    findings, M, rank = _findings(rec, base, y, sel, figures, standing, profiles,
+                                  final_fit.beta, lib)
 
-    # 4. verdict
-    rss_mm = float(np.sum(((y - M @ beta) * base.row_scale) ** 2))
+    # 4. verdict, on the residual of the model itself
+    resid = -base.g
+    rss_mm = float(np.sum(base.g_mm ** 2))
     Q = orth(M)
-    final_cv = cv.heldout_rms(y, M, Q)
-    resid = y - M @ beta
-    final_residuals = per_sample_rms(resid * base.row_scale, m)
-    sig = structure_test(y, Q, groups, n_rows)
+    final_cv = prev_cv
+    final_residuals = per_sample_rms(base.g_mm, m)
+    sig = structure_test(resid, Q, groups, n_rows)
     if sig:
         corr = correlations(project_out(Q, resid), Q, base, feats)
         what = ", ".join(n for n, _, _ in sig[:3])
@@ -135,58 +207,78 @@ def _analyze(rec, *, folds: int = 5, seed: int = 0, alpha: float = ALPHA,
                                     + (f"; it correlates most with {strong}." if strong else "."))
         locate_block["unexplained"] = [{"varies_with": n, "p_value": float(p)} for n, p, _ in sig]
     sigma_row = float(np.sqrt(rss_mm / max(n_rows - rank, 1)))
-    return {
+    final_rms = float(np.sqrt(rss_mm / N))
+    checks = _checks(base_rms, base_cv, final_rms, final_cv, figures)
+    ident = base0.ident
+    report = {
         "format": FORMAT,
         "kind": rec.kind,
         "n_samples": int(N),
         "verdict": verdict_of(sig, len(findings)),
+        "split": {"method": split, "folds": int(len(cv.test_rows)),
+                  **({"seed": int(seed)} if split == "random" else {})},
         "baseline": {"rms_mm": round(base_rms, 5), "heldout_rms_mm": round(base_cv, 5),
                      "parameters": {k: round(v, 6) for k, v in rigid_parameters.items()},
                      "residuals_mm": [round(float(v), 6) for v in base_residuals]},
+        "identifiability": report_block(ident, rec.kind, base0.sens.R_base_flange)
+        if ident is not None else None,
         "locate": locate_block,
         "findings": findings,
-        "final": {"rms_mm": round(float(np.sqrt(rss_mm / N)), 5),
+        "final": {"rms_mm": round(final_rms, 5),
                   "heldout_rms_mm": round(final_cv, 5),
                   "noise_mm": round(sigma_row * float(np.sqrt(m)), 5),
-                  "n_parameters": int(M.shape[1]),
+                  "n_parameters": int(_n_identifiable(base0) + prep.n_params),
                   "residuals_mm": [round(float(v), 6) for v in final_residuals]},
-        "not_identifiable": screened.not_identifiable,
+        "not_identifiable": screened.not_identifiable + lib.skipped,
+        "not_confirmed": dropped,
         "stand_ins": [{"effect": c.effect, "joint": c.joint, "key": c.key,
                        "stands_in_for": standing[c.key].structure}
                       for c in sel.chosen if c.key in standing],
+        "gravity_masses": lib_masses(rec),
+        "checks": checks,
     }
+    if with_model:
+        report["model"] = model_document(prep, final_fit,
+                                         [f["parameters"] for f in findings],
+                                         lib_masses(rec))
+    return report
 
 
-def _relinearise(rec, base: Baseline, y, lib: Library, cands: list[Candidate], sel: Selection,
-                 cv: CV, alpha: float, max_findings: int, include_twist: bool):
-    """Nonlinear refinement: apply the fitted effects to the kinematics, refit the baseline,
-    rebuild the regressors there and select again, until the selection is stable (a
-    Gauss-Newton step on the effects' parameters between selections)."""
-    groups = structure_groups(rec, base)
-    for _ in range(MAX_RELINEARISE):
-        if not sel.chosen:
-            break
-        keys = sel.keys()
-        beta = fit_linear(y, model(base, sel.chosen))[0]
-        state = State.zero(rec.n_samples, rec.joints_deg.shape[1])
-        col = base.B.shape[1]
-        betas = {}
-        for c in sel.chosen:
-            k = c.columns.shape[1]
-            c.apply(state, beta[col:col + k])
-            betas[c.key] = beta[col:col + k]
-            col += k
-        base = fit_baseline(rec, state)
-        lib = build_library(rec, base, torques_nm=lib.torques_nm, include_twist=include_twist)
-        by_key = {c.key: c for c in lib.candidates}
-        # the rigid model's residual, linearised at the fitted effects
-        y = -base.g + sum(by_key[k].columns @ b for k, b in betas.items())
-        cands = [by_key[c.key] for c in cands]
-        groups = structure_groups(rec, base)
-        sel = backward(y, base, forward(y, base, cands, cv, groups, alpha, max_findings), alpha)
-        if sel.keys() == keys:
-            break
-    return base, y, lib, sel, groups
+HELDOUT_BELOW = 0.8   # a held-out RMS this far below the in-sample one is a defect
+RELIN_TOL = 0.02      # the nonlinear fit's RSS this close to the linearised one: no reselection
+
+
+def _checks(base_rms, base_cv, final_rms, final_cv, figures) -> list[dict]:
+    """Consistency checks of the report's own figures (a failing one is a defect to look
+    into, not a result): a held-out error well below the in-sample one cannot be."""
+    out = []
+    pairs = [("baseline", base_rms, base_cv), ("final", final_rms, final_cv)]
+    pairs += [(f"finding {i + 1}", r, h) for i, (r, h, _) in enumerate(figures)]
+    for name, r, h in pairs:
+        ok = h >= HELDOUT_BELOW * r
+        out.append({"check": f"{name}: held-out >= {HELDOUT_BELOW:g} x in-sample RMS",
+                    "passed": bool(ok), "rms_mm": round(r, 5), "heldout_rms_mm": round(h, 5)})
+    return out
+
+
+def _n_identifiable(base: Baseline) -> int:
+    return int(base.ident.basis.shape[1]) if base.ident is not None else int(base.B.shape[1])
+
+
+def lib_masses(rec) -> str:
+    """Where the gravity torques' link masses come from (``solvers.gravity``)."""
+    from solvers.gravity import link_masses
+    lm = getattr(rec, "link_masses", None)
+    return (lm or link_masses(rec.robot)).source
+
+
+def _split_columns(prep: Prepared, base: Baseline) -> list:
+    X = prep.columns(base)
+    out, col = [], 0
+    for e in prep.effects:
+        out.append(X[:, col:col + e.size])
+        col += e.size
+    return out
 
 
 def _evidence(rec, base, chosen, c: Candidate, st: StepStats, b, s, before: float,
@@ -220,33 +312,28 @@ def _evidence(rec, base, chosen, c: Candidate, st: StepStats, b, s, before: floa
     return ev
 
 
-def _findings(rec, base: Baseline, y, cv: CV, sel: Selection, base_cv: float,
-              standing: dict[str, StandIn], profiles: dict[str, TauProfile]):
-    """The report's findings (cumulative figures, in order) and the final model's fit."""
-    N = rec.n_samples
+def _findings(rec, base: Baseline, y, sel: Selection, figures, standing: dict[str, StandIn],
+              profiles: dict[str, TauProfile], beta_nl, lib):
+    """The report's findings: parameters from the nonlinear fit (uncertainties from its
+    Jacobian), cumulative figures from the model refitted on each fold."""
     chosen = sel.chosen
-    cumulative, prev_cv = [], base_cv
-    for i in range(len(chosen)):
-        Mi = model(base, chosen[:i + 1])
-        bi = fit_linear(y, Mi)[0]
-        rssi = float(np.sum(((y - Mi @ bi) * base.row_scale) ** 2))
-        hi = cv.heldout_rms(y, Mi)
-        cumulative.append((float(np.sqrt(rssi / N)), hi, prev_cv))
-        prev_cv = hi
     M = model(base, chosen)
-    beta, cov, _, rank = fit_linear(y, M)
+    _, cov, _, rank = fit_linear(y, M)
     std = np.sqrt(np.maximum(np.diag(cov), 0.0))
-    out, col = [], base.B.shape[1]
-    for c, st, (rms_i, held_i, before) in zip(chosen, sel.steps, cumulative):
+    out, col, bcol = [], base.B.shape[1], 0
+    for c, st, (rms_i, held_i, before) in zip(chosen, sel.steps, figures):
         k = c.columns.shape[1]
-        b, s = beta[col:col + k], std[col:col + k]
+        b, s = beta_nl[bcol:bcol + k], std[col:col + k]
         col += k
-        entry = {"effect": c.effect, "joint": c.joint,
+        bcol += k
+        entry = {"effect": c.effect, "joint": c.joint, "label": c.label,
                  "parameters": c.report_parameters(b, s),
                  "rms_mm": round(rms_i, 5), "heldout_rms_mm": round(held_i, 5),
                  "evidence": _evidence(rec, base, chosen, c, st, b, s, before,
                                        standing.get(c.key), profiles.get(c.key))}
+        if c.effect == "joint_compliance":
+            entry["evidence"]["gravity_masses"] = lib_masses(rec)
         entry["explanation"] = explanation(c, entry, [d.label for d in st.same],
                                            [d.label for d in st.alternatives])
         out.append(entry)
-    return out, M, beta, rank
+    return out, M, rank

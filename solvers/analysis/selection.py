@@ -96,11 +96,38 @@ def identifiable_part(Q: FloatArray, X: FloatArray, tol: float) -> FloatArray:
     return U[:, keep] * s[keep]
 
 
-def folds_of(n_samples: int, k: int, seed: int) -> list[FloatArray]:
+SPLITS = ("blocked", "random")
+
+
+def folds_of(n_samples: int, k: int, seed: int, split: str = "random") -> list[FloatArray]:
+    """Sample index sets of the K folds: ``random`` (a seeded permutation dealt out) or
+    ``blocked`` (K contiguous runs of samples, in the recorded order: neighbours on a path or
+    repeated poses leave together, so a near-duplicate neighbour cannot flatter the fit).
+
+    Examples
+    --------
+    >>> [f.tolist() for f in folds_of(7, 3, 0, "blocked")]
+    [[0, 1, 2], [3, 4], [5, 6]]
+    """
+    k = max(2, min(k, n_samples))
+    if split == "blocked":
+        return [np.asarray(f, int) for f in np.array_split(np.arange(n_samples), k)]
+    if split != "random":
+        raise ValueError(f"split must be one of {SPLITS}, got {split!r}")
     rng = np.random.default_rng(seed)
     perm = rng.permutation(n_samples)
-    k = max(2, min(k, n_samples))
     return [np.sort(perm[i::k]) for i in range(k)]
+
+
+def default_split(t_s, kind: str = "tracker") -> str:
+    """``blocked`` where the samples are ordered in time along the robot's motion (a tracker
+    recording whose times increase: a path, or poses visited one after the other), else
+    ``random``. Touch and beam recordings are patterns (orientations about one point,
+    passes through the beams) whose contiguous runs are whole parts of the pattern: leaving
+    one out leaves the rigid fit of the others undetermined, so they keep the random split."""
+    t = np.asarray(t_s, float)
+    ordered = t.size > 1 and np.ptp(t) > 0 and np.all(np.diff(t) >= 0)
+    return "blocked" if ordered and kind == "tracker" else "random"
 
 
 @dataclass
@@ -111,18 +138,19 @@ class CV:
     m: int
     n_samples: int
     scale: FloatArray | None = None   # per-row factor turning a residual into mm
+    split: str = "random"
 
     @classmethod
-    def make(cls, n_samples: int, m: int, k: int, seed: int) -> "CV":
+    def make(cls, n_samples: int, m: int, k: int, seed: int, split: str = "random") -> "CV":
         te, tr = [], []
         allr = np.arange(n_samples * m)
-        for f in folds_of(n_samples, k, seed):
+        for f in folds_of(n_samples, k, seed, split):
             rows = (f[:, None] * m + np.arange(m)).ravel()
             mask = np.ones(n_samples * m, bool)
             mask[rows] = False
             te.append(rows)
             tr.append(allr[mask])
-        return cls(te, tr, m, n_samples)
+        return cls(te, tr, m, n_samples, split=split)
 
     def heldout_rms(self, y: FloatArray, M: FloatArray, Q: FloatArray | None = None) -> float:
         """sqrt(mean over samples of |held-out residual|^2).

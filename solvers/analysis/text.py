@@ -80,6 +80,12 @@ def explanation(c, f: dict, same: list[str] | None = None,
         text += f" Phase {p['phase_deg']:+.0f} deg (amplitude · sin({c.periods} q{j} + phase))."
     if c.effect == "thermal_drift":
         text += _warmup(p, ev)
+    masses = ev.get("gravity_masses") or ""
+    if c.effect == "joint_compliance" and masses and not masses.startswith(("Universal Robots",)):
+        text += (f" The gravity torque uses {'a generic' if 'generic' in masses else 'an estimated'}"
+                 f" mass model of the arm ({masses}): the compliance's scale is only as good "
+                 f"as that; give the arm's masses in the recording for a value that carries "
+                 f"over.")
     share = ev.get("angle_term_share", 0.0)
     if share > 0.9:
         text += (f" Caution: {100 * share:.0f}% of this signature is also that of a smooth error of "
@@ -101,8 +107,9 @@ def absorber_of(base, c) -> str:
     """Which of the baseline's parameter blocks soaks up the candidate's regressor."""
     from solvers.analysis.selection import orth, residual_ratio
 
+    B = base.B if getattr(base, "B_full", None) is None else base.B_full
     alone = [name for name, sl in base.blocks.items()
-             if residual_ratio(orth(base.B[:, sl]), c.columns) < 3e-3]
+             if residual_ratio(orth(B[:, sl]), c.columns) < 3e-3]
     if alone:
         return " or ".join(alone)
     names = list(base.blocks)
@@ -158,15 +165,28 @@ def not_identifiable_reason(rec, c, base=None) -> str:
 def render_text(report: dict) -> str:
     """The human form of an analysis report (``pendant analyze`` without ``--json``)."""
     b, fin = report["baseline"], report["final"]
+    sp = report.get("split") or {}
+    how = (f"{sp.get('folds')}-fold, {sp.get('method')} split"
+           + (" (contiguous runs of samples in recorded order)" if sp.get("method") == "blocked"
+              else f" (seed {sp.get('seed')})" if "seed" in sp else "")) if sp else ""
     lines = [f"Analysis of a {report['kind']} recording, {report['n_samples']} samples",
              f"Verdict: {report['verdict'].replace('_', ' ')}",
-             f"Rigid model: RMS {b['rms_mm']:.3f} mm, held-out {b['heldout_rms_mm']:.3f} mm",
+             f"Rigid model: RMS {b['rms_mm']:.3f} mm, held-out {b['heldout_rms_mm']:.3f} mm"
+             + (f" (held-out: {how})" if how else ""),
              f"Where: {report['locate']['summary']}"]
+    for e in (report.get("identifiability") or {}).get("not_identifiable", []):
+        lines.append(f"Not identifiable: {', '.join(e['parameters'])}: {e['reason']}. "
+                     f"Would determine it: {e['poses_that_would_determine_it']}.")
     if report["findings"]:
         lines.append("Findings (strongest first):")
         for i, f in enumerate(report["findings"], 1):
-            name = f["effect"] + (f" J{f['joint']}" if f.get("joint") else "")
+            k = f["parameters"].get("periods_per_turn")
+            name = (f["effect"] + (f" J{f['joint']}" if f.get("joint") else "")
+                    + (f" ({k} per turn)" if k else ""))
             lines.append(f"  {i}. {name}: {f['explanation']}")
+    elif report["verdict"] == "unexplained_structure":
+        lines.append("Findings: none — structure remains that no candidate effect explains "
+                     "(see Where).")
     else:
         lines.append("Findings: none — the residual is consistent with measurement noise.")
     lines.append(f"With the findings: RMS {fin['rms_mm']:.3f} mm, held-out "
@@ -175,13 +195,20 @@ def render_text(report: dict) -> str:
         name = w["effect"] + (f" J{w['joint']}" if w.get("joint") else "")
         lines.append(f"Stand-in: {name} may partly stand in for {w['stands_in_for']} "
                      "(kept: it lowers the held-out error).")
+    for c in report.get("checks") or []:
+        if not c["passed"]:
+            lines.append(f"DEFECT: {c['check']} failed (RMS {c['rms_mm']:.4f} mm, held-out "
+                         f"{c['heldout_rms_mm']:.4f} mm): these figures are not to be trusted.")
     ni = report.get("not_identifiable") or []
     if ni:
         lines.append("Not identifiable from this recording:")
         seen = set()
         for e in ni:
+            k = e.get("periods_per_turn")
+            per = "" if k is None else (f", {k} per turn" if isinstance(k, int) else
+                                        f", {min(k)}-{max(k)} per turn")
             name = e["effect"] + (f" J{e['joint']}" if e.get("joint") else "") + (
-                f" ({e['dh_parameter']})" if e.get("dh_parameter") else "")
+                f" ({e['dh_parameter']})" if e.get("dh_parameter") else "") + per
             if name in seen:
                 continue
             seen.add(name)
