@@ -7,7 +7,7 @@ import json
 
 import numpy as np
 import pytest
-from api_helpers import analyze, client, db_url, ok  # noqa: F401
+from api_helpers import analyze, ok
 
 from server.cli import main
 from server.recording import parse_recording
