@@ -254,13 +254,16 @@ def list_controller_files(db: Session, controller_id: int) -> list[ControllerFil
         ControllerFile.controller_id == controller_id).order_by(ControllerFile.format)))
 
 
-def store_controller_file(db: Session, controller_id: int, fmt: str, text: str) -> None:
-    """Keep ``text`` as the controller's ``fmt`` file (replacing an earlier one)."""
+def store_controller_file(db: Session, controller_id: int, fmt: str, text: str,
+                          encoding: str = "utf-8") -> None:
+    """Keep ``text`` as the controller's ``fmt`` file (replacing an earlier one), with the
+    encoding its bytes were in (an export writes it back in that encoding)."""
     row = get_controller_file(db, controller_id, fmt)
     if row is None:
-        db.add(ControllerFile(controller_id=controller_id, format=fmt, text=text))
+        db.add(ControllerFile(controller_id=controller_id, format=fmt, text=text,
+                              encoding=encoding))
     else:
-        row.text, row.imported_at = text, utcnow()
+        row.text, row.encoding, row.imported_at = text, encoding, utcnow()
     db.flush()
 
 
@@ -407,7 +410,8 @@ def backup(db: Session, c: Controller) -> dict[str, Any]:
                       "created_at": _iso(s.created_at), "result": s.result_values(),
                       "report": s.report, "points": [point(p) for p in s.points]}
                      for s in list_sessions(db, c.id)],
-        "files": [{"format": f.format, "text": f.text} for f in list_controller_files(db, c.id)],
+        "files": [{"format": f.format, "text": f.text, "encoding": f.encoding}
+                  for f in list_controller_files(db, c.id)],
     }
 
 
@@ -484,7 +488,8 @@ def restore_backup(db: Session, c: Controller, doc: dict[str, Any]) -> tuple[int
         db.delete(f)
     db.flush()
     for fd in doc.get("files", []):
-        db.add(ControllerFile(controller_id=c.id, format=fd["format"], text=fd["text"]))
+        db.add(ControllerFile(controller_id=c.id, format=fd["format"], text=fd["text"],
+                              encoding=fd.get("encoding") or "utf-8"))
     ctl = doc.get("controller") or {}
     if "joints_deg" in ctl:
         c.joints_deg = [float(q) for q in ctl["joints_deg"]]

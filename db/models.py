@@ -314,6 +314,8 @@ class ControllerFile(Base):
     controller_id: Mapped[int] = mapped_column(_controller_fk(), index=True)
     format: Mapped[str] = mapped_column(String(8))  # kuka | abb | fanuc | ur
     text: Mapped[str] = mapped_column(Text)
+    encoding: Mapped[str] = mapped_column(String(16), default="utf-8",
+                                          server_default="utf-8")  # utf-8 | cp1252 (0010)
     imported_at: Mapped[datetime] = mapped_column(default=utcnow)
 
 

@@ -16,7 +16,6 @@ from __future__ import annotations
 import contextlib
 import fcntl
 import functools
-import os
 from collections.abc import Iterator
 from pathlib import Path
 

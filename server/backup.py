@@ -250,6 +250,7 @@ class FileIn(_Doc):
 
     format: Literal["kuka", "abb", "fanuc", "ur"]
     text: str = Field(max_length=5_000_000)
+    encoding: Literal["utf-8", "cp1252"] = "utf-8"  # of the file's bytes (an export's)
 
     @model_validator(mode="after")
     def _reads(self) -> "FileIn":

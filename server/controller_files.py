@@ -71,8 +71,7 @@ def export_file_encoded(db: Session, controller_id: int, fmt: str) -> tuple[str,
     entries = to_frame_entries(crud.list_entries(db, controller_id))
     kept = crud.get_controller_file(db, controller_id, fmt)
     if kept is not None and fmt in formats.PATCHERS:
-        encoding = formats.unwrap_kept(kept.text)[1]
-        return formats.PATCHERS[fmt](entries, kept.text), encoding
+        return formats.PATCHERS[fmt](entries, kept.text), kept.encoding
     return formats.EXPORTERS[fmt](entries), "utf-8"
 
 
@@ -257,7 +256,7 @@ def apply_import(db: Session, controller: Controller, fmt: str, text: str,
             after.update(method=f"{IMPORTED_USED}{fmt}" if change.after is not None else None,
                          session_id=None, error_max_mm=None, error_rms_mm=None)
             crud.change_entry(db, row, after, reason="import")
-    crud.store_controller_file(db, controller.id, fmt, formats.wrap_kept(text, encoding))
+    crud.store_controller_file(db, controller.id, fmt, text, encoding)
     emit(db, "import-applied", controller, {
         "format": fmt, "entries": result.entries, "skipped": len(result.skipped),
         "changed": [{"table": c.table, "number": c.number, "kind_change": c.kind_change}

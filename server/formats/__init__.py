@@ -21,8 +21,6 @@ from server.formats.encoding import (
     ENCODINGS,
     decode_file,
     encode_file,
-    unwrap_kept,
-    wrap_kept,
 )
 from server.formats.fanuc import export_fanuc, read_fanuc
 from server.formats.kuka import export_kuka, import_kuka, read_kuka
@@ -52,7 +50,6 @@ def _bom_kept(patch: Callable[[Iterable[FrameEntry], str], str]
               ) -> Callable[[Iterable[FrameEntry], str], str]:
     """A patcher that leaves a leading byte order mark where it is."""
     def patched(entries: Iterable[FrameEntry], text: str) -> str:
-        text = unwrap_kept(text)[0]
         if text.startswith(BOM):
             return BOM + patch(entries, text[1:])
         return patch(entries, text)
@@ -63,7 +60,6 @@ def _bom_read(read: Callable[[str], ParsedFile]) -> Callable[[str], ParsedFile]:
     """A reader that ignores a leading byte order mark (and a kept file's encoding mark)."""
     def reader(text: str) -> ParsedFile:
         if isinstance(text, str):
-            text = unwrap_kept(text)[0]
             text = text[1:] if text.startswith(BOM) else text
         return read(text)
     reader.__doc__ = read.__doc__
@@ -124,7 +120,7 @@ FILE_NAMES: dict[str, str] = {
 }
 
 __all__ = [
-    "ENCODINGS", "decode_file", "encode_file", "unwrap_kept", "wrap_kept",
+    "ENCODINGS", "decode_file", "encode_file",
     "EXPORTERS", "FILE_NAMES", "FRAME_KINDS", "IMPORTERS", "LOADED", "PATCHERS", "READERS",
     "ControllerFormat", "FormatError", "FrameEntry", "FrameKind", "LoadData", "ParsedFile",
     "Skipped", "canonical_order", "export_abb", "import_abb", "read_abb", "export_fanuc",

@@ -9,9 +9,8 @@ Windows-1252 leaves undefined (0x81, 0x8D, 0x8F, 0x90, 0x9D) are read as the con
 characters U+0081 ... of the same number and written back as the same byte (as browsers'
 ``TextDecoder("windows-1252")`` does), so no byte is lost.
 
-The kept file (the last import of a format) is stored as text; a file that is not UTF-8
-carries its encoding in a mark before its first character (:func:`wrap_kept`), which the
-readers and patchers take off (:func:`unwrap_kept`).
+The kept file (the last import of a format) is stored as text with its encoding beside it
+(``controller_file.encoding``, revision 0010).
 """
 
 from __future__ import annotations
@@ -21,11 +20,10 @@ from typing import Literal
 
 from server.formats.model import FormatError
 
-__all__ = ["ENCODINGS", "Encoding", "decode_file", "encode_file", "unwrap_kept", "wrap_kept"]
+__all__ = ["ENCODINGS", "Encoding", "decode_file", "encode_file"]
 
 Encoding = Literal["utf-8", "cp1252"]
 ENCODINGS: tuple[str, ...] = ("utf-8", "cp1252")
-_MARK = "\ue000"  # a private-use character: never in a decoded Windows-1252 file
 _UNDEFINED = {0x81, 0x8D, 0x8F, 0x90, 0x9D}
 
 
@@ -80,19 +78,3 @@ def encode_file(text: str, encoding: str) -> bytes:
         line = text.count("\n", 0, err.start) + 1
         raise FormatError.at_line(line, "text", f"{err.object[err.start]!r} cannot be written "
                                   f"in the file's encoding {encoding}; rename it") from None
-
-
-def wrap_kept(text: str, encoding: str) -> str:
-    """The text to keep for a file decoded from ``encoding`` (UTF-8 text is kept as is)."""
-    if encoding == "utf-8" and not text.startswith(_MARK):
-        return text
-    return f"{_MARK}{encoding}{_MARK}{text}"
-
-
-def unwrap_kept(text: str) -> tuple[str, str]:
-    """(text, encoding) of a kept file (:func:`wrap_kept`); plain text is UTF-8."""
-    if text.startswith(_MARK):
-        end = text.find(_MARK, 1)
-        if end > 0 and text[1:end] in ENCODINGS:
-            return text[end + 1:], text[1:end]
-    return text, "utf-8"
