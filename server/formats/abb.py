@@ -263,7 +263,7 @@ _STATEMENT_WORDS = frozenset({"PERS", "VAR", "CONST", "LOCAL", "TASK", "PROC", "
 _ROUTINE = re.compile(r"^[ \t]*(?:LOCAL[ \t]+)?(PROC|TRAP|FUNC[ \t]+\w+)[ \t]+([A-Za-z]\w*)",
                       re.IGNORECASE | re.MULTILINE)
 _ENDROUTINE = re.compile(r"^[ \t]*(ENDPROC|ENDTRAP|ENDFUNC)\b", re.IGNORECASE | re.MULTILINE)
-_MODULE = re.compile(r"^[ \t]*MODULE\s+([A-Za-z]\w*)", re.IGNORECASE | re.MULTILINE)
+MODULE_LINE = re.compile(r"^[ \t]*MODULE\s+([A-Za-z]\w*)", re.IGNORECASE | re.MULTILINE)
 _ENDMODULE = re.compile(r"^[ \t]*ENDMODULE\b", re.IGNORECASE | re.MULTILINE)
 
 
@@ -388,7 +388,7 @@ def _parse_value(toks: list[_Tok], name: str, decl_line: int) -> object:
 def _module_span(text: str, code: str) -> tuple[int, int]:
     """Offsets of ``MODULE`` and of ``ENDMODULE``; a file cut short is refused."""
     n_lines = text.count("\n") + (0 if text.endswith("\n") else 1)
-    m = _MODULE.search(code)
+    m = MODULE_LINE.search(code)
     if not m:
         raise FormatError.at_line(1, "MODULE", "no MODULE: a whole RAPID module is needed "
                                   "(MODULE name ... ENDMODULE)")
@@ -525,7 +525,7 @@ def _pose_of(T: np.ndarray) -> Pose:
     return Pose(*(float(x) for x in T[:3, 3]), *(float(a) for a in abc))
 
 
-def _read_load(v: object, line: int, field: str,
+def read_load(v: object, line: int, field: str,
                warnings: list[Skipped] | None = None) -> LoadData | None:
     shape = "[mass,[cx,cy,cz],[q1,q2,q3,q4],ix,iy,iz]"
     if not (isinstance(v, list) and len(v) == 6):
@@ -555,7 +555,8 @@ def _read_load(v: object, line: int, field: str,
                     (axes.a, axes.b, axes.c))
 
 
-def _read(text: str) -> tuple[list[_Found], list[FrameEntry], list[Skipped], list[_Decl], int]:
+def read_declarations(text: str) -> tuple[list[_Found], list[FrameEntry], list[Skipped],
+                                         list[_Decl], int]:
     if not isinstance(text, str):
         raise FormatError(("file",), f"expected text, got {type(text).__name__}")
     decls, skipped, endmodule = _declarations(text)
@@ -568,7 +569,7 @@ def _read(text: str) -> tuple[list[_Found], list[FrameEntry], list[Skipped], lis
                 raise FormatError.at_line(line, name,
                                           "expected [robhold,[[x,y,z],[q1,q2,q3,q4]],[tload]]")
             pose = _pose_of(_read_pose(v[1], line, f"{name}.tframe"))
-            load = _read_load(v[2], line, f"{name}.tload", skipped)
+            load = read_load(v[2], line, f"{name}.tload", skipped)
             found.append(_Found(d, "tool" if v[0] else "fixed_tool", pose, load))
         elif d.dtype == "wobjdata":
             if not (isinstance(v, list) and len(v) == 5 and isinstance(v[0], bool)
@@ -587,7 +588,7 @@ def _read(text: str) -> tuple[list[_Found], list[FrameEntry], list[Skipped], lis
             T = _read_pose(v[3], line, f"{name}.uframe") @ oframe
             load, load_decl = None, loads.get(f"{name.upper()}_LOAD")
             if v[0] and load_decl is not None:
-                load = _read_load(load_decl.value, load_decl.line, load_decl.name, skipped)
+                load = read_load(load_decl.value, load_decl.line, load_decl.name, skipped)
             kind = "workpiece" if v[0] else ("coordinated_base" if unit else "base")
             found.append(_Found(d, kind, _pose_of(T), load, unit, oframe,
                                 load_decl if v[0] else None))
@@ -615,7 +616,7 @@ def read_abb(text: str) -> ParsedFile:
         with one slot; a file without ``MODULE`` or cut before ``ENDMODULE``.
     """
     text = text.replace("\r\n", "\n").replace("\r", "\n") if isinstance(text, str) else text
-    found, entries, skipped, _, _ = _read(text)  # type: ignore[arg-type]
+    found, entries, skipped, _, _ = read_declarations(text)  # type: ignore[arg-type]
     where = {(family_of(e.kind), e.number): f.decl.line for f, e in zip(found, entries)}
     return ParsedFile(canonical_order(entries), sorted(skipped, key=lambda k: k.line), [], where)
 
@@ -787,7 +788,7 @@ class _Lines:
 def _patch(template: str, entries: list[FrameEntry]) -> str:
     src = _Lines(template)
     text = src.text
-    found, old_entries, _, decls, endmodule = _read(text)
+    found, old_entries, _, decls, endmodule = read_declarations(text)
     check_unique_slots(entries, {"robot_held": 10**9, "stationary": 10**9}, "ABB")
     new = {(family_of(e.kind), e.number): e for e in entries}
     old = {(family_of(e.kind), e.number): (f, e) for f, e in zip(found, old_entries)}

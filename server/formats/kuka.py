@@ -286,7 +286,7 @@ def _tokens(text: str, line: int, fld: str) -> list[tuple[str, str, int, int]]:
     return out
 
 
-def _parse_aggregate(text: str, line: int, fld: str) -> dict[str, object]:
+def parse_aggregate(text: str, line: int, fld: str) -> dict[str, object]:
     """``{X 1.0,Y 2.0,...}`` (nested, any spacing) -> {"X": 1.0, ...} with upper-case keys;
     every number checked against server/bounds.py."""
     tokens = _tokens(text, line, fld)
@@ -327,8 +327,8 @@ def _parse_aggregate(text: str, line: int, fld: str) -> dict[str, object]:
     return value
 
 
-def _components(agg: dict[str, object], keys: tuple[str, ...], units: dict[str, str],
-                line: int, fld: str) -> list[float]:
+def aggregate_components(agg: dict[str, object], keys: tuple[str, ...],
+                         units: dict[str, str], line: int, fld: str) -> list[float]:
     missing = [k for k in keys if k not in agg]
     extra = [k for k in agg if k not in keys]
     if missing or extra:
@@ -351,8 +351,8 @@ def _bounded(v: float, unit: str, line: int, fld: str) -> float:
         raise FormatError.at_line(line, fld, err.reason) from None
 
 
-def _parse_load(text: str, line: int, fld: str) -> LoadData | None:
-    agg = _parse_aggregate(text, line, fld)
+def parse_load(text: str, line: int, fld: str) -> LoadData | None:
+    agg = parse_aggregate(text, line, fld)
     missing = [k for k in ("M", "CM", "J") if k not in agg]
     extra = [k for k in agg if k not in ("M", "CM", "J")]
     if missing or extra:
@@ -363,8 +363,9 @@ def _parse_load(text: str, line: int, fld: str) -> LoadData | None:
         raise FormatError.at_line(line, f"{fld}.M", "expected a number")
     if not isinstance(agg["CM"], dict) or not isinstance(agg["J"], dict):
         raise FormatError.at_line(line, fld, "CM and J must be {...} aggregates")
-    cm = _components(agg["CM"], _FRAME_KEYS, _UNITS, line, f"{fld}.CM")
-    j = _components(agg["J"], ("X", "Y", "Z"), dict.fromkeys("XYZ", "kgm2"), line, f"{fld}.J")
+    cm = aggregate_components(agg["CM"], _FRAME_KEYS, _UNITS, line, f"{fld}.CM")
+    j = aggregate_components(agg["J"], ("X", "Y", "Z"), dict.fromkeys("XYZ", "kgm2"), line,
+                             f"{fld}.J")
     mass = agg["M"]
     if mass == -1.0:
         return None  # KSS: "no load data set"
@@ -377,12 +378,12 @@ def _parse_load(text: str, line: int, fld: str) -> LoadData | None:
 
 def _parse_value(array: str, rhs: str, line: int, fld: str, width: int | None) -> object:
     if array in ("TOOL_DATA", "BASE_DATA"):
-        agg = _parse_aggregate(rhs, line, fld)
-        return Pose(*_components(agg, _FRAME_KEYS, _UNITS, line, fld))
+        agg = parse_aggregate(rhs, line, fld)
+        return Pose(*aggregate_components(agg, _FRAME_KEYS, _UNITS, line, fld))
     if array == "LOAD_DATA":
-        return _parse_load(rhs, line, fld)
+        return parse_load(rhs, line, fld)
     if array == "MACHINE_FRAME_DAT":
-        agg = _parse_aggregate(rhs, line, fld)
+        agg = parse_aggregate(rhs, line, fld)
         parent = agg.get("PARENT[]")
         if not isinstance(parent, str):
             raise FormatError.at_line(line, f"{fld}.PARENT", 'expected PARENT[] "name"')
@@ -420,7 +421,7 @@ def _scan(text: str) -> _Parsed:
         bl = _BASE_LOAD.match(raw)
         if bl:
             n = int(bl.group(1))
-            base_loads[n] = _Value(_parse_load(bl.group(2), number, f"BASE_LOAD[{n}]"), number,
+            base_loads[n] = _Value(parse_load(bl.group(2), number, f"BASE_LOAD[{n}]"), number,
                                    bl.span(2))
             continue
         code = _strip_comment(raw)

@@ -55,7 +55,7 @@ def load(entry) -> str:
 def _aggregate(text: str, fld: str) -> dict[str, object]:
     """``{FRAME: X 1, ...}`` or ``{X 1, ...}`` (nested too) read by the KUKA import's reader."""
     try:
-        return kuka._parse_aggregate(_PREFIX.sub("{", text.strip()), 1, fld)
+        return kuka.parse_aggregate(_PREFIX.sub("{", text.strip()), 1, fld)
     except FormatError as err:
         raise KvpError(f"{'.'.join(str(x) for x in err.loc[2:])}: {err.reason}") from None
 
@@ -68,7 +68,7 @@ def _pose_write(text: str, current: Pose | None, fld: str) -> Pose:
     base = dict(zip(FRAME_KEYS, (current or Pose(0, 0, 0, 0, 0, 0)).as_array()))
     base.update(agg)
     try:
-        values = kuka._components(base, FRAME_KEYS, UNITS, 1, fld)
+        values = kuka.aggregate_components(base, FRAME_KEYS, UNITS, 1, fld)
     except FormatError as err:
         raise KvpError(f"{'.'.join(str(x) for x in err.loc[2:])}: {err.reason}") from None
     return Pose(*values)
@@ -162,7 +162,7 @@ def write(face: Face, name: str, value: str) -> str:
             body = EntryIn(pose={k.lower(): v for k, v in zip(FRAME_KEYS, p.as_array())})
         elif array == "LOAD_DATA":
             try:
-                ld = kuka._parse_load(_PREFIX.sub("{", value.strip()), 1, var)
+                ld = kuka.parse_load(_PREFIX.sub("{", value.strip()), 1, var)
             except FormatError as err:
                 raise KvpError(f"{'.'.join(str(x) for x in err.loc[2:])}: {err.reason}") \
                     from None

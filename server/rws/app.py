@@ -414,7 +414,7 @@ async def logout(face: RwsFace, request: Request, who: ops.Caller) -> Response:
 
 def _module_file(face: RwsFace, who: ops.Caller) -> tuple[str, str]:
     text = ops.export(face.make_session, who, face.controller_id(), "abb")
-    m = abb._MODULE.search(text)
+    m = abb.MODULE_LINE.search(text)
     return (m.group(1) if m else rapid.DEFAULT_MODULE) + ".mod", text
 
 

@@ -54,8 +54,8 @@ def symbols(module_text: str, table_numbers: dict[str, list[int]],
     """Every symbol of ``module_text`` (the ABB export) and the default-named unused slots.
 
     ``table_numbers``: the slot numbers of each table; ``used``: (table, number) in use."""
-    found, entries, _skipped, decls, _ = abb._read(module_text)
-    m = abb._MODULE.search(module_text)
+    found, entries, _skipped, decls, _ = abb.read_declarations(module_text)
+    m = abb.MODULE_LINE.search(module_text)
     module = m.group(1) if m else DEFAULT_MODULE
     out: list[Symbol] = []
     slot_of_decl: dict[int, tuple[str, int, str]] = {}
@@ -78,7 +78,7 @@ def symbols(module_text: str, table_numbers: dict[str, list[int]],
                 continue
             pose = Pose(0, 0, 0, 0, 0, 0)
             text = abb.export_abb([FrameEntry(n, name, kind, pose)], "M")  # type: ignore[arg-type]
-            (d,) = [x for x in abb._read(text)[3]]
+            (d,) = [x for x in abb.read_declarations(text)[3]]
             out.append(Symbol(name, DTYPE_OF_KIND[kind], module,
                               _literal(text, d.start, d.end), table, n, kind))
     return out
@@ -113,7 +113,7 @@ def parse_value(sym: Symbol, value: str) -> FrameEntry | object:
         raise FormatError(("value",), "a literal has no ';', '!' or line break")
     text = f"MODULE M\n  PERS {sym.dtype} {sym.name}:={value};\nENDMODULE\n"
     try:
-        _found, entries, skipped, decls, _ = abb._read(text)
+        _found, entries, skipped, decls, _ = abb.read_declarations(text)
     except FormatError as err:
         raise FormatError(("value", *err.loc[2:]), err.reason) from None
     if skipped:
@@ -122,7 +122,7 @@ def parse_value(sym: Symbol, value: str) -> FrameEntry | object:
         if len(decls) != 1:
             raise FormatError(("value",), "expected one loaddata literal")
         try:
-            return abb._read_load(decls[0].value, 2, sym.name)
+            return abb.read_load(decls[0].value, 2, sym.name)
         except FormatError as err:
             raise FormatError(("value", *err.loc[2:]), err.reason) from None
     if len(entries) != 1:

@@ -308,15 +308,15 @@ def _krl_values(text: str, what: str) -> dict[str, _Found]:
 
 def _frame_at(found: _Found, what: str, fld: str) -> Pose:
     try:
-        agg = _kuka._parse_aggregate(str(found.value), found.line, fld)
-        return Pose(*_kuka._components(agg, _kuka._FRAME_KEYS, _kuka._UNITS, found.line, fld))
+        agg = _kuka.parse_aggregate(str(found.value), found.line, fld)
+        return Pose(*_kuka.aggregate_components(agg, _kuka._FRAME_KEYS, _kuka._UNITS, found.line, fld))
     except FormatError as err:
         raise FormatError((what, f"line {found.line}", str(err.loc[-1])), err.reason) from None
 
 
 def _agg_at(found: _Found, what: str, fld: str) -> dict[str, object]:
     try:
-        return _kuka._parse_aggregate(str(found.value), found.line, fld)
+        return _kuka.parse_aggregate(str(found.value), found.line, fld)
     except FormatError as err:
         raise FormatError((what, f"line {found.line}", str(err.loc[-1])), err.reason) from None
 
@@ -456,7 +456,7 @@ def _machine_defs(cv: dict[str, _Found]) -> dict[str, tuple[Pose, int]]:
             continue
         root = agg["ROOT"]
         try:
-            pose = Pose(*_kuka._components(root, _kuka._FRAME_KEYS,  # type: ignore[arg-type]
+            pose = Pose(*_kuka.aggregate_components(root, _kuka._FRAME_KEYS,  # type: ignore[arg-type]
                                            _kuka._UNITS, found.line, f"{fld}.ROOT"))
         except FormatError as err:
             raise FormatError(("config_dat", f"line {found.line}", str(err.loc[-1])),
