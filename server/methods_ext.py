@@ -251,9 +251,15 @@ _RAIL_EXTRA = (-125.0, 125.0, -190.0, 190.0, -60.0, 60.0, 220.0, -220.0, 90.0)
 _AROUND = (0.0, 90.0, 180.0, 270.0, 45.0, 135.0, 225.0, 315.0, 20.0, 200.0, 110.0, 290.0)
 
 
+#: the rail carrying the robot: every step of a kinematic it does not calibrate puts it at 0
+#: (Move to sets every axis of the chain, not only the menu's own)
+RAIL_AXIS = "E4"
+
+
 def _touch(prompt: str, target: str, k: int, **axes: float) -> Step:
+    chain = {**axes} if RAIL_AXIS in axes else {**axes, RAIL_AXIS: 0.0}
     return Step(prompt, target, tilt_deg=10.0, around_deg=_AROUND[k % len(_AROUND)],
-                external_axes=tuple(axes.items()))
+                external_axes=tuple(chain.items()))
 
 
 def _root_step(k: int, value: float, optional: bool = False) -> Step:

@@ -188,7 +188,7 @@ def compute(controller_id: int, session_id: int, db: SessionDep, response: Respo
     crud.require_open(s)
     spec, points = spec_of(s), taught_data(s)
     spec.check_taught(points, s.params)
-    result = spec.solve(points, resolve_inputs(db, s), s.params)
+    result = ext.solve_in_chain(db, s, spec, points, resolve_inputs(db, s))
     report = ReportOut.from_result(result)
     frame = Pose.from_matrix(result.frame).as_array()
     crud.store_result(db, s, frame, report.model_dump(mode="json"))
