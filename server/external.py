@@ -414,6 +414,18 @@ def chain_points(rail: Rail | None, points: list, method: str) -> tuple[list, li
     return out, [finding], info
 
 
+def assumed_sigma_mm(c: Controller | None) -> float:
+    """The touch scatter (mm per coordinate) a menu assumes where its points cannot estimate
+    it: the cell's aim model, a person's eye on the mark (``POST .../robot/approach``'s
+    default ``noise_mm``, :data:`server.schemas.AIM_NOISE_MM`) and the emulated arm's own
+    noise (``.../cell/physics`` ``noise_mm``) together."""
+    from server.schemas import AIM_NOISE_MM
+
+    doc = (c.physics if c is not None else None) or {}
+    noise = doc.get("noise_mm") if isinstance(doc, dict) else None
+    return float(np.hypot(AIM_NOISE_MM, float(noise or 0.0)))
+
+
 def _label_rail(rail: Rail) -> str:
     return f"rail EX_KIN {rail.number}"
 
@@ -431,6 +443,9 @@ def solve_in_chain(db: Session, s: CalibSession, spec: Any, points: list,
     from solvers.external.chain import combined_bounds, propagate
     from solvers.report import Finding
 
+    if inputs.touch_sigma_mm is None:
+        inputs = replace(inputs, touch_sigma_mm=assumed_sigma_mm(db.get(Controller,
+                                                                         s.controller_id)))
     rail = rail_of(db, s.controller_id)
     pts, findings, info = chain_points(rail, points, s.method)
     result = spec.solve(pts, inputs, s.params)
@@ -486,8 +501,9 @@ def solve_in_chain(db: Session, s: CalibSession, spec: Any, points: list,
     if r.sigma_source == "assumed" and r.sigma_mm is not None:
         extras["assumed_sigma_mm"] = float(r.sigma_mm)
         sigma_note = Finding("assumed_sigma", f"assumed σ = {r.sigma_mm:g} mm per coordinate "
-                             "for the touch scatter (too few points to estimate it): the "
-                             "touch term of the bound rests on it", (), "info")
+                             "(the cell's aim): the points leave no residual to estimate the "
+                             "touch scatter, so the touch term of the bound rests on it; "
+                             "touch more points to measure it", (), "info")
     bounds = combined_bounds(r.position_bound95_mm, r.angle_bound95_deg, terms)
     for name, note in notes.items():
         bounds["terms"].setdefault(name, {"position_bound95_mm": None,  # type: ignore[index]
@@ -500,8 +516,9 @@ def solve_in_chain(db: Session, s: CalibSession, spec: Any, points: list,
         if r.covariance is not None and names == XYZ_PARAMETERS:
             total = total + _inflated(np.asarray(r.covariance, dtype=float)[:3, :3], r.dof)
         extras["position_covariance_total_mm2"] = total.tolist()
+    kept = tuple(w for w in r.warnings if not (sigma_note and w.code == sigma_note.code))
     new_findings = tuple(findings) + ((sigma_note,) if sigma_note else ())
     report = replace(r, position_bound95_mm=bounds["position_bound95_mm"],
                      angle_bound95_deg=bounds["angle_bound95_deg"], extras=extras,
-                     warnings=tuple(r.warnings) + new_findings)
+                     warnings=kept + new_findings)
     return replace(result, report=report)
