@@ -298,6 +298,7 @@ class Rail:
     calibrated: bool
     method: str | None
     slope_covariance: np.ndarray | None = None
+    slope_dof: int | None = None
 
     @property
     def label(self) -> str:
@@ -311,35 +312,26 @@ def rail_of(db: Session, controller_id: int) -> Rail | None:
         if e.kind != "linear_unit" or len(axes) != 1:
             continue
         calibrated = e.method not in (None, "", "machine_data")
-        cov = None
+        cov, dof = None, None
         if e.method == "ext.linear_unit" and e.session_id is not None:
             rs = db.get(CalibSession, e.session_id)
             rep = rs.report if rs is not None else None
             if rep and rep.get("covariance"):
-                cov = _inflated(np.array(rep["covariance"], dtype=float)[3:, 3:], rep.get("dof"))
+                cov = np.array(rep["covariance"], dtype=float)[3:, 3:]
+                dof = int((rep.get("extras") or {}).get("dof") or 0) or None
         return Rail(e.number, e.name, axes[0], root_matrix(e)[:3, 2].copy(),
-                    1.0 if e.scale is None else float(e.scale), calibrated, e.method, cov)
+                    1.0 if e.scale is None else float(e.scale), calibrated, e.method, cov, dof)
     return None
 
 
-def _inflated(C: np.ndarray, dof: object) -> np.ndarray:
-    """A covariance scaled by sigma estimated with ``dof`` degrees of freedom: widened so its
-    chi-square 95 % bound is its F bound (the term then keeps its own 95 % coverage)."""
-    from solvers.report import bound95
-
-    if not dof:
-        return C
-    b_chi, b_f = bound95(C), bound95(C, int(dof))  # type: ignore[arg-type]
-    return C if b_chi <= 0 else C * (b_f / b_chi) ** 2
-
-
 def entry_covariance(db: Session, controller_id: int, table: str,
-                     number: int) -> tuple[np.ndarray | None, str]:
+                     number: int) -> tuple[np.ndarray | None, int | None, str]:
     """The stored covariance (3, 3, mm²) of the position of tool (TCP in the flange) or base
     (a fixed tool's TCP in the world) ``number``: that of the last saved session that wrote
     the position the slot holds now, with the chain's terms when that session had them
-    (``extras.position_covariance_total_mm2``); (None, why) when there is none (typed in,
-    imported, or edited since)."""
+    (``extras.position_covariance_total_mm2``), the degrees of freedom of its sigma (None:
+    known) and where it comes from; (None, None, why) when there is none (typed in, imported,
+    or edited since)."""
     e = crud.get_entry(db, controller_id, table, number)
     what = f"{'tool' if table == 'tool' else 'base'} {number}"
     sessions = db.scalars(select(CalibSession).where(
@@ -354,13 +346,15 @@ def entry_covariance(db: Session, controller_id: int, table: str,
         vals = s.result_values()
         if vals is None or not np.allclose(vals[:3], (e.x_mm, e.y_mm, e.z_mm), atol=1e-6):
             break  # the slot holds another TCP since: not this session's
+        where = f"{s.method} session {s.id}"
         if total is not None:
-            return np.array(total, dtype=float), f"{s.method} session {s.id}"
+            dof = (rep.get("extras") or {}).get("position_covariance_total_dof")
+            return np.array(total, dtype=float), (None if dof is None else float(dof)), where
         if not rep.get("covariance"):
             break
         C = np.array(rep["covariance"], dtype=float)[:3, :3]
-        return _inflated(C, rep.get("dof")), f"{s.method} session {s.id}"
-    return None, (f"{what} has no stored covariance (not calibrated here, or edited "
+        return C, (int(rep["dof"]) if rep.get("dof") else None), where
+    return None, None, (f"{what} has no stored covariance (not calibrated here, or edited "
                   "since): its position counts as exact in the bound")
 
 
@@ -440,7 +434,8 @@ def solve_in_chain(db: Session, s: CalibSession, spec: Any, points: list,
     term assumed (``extras.assumed_sigma_mm``)."""
     from dataclasses import replace
 
-    from solvers.external.chain import combined_bounds, propagate
+    from solvers.external.chain import (combined_bounds, own_covariance, propagate,
+                                         report_dof, welch_dof)
     from solvers.report import Finding
 
     if inputs.touch_sigma_mm is None:
@@ -462,9 +457,10 @@ def solve_in_chain(db: Session, s: CalibSession, spec: Any, points: list,
         n = int(p["fixed_tool_no"])
         candidates.append(("fixed_tcp_mm", f"fixed tool (base {n})", "base", n))
     terms: dict[str, np.ndarray] = {}
+    dofs: dict[str, float | None] = {}
     notes: dict[str, str] = {}
     for fld, name, table, n in candidates:
-        C, source = entry_covariance(db, s.controller_id, table, n)
+        C, nu, source = entry_covariance(db, s.controller_id, table, n)
         if C is None:
             notes[name] = source
             continue
@@ -472,6 +468,7 @@ def solve_in_chain(db: Session, s: CalibSession, spec: Any, points: list,
         try:
             terms[name] = propagate(lambda x, f=fld: spec.solve(  # type: ignore[misc]
                 pts, replace(inputs, **{f: x}), s.params).frame, x0, C)
+            dofs[name] = nu
             notes[name] = source
         except (CalibrationError, np.linalg.LinAlgError) as err:
             notes[name] = f"not propagated: {err}"
@@ -486,6 +483,7 @@ def solve_in_chain(db: Session, s: CalibSession, spec: Any, points: list,
                 return spec.solve(chain_points(r, points, s.method)[0], inputs, s.params).frame
             try:
                 terms[name] = propagate(with_slope, b0, rail.slope_covariance)
+                dofs[name] = rail.slope_dof
                 notes[name] = f"ext.linear_unit (EX_KIN {rail.number})"
             except (CalibrationError, np.linalg.LinAlgError) as err:
                 notes[name] = f"not propagated: {err}"
@@ -504,18 +502,22 @@ def solve_in_chain(db: Session, s: CalibSession, spec: Any, points: list,
                              "(the cell's aim): the points leave no residual to estimate the "
                              "touch scatter, so the touch term of the bound rests on it; "
                              "touch more points to measure it", (), "info")
-    bounds = combined_bounds(r.position_bound95_mm, r.angle_bound95_deg, terms)
+    bounds = combined_bounds(r.position_bound95_mm, r.angle_bound95_deg, terms, report_dof(r),
+                             own_covariance(r), dofs)
     for name, note in notes.items():
         bounds["terms"].setdefault(name, {"position_bound95_mm": None,  # type: ignore[index]
                                           "angle_bound95_deg": None})
         bounds["terms"][name]["source"] = note  # type: ignore[index]
     extras["bound_terms"] = bounds["terms"]
     if terms:
-        total = sum(C[:3, :3] for C in terms.values())
+        parts = [(C[:3, :3], dofs.get(name)) for name, C in terms.items()]
         names = tuple(r.parameter_names)[:3]
         if r.covariance is not None and names == XYZ_PARAMETERS:
-            total = total + _inflated(np.asarray(r.covariance, dtype=float)[:3, :3], r.dof)
+            parts.append((np.asarray(r.covariance, dtype=float)[:3, :3], report_dof(r)))
+        total = sum(C for C, _ in parts)
         extras["position_covariance_total_mm2"] = total.tolist()
+        extras["position_covariance_total_dof"] = welch_dof(
+            [float(np.trace(C)) for C, _ in parts], [nu for _, nu in parts])
     kept = tuple(w for w in r.warnings if not (sigma_note and w.code == sigma_note.code))
     new_findings = tuple(findings) + ((sigma_note,) if sigma_note else ())
     report = replace(r, position_bound95_mm=bounds["position_bound95_mm"],

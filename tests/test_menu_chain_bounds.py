@@ -46,8 +46,8 @@ def test_root_point_bound_carries_the_touching_tools_error(client):
     assert terms["tool 1 TCP"]["source"].startswith("tool.xyz_4point session")
     assert terms["tool 1 TCP"]["position_bound95_mm"] > terms["touch"]["position_bound95_mm"]
     total = rep["position_bound95_mm"]
-    assert np.isclose(total, np.hypot(terms["touch"]["position_bound95_mm"],
-                                      terms["tool 1 TCP"]["position_bound95_mm"]))
+    parts = [terms[k]["position_bound95_mm"] for k in ("touch", "tool 1 TCP")]
+    assert max(parts) < total <= sum(parts)
     t = ext_emu.external_cell(REACH, ok(client.get(f"{C}/cell/external")), 1)
     truth = t.turntable.true_root_frame(t.mark_flange("turntable"))
     err = float(np.linalg.norm(pose_matrix(rep["frame"])[:3, 3] - truth[:3, 3]))
