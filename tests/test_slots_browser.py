@@ -70,3 +70,41 @@ def test_each_menu_proposes_its_own_slot(page, site):
     menu.select_option("tool.xyz_4point")
     assert target.input_value() == "1"
     idle(page)
+
+
+def _R(p: dict):  # noqa: ANN202
+    from solvers.frames import Pose
+
+    return Pose(p["x"], p["y"], p["z"], p["a"], p["b"], p["c"]).as_matrix()[:3, :3]
+
+
+def test_reteaching_an_optional_step_moves_where_it_was_taught(page, site):
+    """XYZ 4-point, then the optional step at the orientation the report suggests. Picked
+    again to re-teach it, Move to goes to that orientation (not the service's default cone
+    for an optional step)."""
+    import numpy as np
+    import re
+
+    open_pendant(page, site)
+    w = wizard(page)
+    open_menu(page, "tool.xyz_4point", 7)
+    walk_steps(page, 4)
+    compute(page)
+    w.get_by_role("button", name="Move to", exact=True).click()  # the suggested orientation
+    idle(page)
+    w.get_by_role("button", name="Touch up", exact=True).click()
+    idle(page)
+    sid = page.evaluate("window.pendant.state.session.id")
+    s = page.request.get(f"{site}/controllers/1/sessions/{sid}").json()
+    taught = next(st for st in s["steps"] if st["index"] == 4)
+    assert taught["filled"] and not taught["required"]
+    w.get_by_role("button", name=re.compile(r"^Step 1: ")).click()
+    w.get_by_role("button", name="Move to", exact=True).click()
+    idle(page)
+    w.get_by_role("button", name=re.compile(r"^Step 5: ")).click()
+    w.get_by_role("button", name="Move to", exact=True).click()
+    idle(page)
+    robot = page.request.get(f"{site}/controllers/1/robot").json()
+    R_now, R_taught = _R(robot["flange_pose"]), _R(taught["point"]["flange_pose"])
+    angle = np.degrees(np.arccos(np.clip((np.trace(R_now.T @ R_taught) - 1) / 2, -1, 1)))
+    assert angle < 0.05, angle

@@ -563,9 +563,33 @@ async function refreshSession(s) {
   renderSession();
 }
 
+/** R = Rz(a) Ry(b) Rx(c) of a KUKA pose (degrees), as rows: the flange's orientation. */
+function rotationOf(p) {
+  const r = Math.PI / 180;
+  const [ca, sa, cb, sb, cc, sc] = [Math.cos(p.a * r), Math.sin(p.a * r), Math.cos(p.b * r),
+                                    Math.sin(p.b * r), Math.cos(p.c * r), Math.sin(p.c * r)];
+  return [[ca * cb, ca * sb * sc - sa * cc, ca * sb * cc + sa * sc],
+          [sa * cb, sa * sb * sc + ca * cc, sa * sb * cc - ca * sc],
+          [-sb, cb * sc, cb * cc]];
+}
+
+/** An optional step already taught goes back where it was taught (the suggested orientation or
+ * axis value the person used then), not to the service's default for that step. */
+function whereTaught(st) {
+  const p = !st.required && st.filled && st.point;
+  if (!p || st.tool_point_mm) return st;
+  if (st.external_axes) { // ext menus: the axis values it was touched at
+    const taught = p.external_axes || {};
+    return { ...st, external_axes: Object.fromEntries(Object.entries(st.external_axes)
+      .map(([k, v]) => [k, taught[k] ?? v])) };
+  }
+  return p.flange_pose ? { ...st, flange_orientation: rotationOf(p.flange_pose) } : st;
+}
+
 async function moveTo() {
-  const st = currentStep();
-  if (!st || !st.target) return;
+  const current = currentStep();
+  if (!current || !current.target) return;
+  const st = whereTaught(current);
   if (st.external_axes) { // ext menus: the external axes go to the step's values first
     await loadRobot(await api("PUT", ctl("/robot/external"), { values: st.external_axes }));
   }
