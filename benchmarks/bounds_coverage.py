@@ -293,7 +293,7 @@ def _chained_trial(result: CalibrationResult, T_true: np.ndarray,
     return Trial(float(np.linalg.norm(e[:3])), b["position_bound95_mm"],
                  None if position_only else float(np.linalg.norm(e[3:])),
                  None if position_only else b["angle_bound95_deg"], None, None,
-                 rep.sigma_source or "-")
+                 rep.sigma_source or ("residual" if report_dof(rep) else "assumed"))
 
 
 def scene_base_3point_with_tool(rng: np.random.Generator) -> Trial:
