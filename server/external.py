@@ -491,6 +491,17 @@ def solve_in_chain(db: Session, s: CalibSession, spec: Any, points: list,
             notes[name] = ("not calibrated: machine data assumed, its error is not in the bound"
                            if not rail.calibrated else
                            f"{rail.method}: no stored covariance, counts as exact")
+    ex = inputs.external
+    if ex is not None and s.target_table != TABLE:  # a base riding on EX_KIN n (the Offset)
+        k = get_slot(db, s.controller_id, ex.number)
+        if k.method in (None, "", "machine_data"):
+            findings.append(Finding(
+                "kinematic_assumed", f"EX_KIN {k.number} ({k.name or k.kind}) is not "
+                f"calibrated: the base is placed on its machine data (root frame as entered); "
+                f"calibrate its root point first for a base that stays on the table as it "
+                f"turns", ("params", "ext_no")))
+            notes[f"EX_KIN {k.number} root"] = "not calibrated: machine data assumed, its error " \
+                                              "is not in the bound"
     r = result.report
     extras = dict(r.extras)
     if info:

@@ -144,3 +144,16 @@ def test_move_to_sets_the_rail_of_the_chain(client):
             assert st["external_axes"]["E4"] == 0.0, (name, st)
     assert all(set(st["external_axes"]) == {"E4"}
                for st in methods["ext.linear_unit"]["steps"])
+
+
+def test_an_offset_on_an_uncalibrated_turntable_says_what_it_assumed(client):
+    """The Offset on EX_KIN 1 still holding the machine data: the report names the assumption
+    (and that the root's error is not in the bound); after a root point it does not."""
+    calibrate(client, "tool.xyz_4point", 1)
+    rep = run(client, "ext.offset", 5, tool_no=1, ext_no=1)
+    w = next(w for w in rep["warnings"] if w["code"] == "kinematic_assumed")
+    assert "EX_KIN 1 (TURNTABLE) is not calibrated" in w["message"]
+    assert "not calibrated" in rep["extras"]["bound_terms"]["EX_KIN 1 root"]["source"]
+    run(client, "ext.root_point", 1, save=True, tool_no=1)
+    rep = run(client, "ext.offset", 5, tool_no=1, ext_no=1)
+    assert "kinematic_assumed" not in [w["code"] for w in rep["warnings"]]
