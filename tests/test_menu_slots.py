@@ -59,7 +59,7 @@ def test_a_named_slot_typed_in_asks_and_keeps_its_name(client):
     r = client.post(f"{url}/save")
     assert r.status_code == 409 and "TOOL 2 holds the tool 'GRIPPER'" in r.json()["detail"][0]["msg"]
     assert ok(client.post(f"{url}/save", params={"confirm": "true"}))["name"] == "GRIPPER"
-    report, slot = calibrate(client, "tool.abc_2point", 2)
+    _, slot = calibrate(client, "tool.abc_2point", 2)
     assert slot["name"] == "GRIPPER"
 
 

@@ -82,8 +82,9 @@ def test_reteaching_an_optional_step_moves_where_it_was_taught(page, site):
     """XYZ 4-point, then the optional step at the orientation the report suggests. Picked
     again to re-teach it, Move to goes to that orientation (not the service's default cone
     for an optional step)."""
-    import numpy as np
     import re
+
+    import numpy as np
 
     open_pendant(page, site)
     w = wizard(page)

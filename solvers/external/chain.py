@@ -22,9 +22,8 @@ from __future__ import annotations
 from collections.abc import Callable
 
 import numpy as np
-from scipy.spatial.transform import Rotation
-
 from scipy import special
+from scipy.spatial.transform import Rotation
 
 from solvers.report import bound95
 from solvers.validate import FloatArray
@@ -241,5 +240,5 @@ def combined_bounds(position_bound95_mm: float | None, angle_bound95_deg: float 
             "terms": out_terms}
 
 
-__all__ = ["rail_shift", "to_world", "frame_vector", "propagate", "combined_bounds", "report_dof",
-           "own_covariance", "welch_dof"]
+__all__ = ["combined_bounds", "frame_vector", "own_covariance", "propagate", "rail_shift",
+           "report_dof", "to_world", "welch_dof"]
