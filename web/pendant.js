@@ -491,7 +491,7 @@ function suggestedStep() {
     const v = r.extras.next_axis_value_deg;
     return { index: Math.max(...s.steps.map((st) => st.index)) + 1, required: false, filled: false,
              suggested: true, target: first.target, tilt_deg: first.tilt_deg, around_deg: first.around_deg,
-             spin_deg: 0, tool_point_mm: null, external_axes: { [axis]: v },
+             spin_deg: 0, tool_point_mm: null, external_axes: { ...first.external_axes, [axis]: v }, // the whole chain
              prompt: `Optional: touch the mark with ${axis} at ${fmt(v, 0)} deg, as the report suggests (Move to goes there), then Compute again` };
   }
   if (!s || !r || !r.next_orientation || !s.extra_steps_allowed) return null;
