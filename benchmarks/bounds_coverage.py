@@ -257,6 +257,106 @@ def scene_light_barrier(rng: np.random.Generator, noise_draws: int = 1) -> list[
 
 
 #: (row name, scene) of the coverage table; every scene returns one Trial.
+# ------------------------------------------------------------------ chained scenes
+# What the server does (server.external.solve_in_chain) with the same solvers.external.chain
+# functions: the touching tool is itself calibrated (XYZ 4-point, its covariance stored), the
+# rail too (Linear unit); both are carried into the result's bound. Touch noise: the cell's
+# aim AIM_SIGMA_MM, which the menus without redundancy assume.
+
+AIM_SIGMA_MM = 0.1  # server.schemas.AIM_NOISE_MM: the pendant's aim, the assumed sigma
+
+
+def _calibrated_tool(rng: np.random.Generator) -> tuple[np.ndarray, np.ndarray, np.ndarray, int | None]:
+    """(true TCP, XYZ 4-point TCP, its covariance as stored, the dof of its sigma)."""
+    t = _random_tcp(rng)
+    res = tcp_xyz_4point(_touch_poses(_cone_rotations(rng, 4), np.array([650.0, 120, 180]), t,
+                                      rng, AIM_SIGMA_MM))
+    return t, res.frame[:3, 3], res.report.covariance[:3, :3], res.report.dof
+
+
+def _tilted_down(rng: np.random.Generator, n: int) -> np.ndarray:
+    """N flange rotations within 10 deg of straight down, random twist (a base touch-up)."""
+    return np.stack([(Rotation.from_matrix(_rotation(rng, 10.0)) * DOWN
+                      * Rotation.from_euler("z", rng.uniform(-180, 180), degrees=True)).as_matrix()
+                     for _ in range(n)])
+
+
+def _chained_trial(result: CalibrationResult, T_true: np.ndarray,
+                   terms: dict[str, np.ndarray], term_dofs: dict[str, int | None],
+                   position_only: bool = False) -> Trial:
+    from solvers.external.chain import combined_bounds, own_covariance, report_dof
+
+    rep = result.report
+    b = combined_bounds(rep.position_bound95_mm, rep.angle_bound95_deg, terms, report_dof(rep),
+                        own_covariance(rep), term_dofs)
+    e = pose_difference(result.frame, T_true)
+    return Trial(float(np.linalg.norm(e[:3])), b["position_bound95_mm"],
+                 None if position_only else float(np.linalg.norm(e[3:])),
+                 None if position_only else b["angle_bound95_deg"], None, None,
+                 rep.sigma_source or ("residual" if report_dof(rep) else "assumed"))
+
+
+def scene_base_3point_with_tool(rng: np.random.Generator) -> Trial:
+    """Base > 3-point touched with tool 1 as XYZ 4-point calibrated it (both at the aim sigma)."""
+    from solvers.dh import tcp_of
+    from solvers.external.chain import propagate
+
+    t, t_hat, C_t, nu_t = _calibrated_tool(rng)
+    T = _frame(_rotation(rng, 30.0), rng.uniform([500, -200, 0], [900, 200, 300]))
+    targets = THREE_POINTS @ T[:3, :3].T + T[:3, 3]
+    F = np.stack([_touch_poses(R[None], p, t, rng, AIM_SIGMA_MM)[0]
+                  for R, p in zip(_tilted_down(rng, 3), targets)])
+
+    def solve(x: np.ndarray) -> CalibrationResult:
+        return base_3point(*tcp_of(F, x), touch_sigma_mm=AIM_SIGMA_MM)
+    res = solve(t_hat)
+    return _chained_trial(res, T, {"tool": propagate(lambda x: solve(x).frame, t_hat, C_t)},
+                          {"tool": nu_t})
+
+
+def scene_root_point_on_rail(rng: np.random.Generator) -> Trial:
+    """ext.root_point on a turntable with the robot on its rail: the rail calibrated (Linear
+    unit, 4 positions over 500 mm), the mark then touched at 4 table positions with the rail at
+    100-300 mm, with tool 1 as calibrated; the root in the world (base at rail 0)."""
+    from solvers.dh import tcp_of
+    from solvers.external import linear_unit, root_point
+    from solvers.external.chain import propagate, to_world
+    from solvers.external_sim import make_linear_unit, make_turntable
+
+    t, t_hat, C_t, nu_t = _calibrated_tool(rng)
+    rail = make_linear_unit(direction_tilt_deg=rng.uniform(-0.6, 0.6),
+                            scale=1.0 + rng.uniform(-0.003, 0.003))
+    e_cal = np.array([-250.0, -80.0, 80.0, 250.0])
+    mark_world = np.array([560.0, 100.0, 250.0])
+    cal_targets = rail.mark_in_base(mark_world, e_cal)
+    F_cal = np.stack([_touch_poses(R[None], p, t, rng, AIM_SIGMA_MM)[0]
+                      for R, p in zip(_tilted_down(rng, 4), cal_targets)])
+    lu = linear_unit(tcp_of(F_cal, t_hat), e_cal, touch_sigma_mm=AIM_SIGMA_MM)
+    d_hat, k_hat = lu.report.extras["travel_direction"], lu.report.extras["scale"]
+    C_b, nu_b = lu.report.covariance[3:, 3:], lu.report.extras["dof"] or None
+    table = make_turntable(tilt_deg=rng.uniform(0, 0.8), root_offset_mm=rng.uniform(0, 3),
+                           nominal_root=_frame(np.eye(3), np.array([520.0, 380.0, 80.0])))
+    mark = np.array([150.0, 0.0, 0.0])
+    theta = np.array([-135.0, -45.0, 45.0, 135.0]) + rng.uniform(-10, 10, 4)
+    e = rng.uniform(100.0, 300.0) * np.ones(4)
+    world = table.mark(mark, theta)
+    B = rail.base_pose(e)
+    in_base = np.einsum("nji,nj->ni", B[:, :3, :3], world - B[:, :3, 3])
+    F = np.stack([_touch_poses(R[None], p, t, rng, AIM_SIGMA_MM)[0]
+                  for R, p in zip(_tilted_down(rng, 4), in_base)])
+
+    def solve(x: np.ndarray, b: np.ndarray) -> CalibrationResult:
+        k = float(np.linalg.norm(b))
+        return root_point(tcp_of(to_world(F, e, -b / k, k), x), theta,
+                          nominal_axis=table.nominal_root[:3, 2], touch_sigma_mm=AIM_SIGMA_MM)
+    b0 = -k_hat * d_hat
+    res = solve(t_hat, b0)
+    terms = {"tool": propagate(lambda x: solve(x, b0).frame, t_hat, C_t),
+             "rail": propagate(lambda b: solve(t_hat, b).frame, b0, C_b)}
+    truth = table.true_root_frame(mark)
+    return _chained_trial(res, truth, terms, {"tool": nu_t, "rail": nu_b}, position_only=True)
+
+
 SCENES: list[tuple[str, Callable[[np.random.Generator], Trial]]] = [
     ("tool.xyz_4point N=4", scene_xyz_4point(4)),
     ("tool.xyz_4point N=8", scene_xyz_4point(8)),
@@ -270,6 +370,8 @@ SCENES: list[tuple[str, Callable[[np.random.Generator], Trial]]] = [
     ("workpiece.indirect N=8", scene_workpiece_indirect(8)),
     ("fixed_tool.5d 3 touches", scene_fixed_tool("5d", 3)),
     ("fixed_tool.6d 2 touches", scene_fixed_tool("6d", 2)),
+    ("chain: base.3point+tool", scene_base_3point_with_tool),
+    ("chain: root_point on rail", scene_root_point_on_rail),
 ]
 
 

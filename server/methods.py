@@ -64,6 +64,9 @@ class MethodInputs:
     beams: dict[str, tuple[FloatArray, FloatArray]] = field(default_factory=dict)
     tool_diameter_mm: float | None = None
     external: Any = None  # ext menus: server.methods_ext.ExtInputs
+    #: the touch scatter (mm per coordinate) the bounds assume where the points cannot estimate
+    #: it: the cell's aim (server.external.assumed_sigma_mm); None: the solver's default
+    touch_sigma_mm: float | None = None
 
 
 Solve = Callable[[Sequence[TaughtData], MethodInputs], CalibrationResult]
@@ -145,6 +148,11 @@ def _fixed(inp: MethodInputs) -> FloatArray:
     return _need(inp.fixed_tcp_mm, "fixed_tool_no", PARAM_HELP["fixed_tool_no"])
 
 
+def _sigma(inp: MethodInputs) -> dict[str, float]:
+    """``touch_sigma_mm=`` for the solvers that assume a scatter (empty: their default)."""
+    return {} if inp.touch_sigma_mm is None else {"touch_sigma_mm": float(inp.touch_sigma_mm)}
+
+
 def _touched(points: Sequence[TaughtData], inp: MethodInputs) -> FloatArray:
     """Positions (base) of the calibrated touching TCP at each touch-up."""
     return tcp_of(_poses(points), _tcp(inp))
@@ -169,7 +177,7 @@ def _abc_world(mode: Literal["5d", "6d"]) -> Solve:
 
 
 def _abc_2point(points: Sequence[TaughtData], inp: MethodInputs) -> CalibrationResult:
-    return tcp.tool_abc_2point(_tcp(inp), _poses(points))
+    return tcp.tool_abc_2point(_tcp(inp), _poses(points), **_sigma(inp))
 
 
 def _tool_numeric(points: Sequence[TaughtData], inp: MethodInputs) -> CalibrationResult:
@@ -191,7 +199,7 @@ def _light_barrier(points: Sequence[TaughtData], inp: MethodInputs) -> Calibrati
 
 def _base_3point(points: Sequence[TaughtData], inp: MethodInputs) -> CalibrationResult:
     origin, x_point, xy_point = _touched(points, inp)
-    return base.base_3point(origin, x_point, xy_point)
+    return base.base_3point(origin, x_point, xy_point, **_sigma(inp))
 
 
 def _base_indirect(points: Sequence[TaughtData], inp: MethodInputs) -> CalibrationResult:
@@ -212,7 +220,7 @@ def _fixed_tool(mode: Literal["5d", "6d"]) -> Solve:
 
 
 def _workpiece_direct(points: Sequence[TaughtData], inp: MethodInputs) -> CalibrationResult:
-    return workpiece.workpiece_direct(_fixed(inp), _poses(points))
+    return workpiece.workpiece_direct(_fixed(inp), _poses(points), **_sigma(inp))
 
 
 def _workpiece_indirect(points: Sequence[TaughtData], inp: MethodInputs) -> CalibrationResult:

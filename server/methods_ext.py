@@ -28,7 +28,8 @@ from typing import Any
 
 import numpy as np
 
-from server.methods import MethodInputs, MethodSpec, Step, TaughtData, _need, _poses, _tcp
+from server.methods import (MethodInputs, MethodSpec, Step, TaughtData, _need, _poses, _sigma,
+                            _tcp)
 from solvers.dh import tcp_of
 from solvers.errors import CalibrationError
 from solvers.external import (linear_unit, offset, offset_numeric, positioner_2axis, root_point,
@@ -124,7 +125,8 @@ def _root_point(points: Sequence[TaughtData], inp: MethodInputs) -> CalibrationR
     nominal = _nominal_root(ex, axis, points[0].external_axes or {})
     try:
         res = root_point(P, theta, nominal_axis=nominal[:3, 2],
-                         nominal_root_mm=_nominal_point(ex, nominal), axis_limits_deg=ROTARY_LIMITS)
+                         nominal_root_mm=_nominal_point(ex, nominal), axis_limits_deg=ROTARY_LIMITS,
+                         **_sigma(inp))
     except CalibrationError as err:
         raise _renamed(err, axis) from None
     return _top_view(res, P)
@@ -153,7 +155,7 @@ def _offset(points: Sequence[TaughtData], inp: MethodInputs) -> CalibrationResul
     turning = ex.axes[-1]
     root = _nominal_root(ex, turning, values)
     return offset(origin, x_point, xy_point, values[turning], root,
-                  root_covariance=ex.root_covariance, root_dof=ex.root_dof)
+                  root_covariance=ex.root_covariance, root_dof=ex.root_dof, **_sigma(inp))
 
 
 def _linear_unit(points: Sequence[TaughtData], inp: MethodInputs) -> CalibrationResult:
@@ -161,7 +163,7 @@ def _linear_unit(points: Sequence[TaughtData], inp: MethodInputs) -> Calibration
     axis = ex.axis or ex.axes[0]
     try:
         return linear_unit(_touched(points, inp), _values(points, axis),
-                           nominal_direction=_nominal_root(ex, axis, {})[:3, 2])
+                           nominal_direction=_nominal_root(ex, axis, {})[:3, 2], **_sigma(inp))
     except CalibrationError as err:
         raise _renamed(err, axis) from None
 
@@ -199,7 +201,7 @@ def _positioner(points: Sequence[TaughtData], inp: MethodInputs) -> CalibrationR
                                _values(turn_pts, turn_axis), tau,
                                nominal_tilt_axis=tilt_nominal[:3, 2],
                                nominal_turn_axis=turn_nominal[:3, 2],
-                               nominal_root_mm=_nominal_point(ex, tilt_nominal))
+                               nominal_root_mm=_nominal_point(ex, tilt_nominal), **_sigma(inp))
     except CalibrationError as err:
         is_turn = str(err.loc[0]).startswith("turn") if err.loc else False
         raise _renamed(err, turn_axis if is_turn else tilt_axis,
@@ -251,9 +253,15 @@ _RAIL_EXTRA = (-125.0, 125.0, -190.0, 190.0, -60.0, 60.0, 220.0, -220.0, 90.0)
 _AROUND = (0.0, 90.0, 180.0, 270.0, 45.0, 135.0, 225.0, 315.0, 20.0, 200.0, 110.0, 290.0)
 
 
+#: the rail carrying the robot: every step of a kinematic it does not calibrate puts it at 0
+#: (Move to sets every axis of the chain, not only the menu's own)
+RAIL_AXIS = "E4"
+
+
 def _touch(prompt: str, target: str, k: int, **axes: float) -> Step:
+    chain = {**axes} if RAIL_AXIS in axes else {**axes, RAIL_AXIS: 0.0}
     return Step(prompt, target, tilt_deg=10.0, around_deg=_AROUND[k % len(_AROUND)],
-                external_axes=tuple(axes.items()))
+                external_axes=tuple(chain.items()))
 
 
 def _root_step(k: int, value: float, optional: bool = False) -> Step:

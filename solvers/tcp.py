@@ -763,7 +763,8 @@ def _two_point_rotation(t: FloatArray, R: FloatArray,
     return np.column_stack([x, np.cross(z, x), z]), lever, radius
 
 
-def tool_abc_2point(tcp_mm: FloatArray, flange_poses: FloatArray) -> CalibrationResult:
+def tool_abc_2point(tcp_mm: FloatArray, flange_poses: FloatArray, *,
+                    touch_sigma_mm: float = NOMINAL_TOUCH_SIGMA_MM) -> CalibrationResult:
     """ABC 2-point: tool axis and XZ plane from three touch-ups of one reference point.
 
     Touch-up 0: the TCP on the reference point, ``q = R_0 t + p_0`` (base).
@@ -771,8 +772,9 @@ def tool_abc_2point(tcp_mm: FloatArray, flange_poses: FloatArray) -> Calibration
     Touch-up 2: a point on the tool's +x side of its XZ plane on q: ``b = R_2ᵀ (q - p_2)``.
     Then (flange frame) ``z = (t - a)/|t - a|``, ``x ∝ (b - t) - ((b - t)·z) z``,
     ``y = z × x``, ``T_flange_tcp = [x y z | t]``. The 95% angle bound propagates a nominal
-    touch repeatability of ``NOMINAL_TOUCH_SIGMA_MM`` (isotropic, each touch-up) through
-    this construction to first order (exactly determined: no residual to estimate it).
+    touch repeatability of ``touch_sigma_mm`` (isotropic, each touch-up; default
+    ``NOMINAL_TOUCH_SIGMA_MM``, the server passes the cell's aim) through this construction to
+    first order (exactly determined: no residual to estimate it).
 
     Parameters
     ----------
@@ -780,6 +782,8 @@ def tool_abc_2point(tcp_mm: FloatArray, flange_poses: FloatArray) -> Calibration
         The TCP t in the flange frame (mm).
     flange_poses : ndarray, shape (3, 4, 4)
         T_base_flange at the three touch-ups in the order above.
+    touch_sigma_mm : float, keyword-only
+        The assumed touch scatter (mm per coordinate) behind the bound.
 
     Returns
     -------
@@ -835,16 +839,18 @@ def tool_abc_2point(tcp_mm: FloatArray, flange_poses: FloatArray) -> Calibration
         dp[i // 3, i % 3] += h
         Ri, _, _ = _two_point_rotation(t, R, dp)
         J[:, i] = (Rinv * Rotation.from_matrix(Ri)).as_rotvec() / h
-    cov = NOMINAL_TOUCH_SIGMA_MM**2 * np.degrees(np.degrees(J @ J.T))
+    if not (np.isfinite(touch_sigma_mm) and touch_sigma_mm >= 0):
+        raise CalibrationError(("touch_sigma_mm",), f"must be a number >= 0, got {touch_sigma_mm}")
+    cov = touch_sigma_mm**2 * np.degrees(np.degrees(J @ J.T))
     findings: list[Finding] = [Finding("exactly_determined", (
         f"three touch-ups determine the orientation exactly; the bound assumes "
-        f"{NOMINAL_TOUCH_SIGMA_MM} mm touch repeatability"), ("flange_poses",), "info")]
+        f"{touch_sigma_mm:g} mm touch repeatability"), ("flange_poses",), "info")]
     if Rft[2, 2] < 0:
         findings.append(Finding("axis_points_back", (
             "the tool axis points back towards the flange: was the axis point touched behind "
             "the TCP (between TCP and flange)?"), ("flange_poses", 1)))
     report = QualityReport(residuals_mm=np.zeros(0), parameter_names=("rx_deg", "ry_deg", "rz_deg"),
-                           covariance=cov, sigma_mm=NOMINAL_TOUCH_SIGMA_MM,
+                           covariance=cov, sigma_mm=float(touch_sigma_mm),
                            sigma_source="assumed", angle_bound95_deg=bound95(cov),
                            mahalanobis_bound95=mahalanobis_bound95(3), warnings=tuple(findings),
                            extras={"lever_mm": lever, "radius_mm": radius})

@@ -57,3 +57,15 @@ def test_light_barrier_bounds_cover_95_percent():
     band = 3 * math.sqrt(0.95 * 0.05 / cov.trials)
     assert cov.trials == 120 and cov.sigma_source == "residual"
     _check(cov, 0.95 - band, 0.95 + band)
+
+
+@pytest.mark.parametrize("name", ["chain: base.3point+tool", "chain: root_point on rail"])
+def test_chained_bounds_cover_95_percent(name):
+    """A base touched with a tool calibrated by XYZ 4-point (its stored covariance carried), a
+    root point touched on a calibrated rail (the rail's slope carried too), at the aim's
+    0.1 mm: the combined bound (solvers.external.chain.combined_bounds) holds 95 %.
+    ``python benchmarks/accuracy.py`` runs 1000 trials of each."""
+    n = 150
+    cov = coverage(name, n, seed=12)
+    band = 3 * math.sqrt(0.95 * 0.05 / n)
+    _check(cov, 0.95 - band, 0.95 + band)

@@ -31,7 +31,12 @@ const state = {
   tools: [],
   bases: [],
   exts: [], // external kinematics (EX_KIN 1..6)
+  targets: {}, // the slot last opened per table: each menu proposes its own (tool, base, extkin)
 };
+
+/** The external kinematics each ext menu calibrates (server.external.METHOD_KINDS). */
+const EXT_KINDS = { "ext.root_point": ["turntable", "positioner"], "ext.linear_unit": ["linear_unit"],
+                    "ext.positioner_2axis": ["positioner"] };
 
 // Tests wait for `window.pendant.pending === 0` (no request in flight).
 const pendant = { pending: 0, state };
@@ -381,11 +386,23 @@ function methodOf(name) {
   return state.methods.find((m) => m.name === name);
 }
 
+/** The slot a menu proposes: an ext menu the EX_KIN of the kind it calibrates, the others the
+ * slot last opened in their own table (never a number carried over from another table). */
+function proposedSlot(m) {
+  const kinds = EXT_KINDS[m.name];
+  if (kinds) {
+    const e = state.exts.find((x) => kinds.includes(x.kind));
+    if (e) return e.number;
+  }
+  return state.targets[m.table] || 1;
+}
+
 function renderParams() {
   const m = methodOf($("#method").value);
   if (!m) return;
   const t = $("#target_no");
   t.max = { tool: 16, base: 32, extkin: 6 }[m.table];
+  t.value = proposedSlot(m);
   $("#target-label").textContent = { tool: "Tool number", base: "Base number",
                                      extkin: "External kinematic (EX_KIN)" }[m.table];
   const box = $("#params");
@@ -448,6 +465,7 @@ async function openSession() {
   const m = methodOf($("#method").value);
   const body = { method: m.name, target_no: Number($("#target_no").value), params: readParams(m) };
   state.session = await api("POST", ctl("/sessions"), body);
+  state.targets[m.table] = body.target_no;
   state.report = null;
   state.step = null;
   renderSession();
@@ -473,7 +491,7 @@ function suggestedStep() {
     const v = r.extras.next_axis_value_deg;
     return { index: Math.max(...s.steps.map((st) => st.index)) + 1, required: false, filled: false,
              suggested: true, target: first.target, tilt_deg: first.tilt_deg, around_deg: first.around_deg,
-             spin_deg: 0, tool_point_mm: null, external_axes: { [axis]: v },
+             spin_deg: 0, tool_point_mm: null, external_axes: { ...first.external_axes, [axis]: v }, // the whole chain
              prompt: `Optional: touch the mark with ${axis} at ${fmt(v, 0)} deg, as the report suggests (Move to goes there), then Compute again` };
   }
   if (!s || !r || !r.next_orientation || !s.extra_steps_allowed) return null;
@@ -545,9 +563,33 @@ async function refreshSession(s) {
   renderSession();
 }
 
+/** R = Rz(a) Ry(b) Rx(c) of a KUKA pose (degrees), as rows: the flange's orientation. */
+function rotationOf(p) {
+  const r = Math.PI / 180;
+  const [ca, sa, cb, sb, cc, sc] = [Math.cos(p.a * r), Math.sin(p.a * r), Math.cos(p.b * r),
+                                    Math.sin(p.b * r), Math.cos(p.c * r), Math.sin(p.c * r)];
+  return [[ca * cb, ca * sb * sc - sa * cc, ca * sb * cc + sa * sc],
+          [sa * cb, sa * sb * sc + ca * cc, sa * sb * cc - ca * sc],
+          [-sb, cb * sc, cb * cc]];
+}
+
+/** An optional step already taught goes back where it was taught (the suggested orientation or
+ * axis value the person used then), not to the service's default for that step. */
+function whereTaught(st) {
+  const p = !st.required && st.filled && st.point;
+  if (!p || st.tool_point_mm) return st;
+  if (st.external_axes) { // ext menus: the axis values it was touched at
+    const taught = p.external_axes || {};
+    return { ...st, external_axes: Object.fromEntries(Object.entries(st.external_axes)
+      .map(([k, v]) => [k, taught[k] ?? v])) };
+  }
+  return p.flange_pose ? { ...st, flange_orientation: rotationOf(p.flange_pose) } : st;
+}
+
 async function moveTo() {
-  const st = currentStep();
-  if (!st || !st.target) return;
+  const current = currentStep();
+  if (!current || !current.target) return;
+  const st = whereTaught(current);
   if (st.external_axes) { // ext menus: the external axes go to the step's values first
     await loadRobot(await api("PUT", ctl("/robot/external"), { values: st.external_axes }));
   }
@@ -600,8 +642,22 @@ async function compute() {
   $("#report").scrollIntoView({ block: "nearest" });
 }
 
+/** Save; a slot of another kind (or a named slot not calibrated here) answers 409 naming it:
+ * the person is asked, and only a yes saves (with confirm=true). */
 async function save() {
-  const entry = await api("POST", ctl(`/sessions/${state.session.id}/save`));
+  const path = ctl(`/sessions/${state.session.id}/save`);
+  let entry;
+  try {
+    entry = await api("POST", path);
+  } catch (err) {
+    const d = err instanceof ApiError && err.status === 409 && Array.isArray(err.detail) ? err.detail[0] : null;
+    if (!d || !d.loc || d.loc[1] !== "confirm") throw err;
+    const what = d.msg.split(/[:;] save with/)[0]; // the slot's kind and name, what it would become
+    if (!window.confirm(`${what}.\n\nReplace it?`)) {
+      throw new ApiError(409, [{ loc: ["query", "confirm"], msg: `not saved: ${what}` }]);
+    }
+    entry = await api("POST", `${path}?confirm=true`);
+  }
   state.session = null;
   state.report = null;
   renderSession();

@@ -9,7 +9,7 @@ from __future__ import annotations
 from typing import Any
 
 import numpy as np
-from fastapi import APIRouter, Body, Response
+from fastapi import APIRouter, Body, Query, Response
 
 import emulator
 from db import crud
@@ -124,7 +124,7 @@ def compute(controller_id: int, session_id: int, db: SessionDep, response: Respo
     crud.require_open(s)
     spec, points = spec_of(s), taught_data(s)
     spec.check_taught(points, s.params)
-    result = spec.solve(points, resolve_inputs(db, s), s.params)
+    result = ext.solve_in_chain(db, s, spec, points, resolve_inputs(db, s))
     report = ReportOut.from_result(result)
     frame = Pose.from_matrix(result.frame).as_array()
     crud.store_result(db, s, frame, report.model_dump(mode="json"))
@@ -137,12 +137,54 @@ def compute(controller_id: int, session_id: int, db: SessionDep, response: Respo
     return report
 
 
+KIND_WORDS = {"tool": "tool", "workpiece": "robot-held workpiece", "base": "base",
+              "fixed_tool": "fixed tool", "coordinated_base": "base on an external kinematic"}
+
+
+def _auto_name(kind: str, number: int) -> str:
+    return f"{kind}{number}"
+
+
+def slot_conflict(spec: Any, e: Any, number: int) -> str | None:
+    """Why saving ``spec``'s result into tool/base slot ``e`` needs the person's word, or None.
+
+    A slot keeps its kind and its name unless the person says otherwise: it is asked when the
+    slot holds something (values, a name or a provenance) of another kind, or carries a name a
+    person or an import gave (not the automatic ``<kind><n>``) and was not written by a
+    calibration menu (a re-calibration of a named slot by a menu is not asked again)."""
+    occupied = bool(e.name) or e.method is not None or any(e.pose_values())
+    if not occupied:
+        return None
+    what = f"{KIND_WORDS.get(e.kind, e.kind)}{' ' + repr(e.name) if e.name else ''}"
+    table = "TOOL" if spec.table == "tool" else "BASE"
+    if e.kind != spec.kind:
+        return (f"{table} {number} holds a {what}; {spec.name} would turn it into a "
+                f"{KIND_WORDS.get(spec.kind, spec.kind)} named "
+                f"{_auto_name(spec.kind, number)!r}: save with confirm=true to replace it "
+                "(name=... to choose the name), or open the menu on an empty slot")
+    if e.name and e.name != _auto_name(e.kind, number) and e.session_id is None:
+        return (f"{table} {number} holds the {what} ({e.method or 'typed in'}, not calibrated "
+                f"here); save with confirm=true to overwrite its values and keep its name "
+                f"(name=... to rename it)")
+    return None
+
+
 @router.post(PREFIX + "/{session_id}/save")
 def save(controller_id: int, session_id: int, db: SessionDep, response: Response,
-         if_match: IfMatch = None) -> EntryOut | ExtSlotOut:
+         if_match: IfMatch = None,
+         confirm: bool = Query(False, description="replace a slot of another kind, or a named "
+                                                  "slot not calibrated here (else 409 naming "
+                                                  "its kind and name)"),
+         name: str | None = Query(None, max_length=64,
+                                  description="the slot's name after the save (default: its "
+                                              "own, or <kind><n> when its kind changes)")
+         ) -> EntryOut | ExtSlotOut:
     """Write the computed frame into the target slot (XYZ menus keep A, B, C), with provenance
     and a history row. Refused (409, saying what changed) when the target slot changed after
-    the compute: compute again on the slot as it is now. ``If-Match`` is the session's ETag."""
+    the compute: compute again on the slot as it is now. A tool or base slot keeps its kind
+    and name: saving over a slot of another kind, or over a named slot that no menu
+    calibrated (imported, typed in), is refused (409 naming its kind and name) unless
+    ``confirm=true``. ``If-Match`` is the session's ETag."""
     s = _session(db, controller_id, session_id, if_match)
     if s.state != "computed":
         raise crud.StateConflict(("path", "session_id"),
@@ -156,6 +198,12 @@ def save(controller_id: int, session_id: int, db: SessionDep, response: Response
         crud.close_session(db, s, "saved")
         set_etag(response, db, s)
         return ext_slot_out(e)
+    why = slot_conflict(spec, e, s.target_no)
+    if why is not None and not confirm:
+        raise crud.StateConflict(("query", "confirm"), why)
+    if name is not None:
+        from server.bounds import check_name
+        check_name(name, ("query", "name"))
     r = s.result_values()
     keys = POSE_KEYS[:3] if spec.writes == "xyz" else POSE_KEYS  # XYZ menus keep A, B, C
     values: dict[str, Any] = dict(zip(keys, r))  # type: ignore[arg-type]
@@ -164,8 +212,10 @@ def save(controller_id: int, session_id: int, db: SessionDep, response: Response
                   error_max_mm=report.get("max_error_mm"), error_rms_mm=report.get("rms_error_mm"))
     if spec.kind == "coordinated_base":  # ext.offset: the base rides on EX_KIN ext_no
         values["mech_unit"] = ext.mech_unit(db, s.controller_id, s.params["ext_no"])
-    if not e.name:
-        values["name"] = f"{spec.kind}{s.target_no}"
+    if name is not None:
+        values["name"] = name
+    elif not e.name or e.kind != spec.kind:  # a slot of another kind does not keep its name
+        values["name"] = _auto_name(spec.kind, s.target_no)
     crud.change_entry(db, e, values, reason="calibration", session_id=s.id)
     crud.close_session(db, s, "saved")
     set_etag(response, db, s)

@@ -1,0 +1,83 @@
+"""The 95 % bounds carry every error source of the chain: the touching tool's stored
+covariance (a root point or a base touched with a tool calibrated with a person's aim), and
+the assumed touch scatter is the cell's aim (0.1 mm), named in the report."""
+
+from __future__ import annotations
+
+import numpy as np
+
+from api_helpers import *  # noqa: F403
+from api_helpers import C, CELL, approach, ok, open_session, pose_matrix, walk
+from emulator import external as ext_emu
+from solvers.robots import ROBOTS
+
+REACH = ROBOTS["kuka_kr6_r900_sixx"].reach_mm
+
+
+def _tool_with_aim(client, noise_mm: float = 0.1) -> dict:  # noqa: ANN001
+    """Tool 1 by XYZ 4-point as a person aims (noise_mm per axis), saved; the report."""
+    url = open_session(client, "tool.xyz_4point", 1)
+    s = ok(client.get(url))
+    for st in s["steps"]:
+        approach(client, st["target"], noise_mm=noise_mm,
+                 **{k: st[k] for k in ("tilt_deg", "around_deg", "spin_deg")})
+        ok(client.post(f"{url}/touch-up", json={"step": st["index"]}))
+    rep = ok(client.post(f"{url}/compute"))
+    ok(client.post(f"{url}/save"))
+    return rep
+
+
+def test_root_point_bound_carries_the_touching_tools_error(client):
+    """Tool 1 off by a person's aim; the root point touched with the ideal aim is off by
+    about that much, and its bound now says so: the tool's term is named and the truth lies
+    inside the total."""
+    tool = _tool_with_aim(client)
+    tool_err = float(np.linalg.norm(pose_matrix(tool["frame"])[:3, 3] - CELL.T_flange_tool[:3, 3]))
+    assert tool_err > 0.03  # the aim left an error to carry
+    url = open_session(client, "ext.root_point", 1, tool_no=1)
+    s = ok(client.get(url))
+    for st in s["steps"]:
+        ok(client.put(f"{C}/robot/external", json={"values": st["external_axes"]}))
+        approach(client, st["target"], tilt_deg=st["tilt_deg"], around_deg=st["around_deg"])
+        ok(client.post(f"{url}/touch-up", json={"step": st["index"]}))
+    rep = ok(client.post(f"{url}/compute"))
+    terms = rep["extras"]["bound_terms"]
+    assert set(terms) == {"touch", "tool 1 TCP"}
+    assert terms["tool 1 TCP"]["source"].startswith("tool.xyz_4point session")
+    assert terms["tool 1 TCP"]["position_bound95_mm"] > terms["touch"]["position_bound95_mm"]
+    total = rep["position_bound95_mm"]
+    parts = [terms[k]["position_bound95_mm"] for k in ("touch", "tool 1 TCP")]
+    assert max(parts) < total <= sum(parts)
+    t = ext_emu.external_cell(REACH, ok(client.get(f"{C}/cell/external")), 1)
+    truth = t.turntable.true_root_frame(t.mark_flange("turntable"))
+    err = float(np.linalg.norm(pose_matrix(rep["frame"])[:3, 3] - truth[:3, 3]))
+    assert err < total, (err, terms)
+
+
+def test_base_3point_assumes_the_cells_aim_and_says_so(client):
+    """Base > 3-point has no redundancy: the bound assumes σ = 0.1 mm (the pendant's aim),
+    shown as "assumed σ" in the report, plus the touching tool's term."""
+    _tool_with_aim(client)
+    url = open_session(client, "base.3point", 2, tool_no=1)
+    walk(client, url)
+    rep = ok(client.post(f"{url}/compute"))
+    assert rep["sigma_source"] == "assumed" and rep["sigma_mm"] == 0.1
+    assert rep["extras"]["assumed_sigma_mm"] == 0.1
+    note = next(w for w in rep["warnings"] if w["code"] == "assumed_sigma")
+    assert "assumed σ = 0.1 mm" in note["message"]
+    assert rep["extras"]["bound_terms"]["tool 1 TCP"]["position_bound95_mm"] > 0
+    assert rep["position_bound95_mm"] > rep["extras"]["bound_terms"]["touch"]["position_bound95_mm"]
+
+
+def test_a_typed_in_tool_counts_as_exact_and_the_report_says_so(client):
+    """Tool 1 typed in (no covariance stored): the base's bound names it as exact."""
+    url = open_session(client, "tool.numeric", 1, pose={"x": float(CELL.T_flange_tool[0, 3]),
+                       "y": float(CELL.T_flange_tool[1, 3]), "z": float(CELL.T_flange_tool[2, 3]),
+                       "a": 0.0, "b": 0.0, "c": 0.0})
+    ok(client.post(f"{url}/compute"))
+    ok(client.post(f"{url}/save"))
+    url = open_session(client, "base.3point", 2, tool_no=1)
+    walk(client, url)
+    rep = ok(client.post(f"{url}/compute"))
+    term = rep["extras"]["bound_terms"]["tool 1 TCP"]
+    assert term["position_bound95_mm"] is None and "counts as exact" in term["source"]
