@@ -11,7 +11,6 @@ import asyncio
 import json
 import logging
 import os
-import threading
 import time
 from collections.abc import Callable, Iterator
 
@@ -22,8 +21,9 @@ from scipy.spatial.transform import Rotation
 
 from api_helpers import ADMIN_TOKEN, C, edit_slot, make_client, ok
 from browser_helpers import free_port
-from server.opcua.service import PendantOpcUa
-from server.opcua.space import DI_URI, PENDANT_URI, ROBOTICS_URI
+from opcua_helpers import client_certificate, namespaces, secure_client, start_face
+from server.opcua.pki import default_pki_dir, trust
+from server.opcua.space import PENDANT_URI
 
 MANDATORY = ua.NodeId(ua.ObjectIds.ModellingRule_Mandatory)
 
@@ -45,35 +45,22 @@ def face(tmp_path_factory: pytest.TempPathFactory) -> Iterator[dict]:
     db_url = fresh_url(tmp_path_factory.mktemp("opcua"))
     logs = LogRecords()
     logging.getLogger("asyncua").addHandler(logs)
-    loop = asyncio.new_event_loop()
-    thread = threading.Thread(target=loop.run_forever, name="opcua", daemon=True)
-    thread.start()
     with make_client(db_url) as rest:
-        server = PendantOpcUa(rest.app.state.sessionmaker,
-                              f"opc.tcp://127.0.0.1:{free_port()}/pendant/", poll_s=0.1,
-                              pki_dir=tmp_path_factory.mktemp("pki"))
-        asyncio.run_coroutine_threadsafe(server.start(), loop).result(timeout=120)
-        yield {"rest": rest, "server": server, "logs": logs, "db_url": db_url}
-        asyncio.run_coroutine_threadsafe(server.stop(), loop).result(timeout=30)
-    loop.call_soon_threadsafe(loop.stop)
-    thread.join(timeout=10)
+        running = start_face(rest.app.state.sessionmaker, tmp_path_factory.mktemp("face"))
+        yield {"rest": rest, "server": running.server, "logs": logs, "db_url": db_url,
+               "face": running, "cert": running.client}
+        running.stop()
     logging.getLogger("asyncua").removeHandler(logs)
 
 
 def on_client(face: dict, body, user: str | None = "admin",  # noqa: ANN001
               password: str | None = ADMIN_TOKEN) -> object:
-    """Run ``body(client, ns)`` with an asyncua Client logged in as ``user`` (the first
-    Administrator by default; None: anonymous); ns = {di, rob, pendant}."""
+    """Run ``body(client, ns)`` with an asyncua Client on the encrypted endpoint, logged in as
+    ``user`` (the first Administrator by default; None: anonymous); ns = {di, rob, pendant}."""
     async def run() -> object:
-        client = Client(face["server"].endpoint, timeout=10)
-        if user is not None:
-            client.set_user(user)
-            client.set_password(password)
+        client = await secure_client(face["server"].endpoint, face["cert"], user, password)
         async with client:
-            ns = {"di": await client.get_namespace_index(DI_URI),
-                  "rob": await client.get_namespace_index(ROBOTICS_URI),
-                  "pendant": await client.get_namespace_index(PENDANT_URI)}
-            return await body(client, ns)
+            return await body(client, await namespaces(client))
     return asyncio.run(run())
 
 
@@ -286,9 +273,14 @@ def test_serve_with_an_opcua_port_starts_the_face_beside_the_rest_service(tmp_pa
 
     import httpx
 
+    from server.cli import main
+
     rest_port, ua_port = free_port(), free_port()
     db_url = f"sqlite:///{tmp_path / 'pendant.db'}"
     env = {**os.environ, "PENDANT_ADMIN_TOKEN": ADMIN_TOKEN}
+    mes = client_certificate(tmp_path / "mes")
+    assert main(["opcua", "trust", mes.cert, "--db", db_url]) == 0  # the face's own PKI folder
+    assert default_pki_dir(db_url) == tmp_path / "pendant.db-opcua-pki"
     proc = subprocess.Popen([sys.executable, "-m", "server.cli", "serve", "--port", str(rest_port),
                              "--opcua-port", str(ua_port), "--db", db_url, "--job-workers", "0"],
                             stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL, env=env)
@@ -297,13 +289,10 @@ def test_serve_with_an_opcua_port_starts_the_face_beside_the_rest_service(tmp_pa
         deadline = time.monotonic() + 120
         while True:
             try:
-                client = Client(f"opc.tcp://127.0.0.1:{ua_port}/pendant/", timeout=5)
-                client.set_user("admin")
-                client.set_password(ADMIN_TOKEN)
+                client = await secure_client(f"opc.tcp://127.0.0.1:{ua_port}/pendant/", mes,
+                                             "admin", ADMIN_TOKEN, timeout=5)
                 async with client:
-                    ns = {"di": await client.get_namespace_index(DI_URI),
-                          "rob": await client.get_namespace_index(ROBOTICS_URI),
-                          "pendant": await client.get_namespace_index(PENDANT_URI)}
+                    ns = await namespaces(client)
                     devices = await (await cell(client, ns)).get_child([f"{ns['rob']}:MotionDevices"])
                     (arm,) = await devices.get_children()
                     node = await arm.get_child([f"{ns['rob']}:Axes", f"{ns['rob']}:A2",
@@ -368,13 +357,14 @@ async def commit(client: Client, ns: dict, number: int, frame: list[float], name
         ua.Variant(version, ua.VariantType.UInt64))
 
 
-def test_an_anonymous_session_may_read_nothing(face: dict) -> None:
+def test_an_anonymous_session_is_refused(face: dict) -> None:
+    """As REST answers 401 without a credential: no session without a login."""
     async def body(client: Client, ns: dict) -> object:
         return await (await cell(client, ns)).read_browse_name()
 
     with pytest.raises(ua.UaStatusCodeError) as err:
         on_client(face, body, user=None)
-    assert err.value.code == ua.StatusCodes.BadUserAccessDenied
+    assert err.value.code == ua.StatusCodes.BadIdentityTokenRejected
 
 
 def test_a_wrong_password_is_refused_at_login(face: dict) -> None:
@@ -451,58 +441,28 @@ def test_a_stale_version_is_refused_and_a_bad_frame_is_a_bad_argument(face: dict
     assert err.value.code == ua.StatusCodes.BadInvalidArgument
 
 
-def client_certificate(folder, uri: str) -> tuple[str, str]:  # noqa: ANN001
-    """A client's self-signed application certificate and key (as a cell PC would have)."""
-    import socket
-
-    from asyncua.crypto.cert_gen import (dump_private_key_as_pem, generate_private_key,
-                                         generate_self_signed_app_certificate)
-    from cryptography import x509
-    from cryptography.hazmat.primitives.serialization import Encoding
-    from cryptography.x509.oid import ExtendedKeyUsageOID
-
-    key = generate_private_key()
-    cert = generate_self_signed_app_certificate(
-        key, "mes-client", {"organizationName": "pendant tests"},
-        [x509.UniformResourceIdentifier(uri), x509.DNSName(socket.gethostname())],
-        [ExtendedKeyUsageOID.CLIENT_AUTH])
-    cert_path, key_path = folder / "client-cert.der", folder / "client-key.pem"
-    cert_path.write_bytes(cert.public_bytes(Encoding.DER))
-    key_path.write_bytes(dump_private_key_as_pem(key))
-    return str(cert_path), str(key_path)
-
-
 def test_a_registered_certificate_logs_in_over_the_encrypted_endpoint(face: dict,
                                                                     tmp_path) -> None:  # noqa: ANN001
-    from asyncua.crypto.security_policies import SecurityPolicyBasic256Sha256
-
     from server.cli import main
 
-    uri = "urn:pendant:tests:mes-client"
-    cert, key = client_certificate(tmp_path, uri)
-    (tmp_path / "other").mkdir()
-    stranger = client_certificate(tmp_path / "other", uri)  # valid, but no user's
+    user_cert = client_certificate(tmp_path / "user", "mes-cell-3")
+    stranger = client_certificate(tmp_path / "other", "stranger")  # valid, but no user's
     ok(face["rest"].post("/users", json={"name": "mes-cell-3", "role": "Expert"}))
-    assert main(["users", "cert", "mes-cell-3", cert, "--db", face["db_url"]]) == 0
+    assert main(["users", "cert", "mes-cell-3", user_cert.cert, "--db", face["db_url"]]) == 0
     version = int(face["rest"].get(f"{C}/tools/11").headers["ETag"].strip('W/"'))
 
-    async def login(cert: str, key: str) -> int:
-        client = Client(face["server"].endpoint, timeout=10)
-        client.application_uri = uri
-        await client.set_security(SecurityPolicyBasic256Sha256, cert, key,
-                                  mode=ua.MessageSecurityMode.SignAndEncrypt)
-        await client.load_client_certificate(cert)  # the X509 identity token
-        await client.load_private_key(key)
+    async def login(identity) -> int:  # noqa: ANN001
+        client = await secure_client(face["server"].endpoint, face["cert"], identity=identity)
         async with client:
             ns = {"pendant": await client.get_namespace_index(PENDANT_URI)}
             return await commit(client, ns, 11, [5.0, 5.0, 90.0, 0.0, 0.0, 0.0], "scanner",
                                 version)
 
-    assert asyncio.run(login(cert, key)) == version + 1
+    assert asyncio.run(login(user_cert)) == version + 1
     (rec,) = [r for r in ok(face["rest"].get("/audit", params={"user": "mes-cell-3"}))
               if r.get("number") == 11]
     assert (rec["source"], rec["role"]) == ("opcua", "Expert")
     with pytest.raises(ua.UaStatusCodeError) as err:
-        asyncio.run(login(*stranger))
+        asyncio.run(login(stranger))
     assert err.value.code == ua.StatusCodes.BadUserAccessDenied
     assert ok(face["rest"].get(f"{C}/tools/11"))["name"] == "scanner"

@@ -15,16 +15,70 @@ import logging
 from dataclasses import dataclass, field
 from pathlib import Path
 
+from urllib.parse import urlparse
+
 from asyncua import Server, ua
+from asyncua.common.utils import ServiceError
+from asyncua.crypto import security_policies
+from cryptography import x509
+from cryptography.hazmat.primitives.serialization import Encoding
 from sqlalchemy.orm import Session, sessionmaker
 
 from db import crud
-from server.opcua import access, commit, space
+from server.opcua import access, commit, pki, space
+from server.settings import LOOPBACK_HOSTS
 from server.opcua.state import ControllerState, events_after, latest_event_id, read_cells
 
 log = logging.getLogger("pendant.opcua")
 TABLES = {"tool": 16, "base": 32}
 FORMATS = ("kuka", "abb", "fanuc", "ur", "json")
+
+
+class CheckedPolicyFactory(security_policies.SecurityPolicyFactory):
+    """asyncua's per-channel policy maker, checking the client's certificate first: trusted
+    (``pki/trusted``) and valid now, else the channel is refused. On the None policy the
+    client's certificate is dropped (nothing proves it is the client's)."""
+
+    def __init__(self, base: security_policies.SecurityPolicyFactory,
+                 trust_list: pki.TrustList) -> None:
+        super().__init__(base.cls, base.mode, base.certificate, base.private_key,
+                         base.permission_ruleset, base.certificate_chain)
+        self.trust_list = trust_list
+
+    def create(self, peer_certificate: bytes | None) -> security_policies.SecurityPolicy:
+        if self.cls is security_policies.SecurityPolicyNone:
+            peer_certificate = None
+        else:
+            self.trust_list.check(peer_certificate)
+        access.CHANNEL.set(access.Channel(self.mode, peer_certificate))
+        return super().create(peer_certificate)
+
+
+async def _same_as_channel(cert: x509.Certificate, _app: ua.ApplicationDescription) -> None:
+    """CreateSession's client certificate must be the one its signed channel was opened with."""
+    ch = access.CHANNEL.get()
+    if ch is not None and ch.peer_certificate is not None and \
+            cert.public_bytes(Encoding.DER) != ch.peer_certificate:
+        raise ServiceError(ua.StatusCodes.BadCertificateInvalid)
+
+
+class PendantServer(Server):
+    """asyncua's Server with the trust list on every channel and endpoints as a plant needs
+    them: a None endpoint offers Anonymous only; a password is always encrypted with the
+    session's server nonce (the token policy names the endpoint's security policy)."""
+
+    trust_list: pki.TrustList
+
+    async def _setup_server_nodes(self) -> None:
+        await super()._setup_server_nodes()
+        self._policies = [CheckedPolicyFactory(p, self.trust_list) for p in self._policies]
+        for edp in self.iserver.endpoints:
+            if edp.SecurityMode == ua.MessageSecurityMode.None_:
+                edp.UserIdentityTokens = [t for t in edp.UserIdentityTokens
+                                          if t.TokenType == ua.UserTokenType.Anonymous]
+            for t in edp.UserIdentityTokens:
+                if t.TokenType == ua.UserTokenType.UserName:
+                    t.SecurityPolicyUri = edp.SecurityPolicyUri
 
 
 @dataclass
@@ -35,8 +89,8 @@ class PendantOpcUa:
     endpoint: str = "opc.tcp://127.0.0.1:4840/pendant/"
     poll_s: float = 0.2
     auth: bool = True  # False: the --no-auth demo, everyone an Administrator (as on REST)
-    pki_dir: Path | None = None  # the server's certificate and key (made on first start):
-    # with it, a Basic256Sha256 SignAndEncrypt endpoint and certificate (X509) logins
+    pki_dir: Path | None = None  # the server's certificate and key, the trust list (server.opcua.pki)
+    none_endpoint: bool = False  # also a SecurityPolicy None endpoint (Anonymous only)
     server: Server = field(init=False)
     cells: dict[int, space.CellNodes] = field(default_factory=dict, init=False)
     states: dict[int, ControllerState] = field(default_factory=dict, init=False)
@@ -47,16 +101,30 @@ class PendantOpcUa:
     _task: asyncio.Task | None = field(default=None, init=False)
 
     async def start(self) -> None:
-        self.server = Server(user_manager=access.PendantUsers(self.make_session, self.auth))
+        host = urlparse(self.endpoint).hostname or ""
+        if not self.auth and host not in LOOPBACK_HOSTS:
+            raise ValueError(f"host: no-auth serves loopback only (127.0.0.1, localhost, ::1), "
+                             f"not {host}")
+        if self.pki_dir is None:
+            raise ValueError("pki_dir: the SignAndEncrypt endpoint needs the server's PKI folder")
+        self.server = PendantServer(user_manager=access.PendantUsers(self.make_session, self.auth))
         await self.server.init()
         self.server.set_endpoint(self.endpoint)
-        self.rules = access.PendantRules(self.make_session, self.auth)
-        policies = [ua.SecurityPolicyType.NoSecurity]
-        identities: list[type] = [ua.AnonymousIdentityToken, ua.UserNameIdentityToken]
-        if self.pki_dir is not None:
-            await self._load_certificate(self.pki_dir)
-            policies.append(ua.SecurityPolicyType.Basic256Sha256_SignAndEncrypt)
-            identities.append(ua.X509IdentityToken)
+        self.rules = access.PendantRules(self.make_session, self.auth, iserver=self.server.iserver)
+        access.install_login_checks(self.server.iserver)
+        access.unguessable_subscription_ids(self.server.iserver.subscription_service)
+        cert, key = await pki.server_certificate(self.pki_dir, space.PENDANT_URI)
+        await self.server.load_certificate(str(cert))
+        await self.server.load_private_key(str(key))
+        self.server.trust_list = pki.TrustList(self.pki_dir)
+        self.server.set_certificate_validator(_same_as_channel)
+        policies = [ua.SecurityPolicyType.Basic256Sha256_SignAndEncrypt]
+        if self.none_endpoint:
+            policies.append(ua.SecurityPolicyType.NoSecurity)
+        # Anonymous: only the --no-auth demo (everyone an Administrator); else no login
+        identities: list[type] = [ua.UserNameIdentityToken, ua.X509IdentityToken]
+        if not self.auth:
+            identities.append(ua.AnonymousIdentityToken)
         self.server.set_security_policy(policies, permission_ruleset=self.rules)
         self.server.set_identity_tokens(identities)
         self.server.set_server_name("pendant")
@@ -67,22 +135,6 @@ class PendantOpcUa:
         await self.sync()
         await self.server.start()
         self._task = asyncio.create_task(self._poll_forever(), name="pendant-opcua-poll")
-
-    async def _load_certificate(self, pki: Path) -> None:
-        """The server's application certificate (self-signed, made once, kept in ``pki``)."""
-        import socket
-
-        from asyncua.crypto.cert_gen import setup_self_signed_certificate
-        from cryptography.x509.oid import ExtendedKeyUsageOID
-
-        pki.mkdir(parents=True, exist_ok=True)
-        key, cert = pki / "pendant-server-key.pem", pki / "pendant-server-cert.der"
-        await setup_self_signed_certificate(
-            key, cert, space.PENDANT_URI, socket.gethostname(),
-            [ExtendedKeyUsageOID.SERVER_AUTH, ExtendedKeyUsageOID.CLIENT_AUTH],
-            {"organizationName": "pendant", "commonName": "pendant OPC UA"})
-        await self.server.load_certificate(str(cert))
-        await self.server.load_private_key(str(key))
 
     async def stop(self) -> None:
         if self._task is not None:
@@ -130,32 +182,30 @@ class PendantOpcUa:
                 a.ArrayDimensions = [0]
             return a
 
-        def read_frame(_parent: ua.NodeId, table: ua.Variant,
-                       number: ua.Variant) -> list[ua.Variant] | ua.StatusCode:
-            key = _slot_key(table.Value, number.Value)
+        async def read_frame(table: str, number: int) -> list[ua.Variant] | ua.StatusCode:
+            key = _slot_key(table, number)
             st = self.states[cid].slot(*key) if key else None
             if st is None:
                 return ua.StatusCode(ua.StatusCodes.BadInvalidArgument)
             return [ua.Variant(st.name, S), ua.Variant(st.kind, S),
                     ua.Variant(list(st.pose), D), ua.Variant(st.version, ua.VariantType.UInt64)]
 
-        async def export_file(_parent: ua.NodeId, fmt: ua.Variant) -> list[ua.Variant] | ua.StatusCode:
-            if fmt.Value not in FORMATS:
+        async def export_file(fmt: str) -> list[ua.Variant] | ua.StatusCode:
+            if fmt not in FORMATS:
                 return ua.StatusCode(ua.StatusCodes.BadInvalidArgument)
-            text = await asyncio.to_thread(self._export, cid, fmt.Value)
+            text = await asyncio.to_thread(self._export, cid, fmt)
             return [ua.Variant(text, S)]
 
-        async def commit_frame(_parent: ua.NodeId, table: ua.Variant, number: ua.Variant,
-                               frame: ua.Variant, slot_name: ua.Variant,
-                               expected: ua.Variant) -> list[ua.Variant] | ua.StatusCode:
-            key = _slot_key(table.Value, number.Value)
+        async def commit_frame(table: str, number: int, frame: list[float], slot_name: str,
+                               expected: int) -> list[ua.Variant] | ua.StatusCode:
+            key = _slot_key(table, number)
+            if key is None:
+                return ua.StatusCode(ua.StatusCodes.BadInvalidArgument)
             caller = access.CURRENT.get()
-            if key is None or caller is None:
-                return ua.StatusCode(ua.StatusCodes.BadInvalidArgument if key is None
-                                     else ua.StatusCodes.BadUserAccessDenied)
+            assert caller is not None  # checked by _method
             outcome = await asyncio.to_thread(
-                commit.commit_frame, self.make_session, cid, *key, frame.Value, slot_name.Value,
-                expected.Value, caller.audit_actor())
+                commit.commit_frame, self.make_session, cid, *key, frame, slot_name,
+                expected, caller.audit_actor())
             if isinstance(outcome, ua.StatusCode):
                 return outcome
             await self.sync()  # the client reads its own write at once
@@ -179,7 +229,7 @@ class PendantOpcUa:
         for method_name, func, inputs, outputs in methods:
             node = await nodes.pendant.add_method(
                 ua.NodeId(f"Pendant.{name}.{method_name}", ns), ua.QualifiedName(method_name, ns),
-                func, inputs, outputs)
+                _method(method_name, func, inputs), inputs, outputs)
             self.rules.method_names[node.nodeid] = method_name
 
     def _export(self, cid: int, fmt: str) -> str:
@@ -190,6 +240,51 @@ class PendantOpcUa:
             return export_text(db, cid, fmt)
 
 
+INTEGERS = {ua.VariantType.SByte, ua.VariantType.Byte, ua.VariantType.Int16,
+            ua.VariantType.UInt16, ua.VariantType.Int32, ua.VariantType.UInt32,
+            ua.VariantType.Int64, ua.VariantType.UInt64}
+
+
+def _accepts(decl: ua.Argument, v: object) -> bool:
+    """Whether the Variant ``v`` fits the declared argument: its type (any integer type for an
+    integer argument, in range for an unsigned one) and scalar or one-dimensional array."""
+    if not isinstance(v, ua.Variant) or v.is_array != (decl.ValueRank == 1):
+        return False
+    want = ua.VariantType(decl.DataType.Identifier)
+    if want == v.VariantType:
+        return True
+    if want in INTEGERS and v.VariantType in INTEGERS:
+        values = v.Value if v.is_array else [v.Value]
+        lo, hi = (0, 2 ** 64 - 1) if want == ua.VariantType.UInt64 else (-2 ** 31, 2 ** 31 - 1)
+        return all(lo <= x <= hi for x in values)
+    return False
+
+
+def _method(name: str, func, inputs: list[ua.Argument]):  # noqa: ANN001, ANN202
+    """asyncua's method callback around ``func(*values)``: first the caller's permission for
+    this call (:func:`access.method_permission`, one table with REST), then the arguments'
+    count and types (OPC 10000-4 §5.11.2: BadArgumentsMissing, BadTooManyArguments,
+    BadTypeMismatch with the offending argument's result). A refusal fails this call only."""
+    async def call(_parent: ua.NodeId, *args: ua.Variant) -> ua.CallMethodResult | list | ua.StatusCode:
+        caller = access.CURRENT.get()
+        fmt = args[0].Value if name == "ExportFile" and args else None
+        if caller is None or not caller.may(access.method_permission(name, fmt)):
+            return ua.StatusCode(ua.StatusCodes.BadUserAccessDenied)
+        if len(args) < len(inputs):
+            return ua.StatusCode(ua.StatusCodes.BadArgumentsMissing)
+        if len(args) > len(inputs):
+            return ua.StatusCode(ua.StatusCodes.BadTooManyArguments)
+        fits = [_accepts(d, v) for d, v in zip(inputs, args)]
+        if not all(fits):
+            return ua.CallMethodResult(
+                StatusCode=ua.StatusCode(ua.StatusCodes.BadInvalidArgument),
+                InputArgumentResults=[ua.StatusCode() if ok else
+                                      ua.StatusCode(ua.StatusCodes.BadTypeMismatch)
+                                      for ok in fits])
+        return await func(*[v.Value for v in args])
+    return call
+
+
 def _slot_key(table: object, number: object) -> tuple[str, int] | None:
     """The (table, number) a client asked for, or None where there is no such slot."""
     if table not in TABLES or isinstance(number, bool) or not isinstance(number, int):
@@ -198,15 +293,18 @@ def _slot_key(table: object, number: object) -> tuple[str, int] | None:
 
 
 async def run(make_session: sessionmaker[Session], host: str, port: int, auth: bool = True,
-              pki_dir: Path | None = None, parent_pid: int | None = None) -> None:
+              pki_dir: Path | None = None, parent_pid: int | None = None,
+              none_endpoint: bool = False) -> None:
     """Serve until cancelled (``pendant opcua``), or until ``parent_pid`` (``pendant serve``,
     which started this face) is gone."""
     import os
 
     face = PendantOpcUa(make_session, f"opc.tcp://{host}:{port}/pendant/", auth=auth,
-                        pki_dir=pki_dir)
+                        pki_dir=pki_dir, none_endpoint=none_endpoint)
     await face.start()
-    log.warning("pendant OPC UA server at %s", face.endpoint)
+    log.warning("pendant OPC UA server ready at %s (%s; PKI %s)", face.endpoint,
+                "Basic256Sha256 SignAndEncrypt" + (" and None (Anonymous only)"
+                                                   if none_endpoint else ""), pki_dir)
     try:
         while parent_pid is None or os.getppid() == parent_pid:
             await asyncio.sleep(1.0)
