@@ -85,6 +85,16 @@ class Face:
         """Run ``coro`` on the face's loop (its address space is not thread-safe)."""
         return asyncio.run_coroutine_threadsafe(coro, self.loop).result(timeout=timeout)
 
+    def restart(self) -> None:
+        """Stop the face and start a new one on the same port, database and PKI folder (as a
+        `pendant serve` restart does)."""
+        old = self.server
+        self.run(old.stop(), timeout=30)
+        self.server = PendantOpcUa(old.make_session, old.endpoint, poll_s=old.poll_s,
+                                   auth=old.auth, pki_dir=old.pki_dir,
+                                   none_endpoint=old.none_endpoint)
+        self.run(self.server.start())
+
     def stop(self) -> None:
         self.run(self.server.stop(), timeout=30)
         self.loop.call_soon_threadsafe(self.loop.stop)

@@ -53,6 +53,11 @@ SESSION_TYPES = {ua.NodeId(t) for t in (
     ua.ObjectIds.GetEndpointsRequest_Encoding_DefaultBinary,
     ua.ObjectIds.FindServersRequest_Encoding_DefaultBinary,
 )}
+# requests asyncua serves without a session (the rest need one: else BadSessionIdInvalid)
+SESSIONLESS_TYPES = SESSION_TYPES | {ua.NodeId(t) for t in (
+    ua.ObjectIds.RegisterServerRequest_Encoding_DefaultBinary,
+    ua.ObjectIds.RegisterServer2Request_Encoding_DefaultBinary,
+)}
 # changing the address space itself: nobody from outside
 ADMIN_TYPES = {ua.NodeId(t) for t in (
     ua.ObjectIds.AddNodesRequest_Encoding_DefaultBinary,
@@ -207,6 +212,22 @@ def unguessable_subscription_ids(service: Any) -> None:
                 return await create(*args, **kwargs)
 
     service.create_subscription = create_subscription
+
+
+def republish_with_status(service: Any) -> None:
+    """Republish of a message the server no longer holds answers ``BadMessageNotAvailable``
+    (of an unknown subscription ``BadSubscriptionIdInvalid``), as OPC 10000-4 §5.13.6 has it.
+    asyncua answers Good with an empty message: after a restart of the face, node-opcua asked
+    again at once, forever (~2,500 requests/s)."""
+    def republish(params: ua.RepublishParameters) -> ua.NotificationMessage:
+        sub = service.subscriptions.get(params.SubscriptionId)
+        if sub is None:
+            raise ServiceError(ua.StatusCodes.BadSubscriptionIdInvalid)
+        if params.RetransmitSequenceNumber not in sub._not_acknowledged_results:
+            raise ServiceError(ua.StatusCodes.BadMessageNotAvailable)
+        return sub.republish(params.RetransmitSequenceNumber)
+
+    service.republish = republish
 
 
 @dataclass

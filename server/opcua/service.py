@@ -20,6 +20,8 @@ from urllib.parse import urlparse
 from asyncua import Server, ua
 from asyncua.common.utils import ServiceError
 from asyncua.crypto import security_policies
+from asyncua.server.binary_server_asyncio import BinaryServer, OPCUAProtocol
+from asyncua.server.uaprocessor import UaProcessor
 from cryptography import x509
 from cryptography.hazmat.primitives.serialization import Encoding
 from sqlalchemy.orm import Session, sessionmaker
@@ -62,12 +64,50 @@ async def _same_as_channel(cert: x509.Certificate, _app: ua.ApplicationDescripti
         raise ServiceError(ua.StatusCodes.BadCertificateInvalid)
 
 
+class SessionProcessor(UaProcessor):
+    """A request on a channel without a (valid) session gets ``BadSessionIdInvalid``, as OPC
+    10000-4 §7.29 has it, so a client makes a new session. asyncua answers
+    ``BadUserAccessDenied``: after a restart of the face, node-opcua then resent its
+    Publish requests at once, forever (thousands a second)."""
+
+    async def _process_message(self, typeid, requesthdr, seqhdr, body):  # noqa: ANN001, ANN202
+        if self.session is None and typeid not in access.SESSIONLESS_TYPES:
+            raise ServiceError(ua.StatusCodes.BadSessionIdInvalid)
+        return await super()._process_message(typeid, requesthdr, seqhdr, body)
+
+
+class SessionProtocol(OPCUAProtocol):
+    def connection_made(self, transport) -> None:  # noqa: ANN001
+        super().connection_made(transport)
+        if self.processor is not None:
+            self.processor.__class__ = SessionProcessor
+
+
+class PendantBinaryServer(BinaryServer):
+    def _make_protocol(self) -> OPCUAProtocol:
+        return SessionProtocol(iserver=self.iserver, policies=self._policies, clients=self.clients,
+                               closing_tasks=self.closing_tasks, limits=self.limits)
+
+
 class PendantServer(Server):
     """asyncua's Server with the trust list on every channel and endpoints as a plant needs
     them: a None endpoint offers Anonymous only; a password is always encrypted with the
     session's server nonce (the token policy names the endpoint's security policy)."""
 
     trust_list: pki.TrustList
+
+    async def start(self) -> None:
+        """asyncua's ``Server.start`` with :class:`PendantBinaryServer`."""
+        await self._setup_server_nodes()
+        await self.iserver.start()
+        try:
+            host, port = self._get_bind_socket_info()
+            self.bserver = PendantBinaryServer(self.iserver, host, port, self.limits)
+            self.bserver.set_policies(self._policies)
+            await self.bserver.start()
+        except Exception:
+            await self.iserver.stop()
+            raise
 
     async def _setup_server_nodes(self) -> None:
         await super()._setup_server_nodes()
@@ -113,6 +153,7 @@ class PendantOpcUa:
         self.rules = access.PendantRules(self.make_session, self.auth, iserver=self.server.iserver)
         access.install_login_checks(self.server.iserver)
         access.unguessable_subscription_ids(self.server.iserver.subscription_service)
+        access.republish_with_status(self.server.iserver.subscription_service)
         cert, key = await pki.server_certificate(self.pki_dir, space.PENDANT_URI)
         await self.server.load_certificate(str(cert))
         await self.server.load_private_key(str(key))
