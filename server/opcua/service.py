@@ -17,7 +17,7 @@ from pathlib import Path
 
 from urllib.parse import urlparse
 
-from asyncua import Server, ua
+from asyncua import Node, Server, ua
 from asyncua.common.utils import ServiceError
 from asyncua.crypto import security_policies
 from asyncua.server.binary_server_asyncio import BinaryServer, OPCUAProtocol
@@ -195,7 +195,9 @@ class PendantOpcUa:
         """Read every controller from the database and update the address space; returns writes."""
         new = await asyncio.to_thread(read_cells, self.make_session)
         writes = 0
-        for cid in set(self.states) - set(new):  # deleted controllers leave the space
+        gone = {cid for cid in self.states
+                if cid not in new or new[cid].node_key != self.states[cid].node_key}
+        for cid in gone:  # deleted controllers leave the space (an id made again: a new one)
             nodes = self.cells.pop(cid)
             await space.remove(nodes.system)
             await space.remove(nodes.pendant)
@@ -268,9 +270,8 @@ class PendantOpcUa:
              [arg("NewVersion", ua.VariantType.UInt64)]),
         )
         for method_name, func, inputs, outputs in methods:
-            node = await nodes.pendant.add_method(
-                ua.NodeId(f"Pendant.{name}.{method_name}", ns), ua.QualifiedName(method_name, ns),
-                _method(method_name, func, inputs), inputs, outputs)
+            node = await _add_method(self.server, nodes.pendant, method_name, ns,
+                                     _method(method_name, func, inputs), inputs, outputs)
             self.rules.method_names[node.nodeid] = method_name
 
     def _export(self, cid: int, fmt: str) -> str:
@@ -279,6 +280,30 @@ class PendantOpcUa:
         with self.make_session() as db:
             crud.get_controller(db, cid)
             return export_text(db, cid, fmt)
+
+
+async def _add_method(server: Server, parent: Node, name: str, ns: int, callback,  # noqa: ANN001
+                      inputs: list[ua.Argument], outputs: list[ua.Argument]) -> Node:
+    """A method of ``parent`` and its argument properties, every NodeId derived from the
+    parent's (asyncua's ``add_method`` numbers the properties: another id after a restart)."""
+    from asyncua.common.manage_nodes import create_property
+
+    method_id = ua.NodeId(f"{parent.nodeid.Identifier}.{name}", ns)
+    attrs = ua.MethodAttributes(DisplayName=ua.LocalizedText(name), Executable=True,
+                                UserExecutable=True)
+    (res,) = await server.iserver.isession.add_nodes([ua.AddNodesItem(
+        ParentNodeId=parent.nodeid, ReferenceTypeId=ua.NodeId(ua.ObjectIds.HasComponent),
+        RequestedNewNodeId=method_id, BrowseName=ua.QualifiedName(name, ns),
+        NodeClass=ua.NodeClass.Method, NodeAttributes=attrs)])
+    res.StatusCode.check()
+    method = server.get_node(method_id)
+    for prop, args in (("InputArguments", inputs), ("OutputArguments", outputs)):
+        await create_property(method, ua.NodeId(f"{method_id.Identifier}.{prop}", ns),
+                              ua.QualifiedName(prop, 0), args,
+                              varianttype=ua.VariantType.ExtensionObject,
+                              datatype=ua.ObjectIds.Argument)
+    server.link_method(method, callback)
+    return method
 
 
 INTEGERS = {ua.VariantType.SByte, ua.VariantType.Byte, ua.VariantType.Int16,

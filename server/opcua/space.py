@@ -32,7 +32,7 @@ PENDANT_URI = "urn:pendant:opcua"
 MOTION_DEVICE_SYSTEM_TYPE = 1002
 LOAD_TYPE = 1018
 MOTION_DEVICE_CATEGORY_ARTICULATED_ROBOT = 1  # MotionDeviceCategoryEnumeration
-AXIS_MOTION_PROFILE_ROTARY = 2  # AxisMotionProfileEnumeration: 1 other, 2 rotary, ...
+AXIS_MOTION_PROFILE_ROTARY = 1  # AxisMotionProfileEnumeration: 0 OTHER, 1 ROTARY (bounded), 2 ROTARY_ENDLESS
 
 
 def opc_orientation(a_deg: float, b_deg: float, c_deg: float) -> tuple[float, float, float]:
@@ -101,6 +101,7 @@ async def _fill_placeholders(parent: Node, names: dict[str, list[str]], ns: int)
             await remove(child)
             for real in names.get(bname.Name, []):
                 made = await instantiate(parent, Node(parent.session, type_def),
+                                         nodeid=ua.NodeId(f"{parent.nodeid.Identifier}.{real}", ns),
                                          bname=ua.QualifiedName(real, bname.NamespaceIndex),
                                          dname=ua.LocalizedText(real), instantiate_optional=False)
                 await _fill_placeholders(made[0], names, ns)
@@ -139,7 +140,7 @@ async def add_cell(server: Server, ns_ids: tuple[int, int, int], st: ControllerS
              "<SoftwareIdentifier>": ["pendant"], "<TaskControlIdentifier>": ["Calibration"]}
     system = (await instantiate(
         device_set, server.get_node(ua.NodeId(MOTION_DEVICE_SYSTEM_TYPE, rob)),
-        nodeid=ua.NodeId(f"{st.name}", ns), bname=ua.QualifiedName(st.name, ns),
+        nodeid=ua.NodeId(st.node_key, ns), bname=ua.QualifiedName(st.name, ns),
         dname=ua.LocalizedText(st.name), instantiate_optional=False))[0]
     await _fill_placeholders(system, names, ns)
 
@@ -163,6 +164,7 @@ async def add_cell(server: Server, ns_ids: tuple[int, int, int], st: ControllerS
         axes.append(pos)
 
     load = (await instantiate(device, server.get_node(ua.NodeId(LOAD_TYPE, rob)),
+                              nodeid=ua.NodeId(f"{device.nodeid.Identifier}.FlangeLoad", ns),
                               bname=ua.QualifiedName("FlangeLoad", rob),
                               dname=ua.LocalizedText("FlangeLoad"), instantiate_optional=True))[0]
     com = await _child(load, f"{rob}:CenterOfMass", "0:CartesianCoordinates")
@@ -191,7 +193,7 @@ async def _pendant_object(server: Server, ns: int, st: ControllerState
     """Objects/Pendant/<controller>: the tables, the active frames, the sessions (one batch)."""
     root = await _pendant_root(server, ns)
     batch = NodeBatch(ns)
-    obj = batch.obj(root.nodeid, st.name, in_folder=True)
+    obj = batch.obj(root.nodeid, st.name, in_folder=True, node_id=f"Pendant.{st.node_key}")
     folders = {"tool": batch.obj(obj, "Tools", folder=True),
                "base": batch.obj(obj, "Bases", folder=True)}
     I32 = ua.VariantType.Int32
@@ -222,11 +224,12 @@ class NodeBatch:
         self.items: list[ua.AddNodesItem] = []
 
     def obj(self, parent: ua.NodeId, name: str, folder: bool = False,
-            in_folder: bool = False) -> ua.NodeId:
+            in_folder: bool = False, node_id: str | None = None) -> ua.NodeId:
         attrs = ua.ObjectAttributes(DisplayName=ua.LocalizedText(name), EventNotifier=0)
         return self._add(parent, name, ua.NodeClass.Object, attrs,
                          ua.ObjectIds.FolderType if folder else ua.ObjectIds.BaseObjectType,
-                         ua.ObjectIds.Organizes if in_folder else ua.ObjectIds.HasComponent)
+                         ua.ObjectIds.Organizes if in_folder else ua.ObjectIds.HasComponent,
+                         node_id=node_id)
 
     def var(self, parent: ua.NodeId, name: str, value: object, variant: ua.VariantType,
             data_type: int, type_def: int = ua.ObjectIds.BaseDataVariableType,
@@ -240,8 +243,8 @@ class NodeBatch:
                          ua.ObjectIds.HasComponent, name_ns)
 
     def _add(self, parent: ua.NodeId, name: str, cls: ua.NodeClass, attrs: object, type_def: int,
-             ref: int, name_ns: int | None = None) -> ua.NodeId:
-        node_id = ua.NodeId(f"{parent.Identifier}.{name}", self.ns)
+             ref: int, name_ns: int | None = None, node_id: str | None = None) -> ua.NodeId:
+        node_id = ua.NodeId(node_id or f"{parent.Identifier}.{name}", self.ns)
         self.items.append(ua.AddNodesItem(
             ParentNodeId=parent, ReferenceTypeId=ua.NodeId(ref),
             RequestedNewNodeId=node_id,
