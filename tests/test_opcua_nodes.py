@@ -163,3 +163,36 @@ def test_commit_frame_checks_its_arguments(cell: dict, args: list, status: int, 
                   if r.value == ua.StatusCodes.BadTypeMismatch]
     assert mismatched == bad
     assert ok(cell["rest"].get(f"{C}/tools/6")) == before
+
+
+def test_no_variable_is_a_good_null(cell: dict) -> None:
+    """Identification, SpeedOverride, SafetyState, TaskControl, FlangeLoad's structures: filled
+    from the emulated cell; what it does not know (a motor's serial, its temperature) reads
+    BadNotReadable, never Null with status Good."""
+    async def body(client: Client, ns: dict) -> tuple[list[str], list[str], dict]:
+        good_nulls, unreadable = [], []
+        for node in await below(await system(client, ns, "cell-1")):
+            if await node.read_node_class() != ua.NodeClass.Variable:
+                continue
+            dv = await node.read_data_value(raise_on_bad_status=False)
+            path = (await node.read_browse_name()).Name
+            if dv.StatusCode.is_good() and (dv.Value is None or dv.Value.Value is None):
+                good_nulls.append(f"{node.nodeid.Identifier}")
+            elif not dv.StatusCode.is_good():
+                assert dv.StatusCode.value == ua.StatusCodes.BadNotReadable, path
+                unreadable.append(path)
+        devices = await (await system(client, ns, "cell-1")).get_child([f"{ns['rob']}:MotionDevices"])
+        (arm,) = await devices.get_children()
+        known = {k: await (await arm.get_child([f"{ns['di']}:{k}"])).read_value()
+                 for k in ("Model", "ProductCode")}
+        load = await arm.get_child([f"{ns['rob']}:FlangeLoad"])
+        known["com"] = await (await load.get_child([f"{ns['rob']}:CenterOfMass"])).read_value()
+        known["inertia"] = await (await load.get_child([f"{ns['rob']}:Inertia"])).read_value()
+        return good_nulls, unreadable, known
+
+    good_nulls, unreadable, known = on_client(cell, body)
+    assert good_nulls == []
+    assert set(unreadable) == {"MotorTemperature", "ProductCode", "SerialNumber"}
+    assert known["Model"].Text == "KUKA KR 6 R900 sixx"
+    assert known["ProductCode"] == "kuka_kr6_r900_sixx"
+    assert isinstance(known["com"], ua.ThreeDFrame) and isinstance(known["inertia"], ua.ThreeDVector)

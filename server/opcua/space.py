@@ -79,6 +79,9 @@ class CellNodes:
     pendant: Node
     axes: list[Node]
     flange_mass: Node
+    flange_com_frame: Node  # 3DFrame: the CenterOfMass, orientation 0
+    flange_com_coords: Node  # its CartesianCoordinates (3DCartesianCoordinates)
+    flange_inertia_vector: Node  # 3DVector: the principal moments
     flange_com: tuple[Node, Node, Node]
     flange_inertia: tuple[Node, Node, Node]
     current_user: Node
@@ -157,10 +160,8 @@ async def add_cell(server: Server, ns_ids: tuple[int, int, int], st: ControllerS
                    ua.VariantType.Int32)
         pos = await _child(axis, f"{di}:ParameterSet", f"{rob}:ActualPosition")
         await _set(pos, st.joints_deg[i], ua.VariantType.Double)
-        await _set(await _child(pos, "0:EngineeringUnits"), ua.EUInformation(
-            NamespaceUri="http://www.opcfoundation.org/UA/units/un/cefact", UnitId=17476,
-            DisplayName=ua.LocalizedText("°"), Description=ua.LocalizedText("degree")),
-            ua.VariantType.ExtensionObject)
+        await _set(await _child(pos, "0:EngineeringUnits"), UNITS["deg"],
+                   ua.VariantType.ExtensionObject)
         axes.append(pos)
 
     load = (await instantiate(device, server.get_node(ua.NodeId(LOAD_TYPE, rob)),
@@ -172,11 +173,14 @@ async def add_cell(server: Server, ns_ids: tuple[int, int, int], st: ControllerS
 
     ctrl = await _child(system, f"{rob}:Controllers", f"{rob}:{st.name}")
     user = await _child(ctrl, f"{rob}:CurrentUser", f"{rob}:Level")
+    await _identify(system, device, ctrl, load, st, ns_ids)
 
     pendant, slot_ids = await _pendant_object(server, ns, st)
     nodes = CellNodes(
         system=system, pendant=pendant, axes=axes,
         flange_mass=await _child(load, f"{rob}:Mass"),
+        flange_com_frame=await _child(load, f"{rob}:CenterOfMass"), flange_com_coords=com,
+        flange_inertia_vector=inertia,
         flange_com=tuple([await _child(com, f"0:{k}") for k in "XYZ"]),  # type: ignore[arg-type]
         flange_inertia=tuple([await _child(inertia, f"0:{k}") for k in "XYZ"]),  # type: ignore[arg-type]
         current_user=user,
@@ -186,6 +190,92 @@ async def add_cell(server: Server, ns_ids: tuple[int, int, int], st: ControllerS
     nodes.slots = {key: _slot_nodes(server, ids) for key, ids in slot_ids.items()}
     await update_cell(nodes, None, st)
     return nodes
+
+
+UNECE = "http://www.opcfoundation.org/UA/units/un/cefact"
+UNITS = {  # OPC 10000-8 §5.6.3: UNECE Rec. 20 codes, UnitId = the code's ASCII as an int
+    "deg": ua.EUInformation(NamespaceUri=UNECE, UnitId=17476, DisplayName=ua.LocalizedText("°"),
+                            Description=ua.LocalizedText("degree")),
+    "mm": ua.EUInformation(NamespaceUri=UNECE, UnitId=5066068, DisplayName=ua.LocalizedText("mm"),
+                           Description=ua.LocalizedText("millimetre")),
+    "kg": ua.EUInformation(NamespaceUri=UNECE, UnitId=4933453, DisplayName=ua.LocalizedText("kg"),
+                           Description=ua.LocalizedText("kilogram")),
+    "degC": ua.EUInformation(NamespaceUri=UNECE, UnitId=4408652, DisplayName=ua.LocalizedText("°C"),
+                             Description=ua.LocalizedText("degree Celsius")),
+}
+OPERATIONAL_MODE_T1 = 1  # OperationalModeEnumeration MANUAL_REDUCED_SPEED: a teach pendant's T1
+
+
+async def _identify(system: Node, device: Node, ctrl: Node, load: Node, st: ControllerState,
+                    ns_ids: tuple[int, int, int]) -> None:
+    """The mandatory values an emulated cell knows (the robot catalogue: maker and model;
+    pendant: the software; the emulator: T1, no stop, full speed), and ``BadNotReadable`` for
+    the rest (a motor's serial number, its temperature): never a Good Null."""
+    from importlib.metadata import PackageNotFoundError, version
+
+    di, rob, _ns = ns_ids
+    try:
+        revision = version("pendant")
+    except PackageNotFoundError:
+        revision = "unknown"
+    maker = st.robot_name.split()[0]
+    lt, s_ = ua.VariantType.LocalizedText, ua.VariantType.String
+    values: list[tuple[Node, object, ua.VariantType]] = [
+        (await _child(device, f"{di}:ProductCode"), st.robot_key, s_),
+        (await _child(device, f"{di}:SerialNumber"), f"emulated:{st.node_key}", s_),
+        (await _child(device, f"{di}:ParameterSet", f"{rob}:SpeedOverride"), 100.0,
+         ua.VariantType.Double),
+        (await _child(ctrl, f"{di}:Manufacturer"), ua.LocalizedText("pendant"), lt),
+        (await _child(ctrl, f"{di}:Model"), ua.LocalizedText(f"emulated {maker} controller"), lt),
+        (await _child(ctrl, f"{di}:ProductCode"), "pendant-emulator", s_),
+        (await _child(ctrl, f"{di}:SerialNumber"), f"emulated:{st.node_key}", s_),
+    ]
+    software = await _child(ctrl, f"{rob}:Software", f"{rob}:pendant")
+    values += [(await _child(software, f"{di}:Manufacturer"), ua.LocalizedText("pendant"), lt),
+               (await _child(software, f"{di}:Model"), ua.LocalizedText("pendant"), lt),
+               (await _child(software, f"{di}:SoftwareRevision"), revision, s_)]
+    task = await _child(ctrl, f"{rob}:TaskControls", f"{rob}:Calibration")
+    values += [(await _child(task, f"{di}:ComponentName"), ua.LocalizedText("Calibration"), lt),
+               (await _child(task, f"{di}:ParameterSet", f"{rob}:TaskProgramName"),
+                "calibration menus", s_),
+               (await _child(task, f"{di}:ParameterSet", f"{rob}:TaskProgramLoaded"), True,
+                ua.VariantType.Boolean)]
+    safety = await _child(system, f"{rob}:SafetyStates", f"{rob}:SafetyState", f"{di}:ParameterSet")
+    values += [(await _child(safety, f"{rob}:EmergencyStop"), False, ua.VariantType.Boolean),
+               (await _child(safety, f"{rob}:ProtectiveStop"), False, ua.VariantType.Boolean),
+               (await _child(safety, f"{rob}:OperationalMode"), OPERATIONAL_MODE_T1,
+                ua.VariantType.Int32),
+               (await _child(load, f"{rob}:Mass", "0:EngineeringUnits"), UNITS["kg"],
+                ua.VariantType.ExtensionObject)]
+    # the centre of mass frame's orientation: the flange's (the inertia is about its axes)
+    orient = await _child(load, f"{rob}:CenterOfMass", "0:Orientation")
+    values += [(orient, ua.ThreeDOrientation(), ua.VariantType.ExtensionObject)]
+    values += [(await _child(orient, f"0:{k}"), 0.0, ua.VariantType.Double) for k in "ABC"]
+    for i in range(len(st.joints_deg)):
+        motor = await _child(device, f"{rob}:PowerTrains", f"{rob}:PT{i + 1}", f"{rob}:Motor")
+        values += [(await _child(motor, f"{di}:Manufacturer"), ua.LocalizedText(maker), lt),
+                   (await _child(motor, f"{di}:Model"),
+                    ua.LocalizedText(f"{st.robot_name} A{i + 1} motor"), lt),
+                   (await _child(motor, f"{di}:ParameterSet", f"{rob}:MotorTemperature",
+                                 "0:EngineeringUnits"), UNITS["degC"],
+                    ua.VariantType.ExtensionObject)]
+    for node, value, variant in values:
+        await _set(node, value, variant)
+    await _no_good_nulls(system)
+
+
+async def _no_good_nulls(node: Node) -> None:
+    """Every variable below ``node`` still Null reads ``BadNotReadable`` (the emulator does
+    not know it: a motor's serial number, its temperature)."""
+    for child in await node.get_children(refs=ua.ObjectIds.HierarchicalReferences):
+        cls = await child.read_node_class()
+        if cls == ua.NodeClass.Variable:
+            dv = await child.read_data_value(raise_on_bad_status=False)
+            if dv.Value is None or dv.Value.Value is None:
+                await child.write_value(ua.DataValue(
+                    StatusCode=ua.StatusCode(ua.StatusCodes.BadNotReadable)))
+        if cls in (ua.NodeClass.Object, ua.NodeClass.Variable):
+            await _no_good_nulls(child)
 
 
 async def _pendant_object(server: Server, ns: int, st: ControllerState
@@ -307,6 +397,7 @@ async def update_cell(nodes: CellNodes, old: ControllerState | None, new: Contro
     """Write the values that differ between ``old`` and ``new``; returns how many were written."""
     writes: list[tuple[Node, object, ua.VariantType]] = []
     dbl, s_, i32 = ua.VariantType.Double, ua.VariantType.String, ua.VariantType.Int32
+    ext = ua.VariantType.ExtensionObject
     for i, q in enumerate(new.joints_deg):
         if old is None or old.joints_deg[i] != q:
             writes.append((nodes.axes[i], q, dbl))
@@ -323,6 +414,12 @@ async def update_cell(nodes: CellNodes, old: ControllerState | None, new: Contro
         com = tool_new.com_mm if tool_new else (0.0, 0.0, 0.0)
         inertia = tool_new.inertia_kgm2 if tool_new else (0.0, 0.0, 0.0)
         writes.append((nodes.flange_mass, mass, dbl))
+        coords = ua.ThreeDCartesianCoordinates(X=com[0], Y=com[1], Z=com[2])
+        writes += [(nodes.flange_com_frame, ua.ThreeDFrame(
+                        CartesianCoordinates=coords, Orientation=ua.ThreeDOrientation()), ext),
+                   (nodes.flange_com_coords, coords, ext),
+                   (nodes.flange_inertia_vector,
+                    ua.ThreeDVector(X=inertia[0], Y=inertia[1], Z=inertia[2]), ext)]
         writes += [(n, v, dbl) for n, v in zip(nodes.flange_com, com)]
         writes += [(n, v, dbl) for n, v in zip(nodes.flange_inertia, inertia)]
     if old is None or old.sessions != new.sessions:

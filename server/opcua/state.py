@@ -56,6 +56,7 @@ class ControllerState:
     name: str
     created_at: str  # the row's creation time, UTC, as YYYYMMDDTHHMMSSffffffZ
     robot_name: str
+    robot_key: str  # solvers.robots.ROBOTS key, "custom" for a custom DH table
     joints_deg: tuple[float, ...]
     joint_limits_deg: tuple[tuple[float, float], ...]
     active_tool_no: int
@@ -106,6 +107,7 @@ def controller_state(db: Session, c: Controller) -> ControllerState:
                       .order_by(AuditRecord.id.desc()).limit(1)).first()
     return ControllerState(
         id=c.id, name=c.name, robot_name=robot.name,
+        robot_key="custom" if c.custom_robot else (c.robot_key or "kuka_kr6_r900_sixx"),
         created_at=c.created_at.strftime("%Y%m%dT%H%M%S%fZ"),
         current_user=(last[1] or "") if last else "",
         joints_deg=tuple(float(q) for q in c.joints_deg),
