@@ -196,3 +196,25 @@ def test_no_variable_is_a_good_null(cell: dict) -> None:
     assert known["Model"].Text == "KUKA KR 6 R900 sixx"
     assert known["ProductCode"] == "kuka_kr6_r900_sixx"
     assert isinstance(known["com"], ua.ThreeDFrame) and isinstance(known["inertia"], ua.ThreeDVector)
+
+
+def test_frames_carry_units_rotation_order_and_source_timestamps(cell: dict) -> None:
+    async def body(client: Client, ns: dict) -> dict:
+        frame = await client.nodes.objects.get_child([
+            f"{ns['pendant']}:Pendant", f"{ns['pendant']}:cell-1", f"{ns['pendant']}:Tools",
+            f"{ns['pendant']}:Tool1", f"{ns['pendant']}:Frame"])
+        coords = await frame.get_child(["0:CartesianCoordinates"])
+        orient = await frame.get_child(["0:Orientation"])
+        x = await coords.get_child(["0:X"])
+        return {"length": await (await coords.get_child(["0:LengthUnit"])).read_value(),
+                "angle": await (await orient.get_child(["0:AngleUnit"])).read_value(),
+                "order": (await orient.read_description()).Text,
+                "x_time": (await x.read_data_value()).SourceTimestamp,
+                "namespaces": await client.get_namespace_array()}
+
+    got = on_client(cell, body)
+    assert (got["length"].DisplayName.Text, got["length"].UnitId) == ("mm", 5066068)  # MMT
+    assert (got["angle"].DisplayName.Text, got["angle"].UnitId) == ("°", 17476)  # DD
+    assert "A about X" in got["order"] and "Rz(C) Ry(B) Rx(A)" in got["order"]
+    assert got["x_time"] is not None
+    assert "urn:pendant:opcua" in got["namespaces"]

@@ -15,6 +15,7 @@ rotation, see :func:`opc_orientation`). docs/opcua.md has the tree.
 from __future__ import annotations
 
 import json
+from datetime import datetime, timezone
 from dataclasses import dataclass, field
 from pathlib import Path
 
@@ -127,7 +128,9 @@ async def remove(node: Node) -> None:
 
 
 async def _set(node: Node, value: object, variant: ua.VariantType) -> None:
-    await node.write_value(ua.DataValue(ua.Variant(value, variant)))
+    """Write a value with its SourceTimestamp (when the face saw it in the database)."""
+    await node.write_value(ua.DataValue(ua.Variant(value, variant),
+                                        SourceTimestamp=datetime.now(timezone.utc)))
 
 
 async def add_cell(server: Server, ns_ids: tuple[int, int, int], st: ControllerState) -> CellNodes:
@@ -203,6 +206,9 @@ UNITS = {  # OPC 10000-8 §5.6.3: UNECE Rec. 20 codes, UnitId = the code's ASCII
     "degC": ua.EUInformation(NamespaceUri=UNECE, UnitId=4408652, DisplayName=ua.LocalizedText("°C"),
                              Description=ua.LocalizedText("degree Celsius")),
 }
+ORIENTATION_ORDER = ("A about X (roll), B about Y (pitch), C about Z (yaw), degrees; "
+                     "R = Rz(C) Ry(B) Rx(A), intrinsic z-y'-x'' (OPC 10000-5 12.29). "
+                     "KUKA's A is this C, KUKA's C this A.")
 OPERATIONAL_MODE_T1 = 1  # OperationalModeEnumeration MANUAL_REDUCED_SPEED: a teach pendant's T1
 
 
@@ -323,14 +329,27 @@ class NodeBatch:
 
     def var(self, parent: ua.NodeId, name: str, value: object, variant: ua.VariantType,
             data_type: int, type_def: int = ua.ObjectIds.BaseDataVariableType,
-            name_ns: int | None = None) -> ua.NodeId:
+            name_ns: int | None = None, description: str = "") -> ua.NodeId:
         attrs = ua.VariableAttributes(
             DisplayName=ua.LocalizedText(name), Value=ua.Variant(value, variant),
+            Description=ua.LocalizedText(description or name),
             DataType=ua.NodeId(data_type), ValueRank=ua.ValueRank.Scalar,
             AccessLevel=ua.AccessLevel.CurrentRead.mask,
             UserAccessLevel=ua.AccessLevel.CurrentRead.mask)
         return self._add(parent, name, ua.NodeClass.Variable, attrs, type_def,
                          ua.ObjectIds.HasComponent, name_ns)
+
+    def prop(self, parent: ua.NodeId, name: str, value: object, data_type: int) -> ua.NodeId:
+        """A property (HasProperty, PropertyType) in namespace 0's browse names, as the
+        standard types declare them (LengthUnit, AngleUnit)."""
+        attrs = ua.VariableAttributes(
+            DisplayName=ua.LocalizedText(name),
+            Value=ua.Variant(value, ua.VariantType.ExtensionObject),
+            DataType=ua.NodeId(data_type), ValueRank=ua.ValueRank.Scalar,
+            AccessLevel=ua.AccessLevel.CurrentRead.mask,
+            UserAccessLevel=ua.AccessLevel.CurrentRead.mask)
+        return self._add(parent, name, ua.NodeClass.Variable, attrs, ua.ObjectIds.PropertyType,
+                         ua.ObjectIds.HasProperty, 0)
 
     def _add(self, parent: ua.NodeId, name: str, cls: ua.NodeClass, attrs: object, type_def: int,
              ref: int, name_ns: int | None = None, node_id: str | None = None) -> ua.NodeId:
@@ -360,7 +379,9 @@ def _add_slot(batch: NodeBatch, folder: ua.NodeId, s: SlotState) -> dict[str, ua
                        O.ThreeDCartesianCoordinatesType, name_ns=0)
     orient = batch.var(frame, "Orientation", _frame_value(s.pose).Orientation,
                        ua.VariantType.ExtensionObject, O.ThreeDOrientation,
-                       O.ThreeDOrientationType, name_ns=0)
+                       O.ThreeDOrientationType, name_ns=0, description=ORIENTATION_ORDER)
+    batch.prop(coords, "LengthUnit", UNITS["mm"], O.EUInformation)  # CartesianCoordinatesType
+    batch.prop(orient, "AngleUnit", UNITS["deg"], O.EUInformation)  # OrientationType
     ids = {"frame": frame, "coords": coords, "orient": orient}
     for k in "XYZ":
         ids[k] = batch.var(coords, k, 0.0, D, O.Double, name_ns=0)
