@@ -281,9 +281,10 @@ def test_serve_with_an_opcua_port_starts_the_face_beside_the_rest_service(tmp_pa
     mes = client_certificate(tmp_path / "mes")
     assert main(["opcua", "trust", mes.cert, "--db", db_url]) == 0  # the face's own PKI folder
     assert default_pki_dir(db_url) == tmp_path / "pendant.db-opcua-pki"
+    log = tmp_path / "serve.log"
     proc = subprocess.Popen([sys.executable, "-m", "server.cli", "serve", "--port", str(rest_port),
                              "--opcua-port", str(ua_port), "--db", db_url, "--job-workers", "0"],
-                            stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL, env=env)
+                            stdout=subprocess.DEVNULL, stderr=log.open("w"), env=env)
 
     async def a1() -> float:
         deadline = time.monotonic() + 120
@@ -309,6 +310,10 @@ def test_serve_with_an_opcua_port_starts_the_face_beside_the_rest_service(tmp_pa
         joints = httpx.get(f"http://127.0.0.1:{rest_port}/controllers/1/robot",
                            headers={"Authorization": f"Bearer {ADMIN_TOKEN}"}).json()["joints_deg"]
         assert value == pytest.approx(joints[1])
+        assert f"pendant OPC UA server ready at opc.tcp://127.0.0.1:{ua_port}/pendant/" in \
+            log.read_text()  # the OPC UA port opens after REST's: the log says when
+        pki = tmp_path / "pendant.db-opcua-pki"
+        assert oct(pki.stat().st_mode & 0o777) == "0o700"
     finally:
         proc.terminate()
         proc.wait(timeout=20)

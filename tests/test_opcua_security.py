@@ -390,3 +390,22 @@ def test_by_default_only_the_encrypted_endpoint(cell: dict, tmp_path: Path) -> N
             asyncio.run(none_session())
     finally:
         face.stop()
+
+
+def test_an_operator_may_call_get_monitored_items(cell: dict) -> None:
+    """A standard method that only reads needs frames:read, as reading does: an Operator's
+    GetMonitoredItems passes the access check (asyncua has no implementation behind it and
+    answers BadNothingToDo; before, the face refused it with BadUserAccessDenied)."""
+    token = user(cell, "ozzy", "Operator")
+
+    async def body() -> None:
+        client = await secure_client(cell["face"].endpoint, cell["face"].client, "ozzy", token)
+        async with client:
+            sub = await client.create_subscription(100, None)
+            await sub.subscribe_data_change(client.nodes.server_state)
+            await client.nodes.server.call_method(
+                "0:GetMonitoredItems", ua.Variant(sub.subscription_id, ua.VariantType.UInt32))
+
+    with pytest.raises(ua.UaStatusCodeError) as err:
+        asyncio.run(body())
+    assert codes(err) == ua.StatusCodes.BadNothingToDo

@@ -199,6 +199,9 @@ class PendantOpcUa:
                 if cid not in new or new[cid].node_key != self.states[cid].node_key}
         for cid in gone:  # deleted controllers leave the space (an id made again: a new one)
             nodes = self.cells.pop(cid)
+            for method_id in [m for m in self.rules.method_names
+                              if str(m.Identifier).startswith(f"{nodes.pendant.nodeid.Identifier}.")]:
+                del self.rules.method_names[method_id]
             await space.remove(nodes.system)
             await space.remove(nodes.pendant)
             self.states.pop(cid)
