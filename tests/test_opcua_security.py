@@ -58,18 +58,32 @@ def codes(err: pytest.ExceptionInfo) -> int:
 
 # 1. a public certificate is no login -------------------------------------------------------
 
-def test_a_channel_certificate_on_the_none_endpoint_is_no_login(cell: dict, tmp_path: Path) -> None:
+def test_a_channel_certificate_on_the_none_endpoint_is_no_login(
+        cell: dict, tmp_path: Path, monkeypatch: pytest.MonkeyPatch) -> None:
     """The registered user's certificate (public data) presented when opening a None channel,
     with an Anonymous token: before, the face logged in as that user."""
+    from asyncua.common.connection import MessageChunk
+
     from server.cli import main
 
     victim = client_certificate(tmp_path, "victim-cell")
     ok(cell["rest"].post("/users", json={"name": "victim", "role": "Expert"}))
     assert main(["users", "cert", "victim", victim.cert, "--db", cell["db_url"]]) == 0
 
+    to_chunks = MessageChunk.message_to_chunks
+
+    def with_sender_certificate(policy, body, size, message_type=ua.MessageType.SecureMessage,  # noqa: ANN001, ANN202
+                                *args, **kwargs):  # noqa: ANN002, ANN003
+        chunks = to_chunks(policy, body, size, message_type, *args, **kwargs)
+        if message_type == ua.MessageType.SecureOpen:  # asyncua sends none on None: the attacker does
+            chunks[0].SecurityHeader.SenderCertificate = victim.der()
+        return chunks
+
+    monkeypatch.setattr(MessageChunk, "message_to_chunks", staticmethod(with_sender_certificate))
+
     async def attack() -> object:
         client = Client(cell["face"].endpoint, timeout=10)
-        client.security_policy.host_certificate = victim.der()  # sent as SenderCertificate
+        client.security_policy.host_certificate = victim.der()  # CreateSession's ClientCertificate
         async with client:
             ns = await namespaces(client)
             return await (await pendant_obj(client, ns)).call_method(
@@ -409,3 +423,21 @@ def test_an_operator_may_call_get_monitored_items(cell: dict) -> None:
     with pytest.raises(ua.UaStatusCodeError) as err:
         asyncio.run(body())
     assert codes(err) == ua.StatusCodes.BadNothingToDo
+
+
+def test_the_no_auth_demo_on_loopback_serves_anonymous_on_the_none_endpoint(
+        cell: dict, tmp_path: Path) -> None:
+    """`--no-auth --none-endpoint` on loopback: an anonymous client without a certificate
+    reads a frame (the demo); a password still never travels on that endpoint."""
+    face = start_face(cell["rest"].app.state.sessionmaker, tmp_path, auth=False,
+                      none_endpoint=True)
+    try:
+        async def read() -> str:
+            async with Client(face.endpoint, timeout=10) as client:
+                ns = await namespaces(client)
+                return (await (await pendant_obj(client, ns)).call_method(
+                    f"{ns['pendant']}:ReadFrame", "tool", 1))[1]
+
+        assert asyncio.run(read()) == "tool"
+    finally:
+        face.stop()
