@@ -100,6 +100,72 @@ def test_node_opcua_with_a_users_public_certificate_is_refused(cell: dict, tmp_p
     assert own == {"ok": "Server"}
 
 
+class Subscriber:
+    """client.js subscribed to ``path``: its JSON lines, as they come, with their times."""
+
+    def __init__(self, spec: dict) -> None:
+        self.proc = subprocess.Popen([NODE, "client.js", json.dumps(spec)], cwd=NODE_DIR,
+                                     stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
+        self.lines: queue.Queue[tuple[float, dict]] = queue.Queue()
+        threading.Thread(target=self._pump, daemon=True).start()
+
+    def _pump(self) -> None:
+        for line in self.proc.stdout:  # type: ignore[union-attr]
+            if line.startswith("{"):
+                self.lines.put((time.monotonic(), json.loads(line)))
+
+    def wait_for(self, pred, timeout: float) -> tuple[float, dict] | None:  # noqa: ANN001
+        deadline = time.monotonic() + timeout
+        while time.monotonic() < deadline:
+            try:
+                t, msg = self.lines.get(timeout=0.2)
+            except queue.Empty:
+                continue
+            if pred(msg):
+                return t, msg
+        return None
+
+    def request_rate(self, seconds: int = 4) -> float:
+        """Requests per second the client made, from its counter printed each second."""
+        counts = [self.wait_for(lambda m: "requests" in m, 5) for _ in range(seconds)]
+        assert all(counts), "the client stopped printing its counter"
+        (t0, first), (t1, last) = counts[0], counts[-1]  # type: ignore[misc]
+        return (last["requests"] - first["requests"]) / (t1 - t0)
+
+    def stop(self) -> None:
+        self.proc.terminate()
+        self.proc.wait(timeout=10)
+
+
+def tool3_name(cell: dict, user: str, password: str) -> dict:
+    return {**cell["spec"], "user": user, "password": password, "action": "subscribe",
+            "path": [f"{PENDANT_URI}|Pendant", f"{PENDANT_URI}|cell-1", f"{PENDANT_URI}|Tools",
+                     f"{PENDANT_URI}|Tool3", f"{PENDANT_URI}|Name"]}
+
+
+def test_a_revoked_login_ends_node_opcuas_session_without_a_storm(cell: dict) -> None:
+    """Revoked while subscribed: no more data, and the client is told its session ended
+    (refusing each Publish made node-opcua resend at once, thousands a second)."""
+    from server.auth import tokens
+
+    ok(cell["rest"].post("/users", json={"name": "rita", "role": "Expert"}))
+    made = ok(cell["rest"].post("/users/rita/tokens", json={}))
+    sub = Subscriber(tool3_name(cell, "rita", made["token"]))
+    try:
+        assert sub.wait_for(lambda m: m.get("event") == "subscribed", 60), "never subscribed"
+        with cell["rest"].app.state.sessionmaker() as db:
+            (t,) = [t for t in tokens.list_tokens(db)
+                    if t.token_sha256 == tokens.sha256(made["token"])]
+            tokens.revoke_token(db, t.id)
+            db.commit()
+        ok(edit_slot(cell["rest"], f"{C}/tools/3", {"name": "after-revoke"}))
+        assert sub.wait_for(lambda m: m.get("value") == "after-revoke", 3) is None
+        rate = sub.request_rate()
+        assert rate < 50, f"{rate:.0f} requests/s after the revoke: a request storm"
+    finally:
+        sub.stop()
+
+
 def test_node_opcua_gets_data_again_after_the_face_restarts(cell: dict) -> None:
     """Subscribed, the face restarted: the change made after the restart arrives within
     10 s, and the client does not spin (issue 20 saw ~2,500 requests/s forever)."""

@@ -269,11 +269,11 @@ class PendantRules(PermissionRuleset):
     iserver: Any = None  # for the owners of subscriptions
     _cache: dict[str, tuple[float, Caller | None]] = field(default_factory=dict)
 
-    def caller(self, secret: str) -> Caller | None:
-        """The login's user, role and permissions now (cached ``ttl_s``); None if its token or
-        user was revoked, or expired."""
+    def caller(self, secret: str, fresh: bool = False) -> Caller | None:
+        """The login's user, role and permissions now (cached ``ttl_s`` unless ``fresh``);
+        None if its token or user was revoked, or expired."""
         hit = self._cache.get(secret)
-        if hit is not None and time.monotonic() - hit[0] < self.ttl_s:
+        if not fresh and hit is not None and time.monotonic() - hit[0] < self.ttl_s:
             return hit[1]
         with self.make_session() as db:
             found = tokens.actor_of_token(db, secret)
@@ -283,6 +283,11 @@ class PendantRules(PermissionRuleset):
             self._cache.clear()
         self._cache[secret] = (time.monotonic(), caller)
         return caller
+
+    def revoked(self, user: User | None) -> bool:
+        """Whether the session's login no longer holds (its token or user revoked, expired)."""
+        secret = getattr(user, "secret", None)
+        return self.auth and bool(secret) and self.caller(secret) is None
 
     def needs(self, action_type: ua.NodeId, body: Any) -> set[str]:
         """What the request needs; ``body`` is the undecoded request (asyncua's Buffer), so a

@@ -66,12 +66,21 @@ async def _same_as_channel(cert: x509.Certificate, _app: ua.ApplicationDescripti
 
 class SessionProcessor(UaProcessor):
     """A request on a channel without a (valid) session gets ``BadSessionIdInvalid``, as OPC
-    10000-4 §7.29 has it, so a client makes a new session. asyncua answers
+    10000-4 §7.29 has it, so a client makes a new session; a session whose login was revoked
+    is closed at its next request and answered the same. asyncua answers
     ``BadUserAccessDenied``: after a restart of the face, node-opcua then resent its
     Publish requests at once, forever (thousands a second)."""
 
     async def _process_message(self, typeid, requesthdr, seqhdr, body):  # noqa: ANN001, ANN202
         if self.session is None and typeid not in access.SESSIONLESS_TYPES:
+            raise ServiceError(ua.StatusCodes.BadSessionIdInvalid)
+        rules = self._connection.security_policy.permissions
+        if self.session is not None and typeid not in access.SESSION_TYPES and \
+                isinstance(rules, access.PendantRules) and rules.revoked(self.session.user):
+            # the login's token or user was revoked (or expired): the session ends, its
+            # subscriptions with it (refusing each request made node-opcua resend at once)
+            await self.session.close_session(True)
+            self.session = None
             raise ServiceError(ua.StatusCodes.BadSessionIdInvalid)
         return await super()._process_message(typeid, requesthdr, seqhdr, body)
 
@@ -191,8 +200,27 @@ class PendantOpcUa:
             except Exception:  # a DB hiccup must not end the face; say it and poll again
                 log.exception("OPC UA poll of the database failed")
 
+    async def end_revoked_sessions(self) -> int:
+        """Close every session whose login was revoked or expired (its subscriptions with it:
+        no more data goes out); returns how many. Run before each poll's writes."""
+        sessions = [s for s in list(self.server.iserver._external_sessions.values())
+                    if getattr(s.user, "secret", None)]
+        if not sessions or not self.auth:
+            return 0
+        gone = await asyncio.to_thread(
+            lambda: {s.user.secret for s in sessions if self.rules.caller(s.user.secret, fresh=True) is None})
+        ended = 0
+        for s in sessions:
+            if s.user.secret in gone:
+                log.warning("OPC UA: the login of %s was revoked or expired: session ended",
+                            s.user.name)
+                await s.close_session(True)  # and asyncua forgets it
+                ended += 1
+        return ended
+
     async def sync(self) -> int:
         """Read every controller from the database and update the address space; returns writes."""
+        await self.end_revoked_sessions()
         new = await asyncio.to_thread(read_cells, self.make_session)
         writes = 0
         gone = {cid for cid in self.states
