@@ -12,13 +12,13 @@ from pathlib import Path
 
 from asyncua import Client, ua
 from asyncua.crypto.security_policies import SecurityPolicyBasic256Sha256
+from browser_helpers import free_port
 from cryptography import x509
 from cryptography.hazmat.primitives import hashes
 from cryptography.hazmat.primitives.asymmetric import rsa
 from cryptography.hazmat.primitives.serialization import Encoding, NoEncryption, PrivateFormat
 from cryptography.x509.oid import ExtendedKeyUsageOID, NameOID
 
-from browser_helpers import free_port
 from server.opcua import pki
 from server.opcua.service import PendantOpcUa
 from server.opcua.space import DI_URI, PENDANT_URI, ROBOTICS_URI
@@ -44,7 +44,7 @@ def client_certificate(folder: Path, name: str = "mes-client", uri: str = CLIENT
     key = rsa.generate_private_key(public_exponent=65537, key_size=2048)
     subject = x509.Name([x509.NameAttribute(NameOID.COMMON_NAME, name),
                          x509.NameAttribute(NameOID.ORGANIZATION_NAME, "pendant tests")])
-    start = dt.datetime.now(dt.timezone.utc) + dt.timedelta(days=valid_from_days)
+    start = dt.datetime.now(dt.UTC) + dt.timedelta(days=valid_from_days)
     cert = (x509.CertificateBuilder().subject_name(subject).issuer_name(subject)
             .public_key(key.public_key()).serial_number(x509.random_serial_number())
             .not_valid_before(start).not_valid_after(start + dt.timedelta(days=valid_days))
@@ -81,7 +81,7 @@ class Face:
     def endpoint(self) -> str:
         return self.server.endpoint
 
-    def run(self, coro, timeout: float = 120):  # noqa: ANN001, ANN201
+    def run(self, coro, timeout: float = 120):
         """Run ``coro`` on the face's loop (its address space is not thread-safe)."""
         return asyncio.run_coroutine_threadsafe(coro, self.loop).result(timeout=timeout)
 
@@ -101,8 +101,8 @@ class Face:
         self.thread.join(timeout=10)
 
 
-def start_face(make_session, folder: Path, port: int | None = None,  # noqa: ANN001
-               **kwargs) -> Face:  # noqa: ANN003
+def start_face(make_session, folder: Path, port: int | None = None,
+               **kwargs) -> Face:
     """The face on ``make_session``'s database, its PKI in ``folder/pki`` with one trusted
     client certificate (``face.client``)."""
     loop = asyncio.new_event_loop()

@@ -16,13 +16,13 @@ from collections.abc import Callable, Iterator
 
 import numpy as np
 import pytest
-from asyncua import Client, Node, ua
-from scipy.spatial.transform import Rotation
-
 from api_helpers import ADMIN_TOKEN, C, edit_slot, make_client, ok
+from asyncua import Client, Node, ua
 from browser_helpers import free_port
 from opcua_helpers import client_certificate, namespaces, secure_client, start_face
-from server.opcua.pki import default_pki_dir, trust
+from scipy.spatial.transform import Rotation
+
+from server.opcua.pki import default_pki_dir
 from server.opcua.space import PENDANT_URI
 
 MANDATORY = ua.NodeId(ua.ObjectIds.ModellingRule_Mandatory)
@@ -53,7 +53,7 @@ def face(tmp_path_factory: pytest.TempPathFactory) -> Iterator[dict]:
     logging.getLogger("asyncua").removeHandler(logs)
 
 
-def on_client(face: dict, body, user: str | None = "admin",  # noqa: ANN001
+def on_client(face: dict, body, user: str | None = "admin",
               password: str | None = ADMIN_TOKEN) -> object:
     """Run ``body(client, ns)`` with an asyncua Client on the encrypted endpoint, logged in as
     ``user`` (the first Administrator by default; None: anonymous); ns = {di, rob, pendant}."""
@@ -64,7 +64,7 @@ def on_client(face: dict, body, user: str | None = "admin",  # noqa: ANN001
     return asyncio.run(run())
 
 
-def poll(face: dict, body, settled: Callable[[object], bool],  # noqa: ANN001
+def poll(face: dict, body, settled: Callable[[object], bool],
          timeout_s: float = 15.0) -> object:
     """``on_client(face, body)`` every 0.1 s until ``settled(outcome)`` or ``timeout_s`` ran out:
     the server takes a REST change from the database at its next poll (every 0.1 s here, later
@@ -143,7 +143,7 @@ def test_a_rest_change_reaches_a_subscribed_client_within_a_second(face: dict) -
         def __init__(self) -> None:
             self.seen: list[tuple[float, object]] = []
 
-        def datachange_notification(self, node, val, data) -> None:  # noqa: ANN001
+        def datachange_notification(self, node, val, data) -> None:
             self.seen.append((time.monotonic(), val))
 
     async def body(client: Client, ns: dict) -> float:
@@ -266,7 +266,7 @@ def test_instances_have_every_mandatory_child_of_their_types(face: dict) -> None
         assert expected in " ".join(checked), expected
 
 
-def test_serve_with_an_opcua_port_starts_the_face_beside_the_rest_service(tmp_path) -> None:  # noqa: ANN001
+def test_serve_with_an_opcua_port_starts_the_face_beside_the_rest_service(tmp_path) -> None:
     """``pendant serve --opcua-port``: both faces as processes on one SQLite file."""
     import subprocess
     import sys
@@ -300,7 +300,7 @@ def test_serve_with_an_opcua_port_starts_the_face_beside_the_rest_service(tmp_pa
                                                 f"{ns['di']}:ParameterSet",
                                                 f"{ns['rob']}:ActualPosition"])
                     return await node.read_value()
-            except (OSError, asyncio.TimeoutError, ua.UaError):
+            except (TimeoutError, OSError, ua.UaError):
                 if time.monotonic() > deadline:
                     raise
                 await asyncio.sleep(0.5)
@@ -324,7 +324,7 @@ def test_a_frame_committed_over_rest_arrives_as_an_opcua_event(face: dict) -> No
         def __init__(self) -> None:
             self.events: list[tuple[float, object]] = []
 
-        def event_notification(self, event) -> None:  # noqa: ANN001
+        def event_notification(self, event) -> None:
             self.events.append((time.monotonic(), event))
 
     async def body(client: Client, ns: dict) -> tuple[float, object]:
@@ -447,7 +447,7 @@ def test_a_stale_version_is_refused_and_a_bad_frame_is_a_bad_argument(face: dict
 
 
 def test_a_registered_certificate_logs_in_over_the_encrypted_endpoint(face: dict,
-                                                                    tmp_path) -> None:  # noqa: ANN001
+                                                                    tmp_path) -> None:
     from server.cli import main
 
     user_cert = client_certificate(tmp_path / "user", "mes-cell-3")
@@ -456,7 +456,7 @@ def test_a_registered_certificate_logs_in_over_the_encrypted_endpoint(face: dict
     assert main(["users", "cert", "mes-cell-3", user_cert.cert, "--db", face["db_url"]]) == 0
     version = int(face["rest"].get(f"{C}/tools/11").headers["ETag"].strip('W/"'))
 
-    async def login(identity) -> int:  # noqa: ANN001
+    async def login(identity) -> int:
         client = await secure_client(face["server"].endpoint, face["cert"], identity=identity)
         async with client:
             ns = {"pendant": await client.get_namespace_index(PENDANT_URI)}

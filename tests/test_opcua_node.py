@@ -18,11 +18,11 @@ from collections.abc import Iterator
 from pathlib import Path
 
 import pytest
+from api_helpers import ADMIN_TOKEN, C, edit_slot, make_client, ok
 from cryptography import x509
 from cryptography.hazmat.primitives.serialization import Encoding
-
-from api_helpers import ADMIN_TOKEN, C, edit_slot, make_client, ok
 from opcua_helpers import ClientCert, client_certificate, start_face
+
 from server.opcua.space import PENDANT_URI
 
 NODE_DIR = Path(__file__).resolve().parent / "opcua_node"
@@ -59,7 +59,7 @@ def cell(tmp_path_factory: pytest.TempPathFactory) -> Iterator[dict]:
 def node(spec: dict, timeout: float = 60) -> list[dict]:
     """Run client.js with ``spec``; its JSON lines."""
     r = subprocess.run([NODE, "client.js", json.dumps(spec)], cwd=NODE_DIR, capture_output=True,
-                       text=True, timeout=timeout)
+                       text=True, timeout=timeout, check=False)
     lines = [json.loads(x) for x in r.stdout.splitlines() if x.startswith("{")]
     assert lines, f"node client printed nothing (rc {r.returncode}): {r.stderr[-2000:]}"
     return lines
@@ -114,7 +114,7 @@ class Subscriber:
             if line.startswith("{"):
                 self.lines.put((time.monotonic(), json.loads(line)))
 
-    def wait_for(self, pred, timeout: float) -> tuple[float, dict] | None:  # noqa: ANN001
+    def wait_for(self, pred, timeout: float) -> tuple[float, dict] | None:
         deadline = time.monotonic() + timeout
         while time.monotonic() < deadline:
             try:
@@ -183,7 +183,7 @@ def test_node_opcua_gets_data_again_after_the_face_restarts(cell: dict) -> None:
 
     threading.Thread(target=pump, daemon=True).start()
 
-    def wait_for(pred, timeout: float) -> tuple[float, dict] | None:  # noqa: ANN001
+    def wait_for(pred, timeout: float) -> tuple[float, dict] | None:
         deadline = time.monotonic() + timeout
         while time.monotonic() < deadline:
             try:

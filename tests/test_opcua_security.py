@@ -18,12 +18,12 @@ from collections.abc import Iterator
 from pathlib import Path
 
 import pytest
+from api_helpers import ADMIN_TOKEN, C, make_client, ok
 from asyncua import Client, ua
 from asyncua.crypto.security_policies import SecurityPolicyBasic256Sha256
-
-from api_helpers import ADMIN_TOKEN, C, make_client, ok
 from browser_helpers import free_port
 from opcua_helpers import Face, client_certificate, namespaces, secure_client, start_face
+
 from server.auth import tokens
 from server.opcua.pki import KEY_NAME
 from server.opcua.service import PendantOpcUa
@@ -47,7 +47,7 @@ def user(cell: dict, name: str, role: str) -> str:
     return ok(cell["rest"].post(f"/users/{name}/tokens", json={}))["token"]
 
 
-async def pendant_obj(client: Client, ns: dict):  # noqa: ANN201
+async def pendant_obj(client: Client, ns: dict):
     return await client.nodes.objects.get_child([f"{ns['pendant']}:Pendant",
                                                  f"{ns['pendant']}:cell-1"])
 
@@ -72,8 +72,8 @@ def test_a_channel_certificate_on_the_none_endpoint_is_no_login(
 
     to_chunks = MessageChunk.message_to_chunks
 
-    def with_sender_certificate(policy, body, size, message_type=ua.MessageType.SecureMessage,  # noqa: ANN001, ANN202
-                                *args, **kwargs):  # noqa: ANN002, ANN003
+    def with_sender_certificate(policy, body, size, message_type=ua.MessageType.SecureMessage,
+                                *args, **kwargs):
         chunks = to_chunks(policy, body, size, message_type, *args, **kwargs)
         if message_type == ua.MessageType.SecureOpen:  # asyncua sends none on None: the attacker does
             chunks[0].SecurityHeader.SenderCertificate = victim.der()
@@ -104,7 +104,7 @@ def test_an_x509_token_without_a_signature_is_refused(cell: dict, tmp_path: Path
     assert main(["users", "cert", "victim2", victim.cert, "--db", cell["db_url"]]) == 0
 
     class NoProof(Client):
-        def _add_certificate_auth(self, params, certificate, challenge, chain=None):  # noqa: ANN001
+        def _add_certificate_auth(self, params, certificate, challenge, chain=None):
             super()._add_certificate_auth(params, certificate, challenge, chain)
             params.UserTokenSignature = ua.SignatureData()
 
@@ -129,7 +129,7 @@ def test_an_x509_token_without_a_signature_is_refused(cell: dict, tmp_path: Path
 class PlainPassword(Client):
     """Sends the password as plaintext, whatever the endpoint's token policy asks."""
 
-    def _add_user_auth(self, params, username, password):  # noqa: ANN001
+    def _add_user_auth(self, params, username, password):
         params.UserIdentityToken = ua.UserNameIdentityToken(
             UserName=username, Password=password.encode(), EncryptionAlgorithm=None,
             PolicyId=self.server_policy(ua.UserTokenType.UserName).PolicyId)
@@ -140,7 +140,7 @@ class Replayer(Client):
 
     captured: ua.UserNameIdentityToken | None = None
 
-    def _add_user_auth(self, params, username, password):  # noqa: ANN001
+    def _add_user_auth(self, params, username, password):
         if Replayer.captured is None:
             super()._add_user_auth(params, username, password)
             Replayer.captured = params.UserIdentityToken
@@ -187,7 +187,7 @@ def test_no_password_or_certificate_login_on_the_none_endpoint(cell: dict) -> No
     assert pw.SecurityPolicyUri == SecurityPolicyBasic256Sha256.URI  # encrypted with the nonce
 
     class PlainOnNone(PlainPassword):
-        def server_policy(self, token_type):  # noqa: ANN001
+        def server_policy(self, token_type):
             return ua.UserTokenPolicy(PolicyId="username", TokenType=token_type)
 
     async def plain_on_none() -> None:
@@ -343,7 +343,7 @@ def test_expired_and_not_yet_valid_certificates_are_refused(cell: dict, tmp_path
         # placed in the trust list by hand: the channel is still refused
         (cell["face"].pki / "trusted" / Path(cert.cert).name).write_bytes(cert.der())
 
-        async def read(cert=cert) -> str:  # noqa: ANN001
+        async def read(cert=cert) -> str:
             client = await secure_client(cell["face"].endpoint, cert, "admin", ADMIN_TOKEN)
             async with client:
                 return (await client.nodes.server.read_browse_name()).Name
@@ -372,7 +372,7 @@ def test_no_auth_on_another_interface_is_refused(tmp_path: Path) -> None:
     db = f"sqlite:///{tmp_path / 'p.db'}"
     r = subprocess.run([sys.executable, "-m", "server.cli", "opcua", "--host", "0.0.0.0",
                         "--port", str(free_port()), "--db", db], env=env, capture_output=True,
-                       text=True, timeout=120)
+                       text=True, timeout=120, check=False)
     assert r.returncode == 2, r.stderr
     assert "--host" in r.stderr and "loopback" in r.stderr
     face = PendantOpcUa(None, f"opc.tcp://0.0.0.0:{free_port()}/pendant/", auth=False,  # type: ignore[arg-type]

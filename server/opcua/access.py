@@ -27,15 +27,16 @@ import secrets
 import time
 import uuid
 from dataclasses import dataclass, field
+from struct import error as StructError
 from struct import unpack_from
 from typing import Any
 
 from asyncua import ua
 from asyncua.common.utils import ServiceError
 from asyncua.crypto import uacrypto
-from asyncua.ua.ua_binary import struct_from_binary
 from asyncua.crypto.permission_rules import PermissionRuleset, User, UserRole
 from asyncua.server.user_managers import UserManager
+from asyncua.ua.ua_binary import struct_from_binary
 from cryptography import x509
 from sqlalchemy.orm import Session, sessionmaker
 
@@ -177,7 +178,7 @@ def install_login_checks(iserver: Any) -> None:
         try:
             raw = decrypt(iserver.private_key, token.Password)
             length = unpack_from("<I", raw)[0]
-        except Exception:
+        except (ValueError, TypeError, StructError):  # not encrypted with our key
             raise ServiceError(ua.StatusCodes.BadIdentityTokenInvalid) from None
         nonce = isession.nonce or b""
         body = raw[4:4 + length]

@@ -97,7 +97,6 @@ def run_opcua(args: argparse.Namespace) -> int:
 def start_beside(host: str, port: int, db_url: str | None, auth: bool = True) -> subprocess.Popen:
     """``pendant serve --opcua-port``: the OPC UA face as a child process on the same DB (and,
     with ``serve --no-auth``, as open as the REST service)."""
-    import os
 
     from server.settings import ENV_NO_AUTH, ENV_PARENT_PID
 

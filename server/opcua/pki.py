@@ -22,7 +22,7 @@ import logging
 import os
 import re
 import stat
-from datetime import datetime, timezone
+from datetime import UTC, datetime
 from pathlib import Path
 
 from asyncua import ua
@@ -65,8 +65,11 @@ async def server_certificate(pki: Path, app_uri: str) -> tuple[Path, Path]:
     """(certificate, key) of the server, made on first start; the folders 0700, the key 0600."""
     import socket
 
-    from asyncua.crypto.cert_gen import (dump_private_key_as_pem, generate_private_key,
-                                         generate_self_signed_app_certificate)
+    from asyncua.crypto.cert_gen import (
+        dump_private_key_as_pem,
+        generate_private_key,
+        generate_self_signed_app_certificate,
+    )
     from cryptography.x509.oid import ExtendedKeyUsageOID
 
     private_folder(pki)
@@ -99,7 +102,7 @@ def fingerprint(der: bytes) -> str:
 
 def check_time(cert: x509.Certificate) -> str | None:
     """Why ``cert`` is not valid now, or None."""
-    now = datetime.now(timezone.utc)
+    now = datetime.now(UTC)
     if cert.not_valid_after_utc < now:
         return f"expired on {cert.not_valid_after_utc:%Y-%m-%d %H:%M} UTC"
     if cert.not_valid_before_utc > now:

@@ -14,7 +14,6 @@ import asyncio
 import logging
 from dataclasses import dataclass, field
 from pathlib import Path
-
 from urllib.parse import urlparse
 
 from asyncua import Node, Server, ua
@@ -28,8 +27,8 @@ from sqlalchemy.orm import Session, sessionmaker
 
 from db import crud
 from server.opcua import access, commit, pki, space
-from server.settings import LOOPBACK_HOSTS
 from server.opcua.state import ControllerState, events_after, latest_event_id, read_cells
+from server.settings import LOOPBACK_HOSTS
 
 log = logging.getLogger("pendant.opcua")
 TABLES = {"tool": 16, "base": 32}
@@ -71,7 +70,7 @@ class SessionProcessor(UaProcessor):
     ``BadUserAccessDenied``: after a restart of the face, node-opcua then resent its
     Publish requests at once, forever (thousands a second)."""
 
-    async def _process_message(self, typeid, requesthdr, seqhdr, body):  # noqa: ANN001, ANN202
+    async def _process_message(self, typeid, requesthdr, seqhdr, body):
         if self.session is None and typeid not in access.SESSIONLESS_TYPES:
             raise ServiceError(ua.StatusCodes.BadSessionIdInvalid)
         rules = self._connection.security_policy.permissions
@@ -86,7 +85,7 @@ class SessionProcessor(UaProcessor):
 
 
 class SessionProtocol(OPCUAProtocol):
-    def connection_made(self, transport) -> None:  # noqa: ANN001
+    def connection_made(self, transport) -> None:
         super().connection_made(transport)
         if self.processor is not None:
             self.processor.__class__ = SessionProcessor
@@ -313,7 +312,7 @@ class PendantOpcUa:
             return export_text(db, cid, fmt)
 
 
-async def _add_method(server: Server, parent: Node, name: str, ns: int, callback,  # noqa: ANN001
+async def _add_method(server: Server, parent: Node, name: str, ns: int, callback,
                       inputs: list[ua.Argument], outputs: list[ua.Argument]) -> Node:
     """A method of ``parent`` and its argument properties, every NodeId derived from the
     parent's (asyncua's ``add_method`` numbers the properties: another id after a restart)."""
@@ -357,7 +356,7 @@ def _accepts(decl: ua.Argument, v: object) -> bool:
     return False
 
 
-def _method(name: str, func, inputs: list[ua.Argument]):  # noqa: ANN001, ANN202
+def _method(name: str, func, inputs: list[ua.Argument]):
     """asyncua's method callback around ``func(*values)``: first the caller's permission for
     this call (:func:`access.method_permission`, one table with REST), then the arguments'
     count and types (OPC 10000-4 §5.11.2: BadArgumentsMissing, BadTooManyArguments,

@@ -15,8 +15,8 @@ rotation, see :func:`opc_orientation`). docs/opcua.md has the tree.
 from __future__ import annotations
 
 import json
-from datetime import datetime, timezone
 from dataclasses import dataclass, field
+from datetime import UTC, datetime
 from pathlib import Path
 
 from asyncua import Node, Server, ua
@@ -130,7 +130,7 @@ async def remove(node: Node) -> None:
 async def _set(node: Node, value: object, variant: ua.VariantType) -> None:
     """Write a value with its SourceTimestamp (when the face saw it in the database)."""
     await node.write_value(ua.DataValue(ua.Variant(value, variant),
-                                        SourceTimestamp=datetime.now(timezone.utc)))
+                                        SourceTimestamp=datetime.now(UTC)))
 
 
 async def add_cell(server: Server, ns_ids: tuple[int, int, int], st: ControllerState) -> CellNodes:
@@ -470,7 +470,7 @@ async def update_cell(nodes: CellNodes, old: ControllerState | None, new: Contro
     return len(writes)
 
 
-async def event_generator(server: Server, ns: int):  # noqa: ANN201
+async def event_generator(server: Server, ns: int):
     """``PendantEventType`` (a BaseEventType) raised by the Server object for every outbox
     event: Kind, Controller, Payload (the JSON the webhooks carry), EventRecordId."""
     etype = await server.create_custom_event_type(
@@ -480,7 +480,7 @@ async def event_generator(server: Server, ns: int):  # noqa: ANN201
     return await server.get_event_generator(etype, server.nodes.server)
 
 
-async def raise_event(gen, ev: EventState) -> None:  # noqa: ANN001
+async def raise_event(gen, ev: EventState) -> None:
     gen.event.Kind = ev.kind
     gen.event.Controller = ev.controller or ""
     gen.event.Payload = json.dumps(ev.payload, separators=(",", ":"))
