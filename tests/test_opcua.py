@@ -11,19 +11,19 @@ import asyncio
 import json
 import logging
 import os
-import threading
 import time
 from collections.abc import Callable, Iterator
 
 import numpy as np
 import pytest
+from api_helpers import ADMIN_TOKEN, C, edit_slot, make_client, ok
 from asyncua import Client, Node, ua
+from browser_helpers import free_port
+from opcua_helpers import client_certificate, namespaces, secure_client, start_face
 from scipy.spatial.transform import Rotation
 
-from api_helpers import ADMIN_TOKEN, C, edit_slot, make_client, ok
-from browser_helpers import free_port
-from server.opcua.service import PendantOpcUa
-from server.opcua.space import DI_URI, PENDANT_URI, ROBOTICS_URI
+from server.opcua.pki import default_pki_dir
+from server.opcua.space import PENDANT_URI
 
 MANDATORY = ua.NodeId(ua.ObjectIds.ModellingRule_Mandatory)
 
@@ -43,39 +43,26 @@ def face(fresh_db, tmp_path_factory: pytest.TempPathFactory) -> Iterator[dict]: 
     db_url = fresh_db("opcua")
     logs = LogRecords()
     logging.getLogger("asyncua").addHandler(logs)
-    loop = asyncio.new_event_loop()
-    thread = threading.Thread(target=loop.run_forever, name="opcua", daemon=True)
-    thread.start()
     with make_client(db_url) as rest:
-        server = PendantOpcUa(rest.app.state.sessionmaker,
-                              f"opc.tcp://127.0.0.1:{free_port()}/pendant/", poll_s=0.1,
-                              pki_dir=tmp_path_factory.mktemp("pki"))
-        asyncio.run_coroutine_threadsafe(server.start(), loop).result(timeout=120)
-        yield {"rest": rest, "server": server, "logs": logs, "db_url": db_url}
-        asyncio.run_coroutine_threadsafe(server.stop(), loop).result(timeout=30)
-    loop.call_soon_threadsafe(loop.stop)
-    thread.join(timeout=10)
+        running = start_face(rest.app.state.sessionmaker, tmp_path_factory.mktemp("face"))
+        yield {"rest": rest, "server": running.server, "logs": logs, "db_url": db_url,
+               "face": running, "cert": running.client}
+        running.stop()
     logging.getLogger("asyncua").removeHandler(logs)
 
 
-def on_client(face: dict, body, user: str | None = "admin",  # noqa: ANN001
+def on_client(face: dict, body, user: str | None = "admin",
               password: str | None = ADMIN_TOKEN) -> object:
-    """Run ``body(client, ns)`` with an asyncua Client logged in as ``user`` (the first
-    Administrator by default; None: anonymous); ns = {di, rob, pendant}."""
+    """Run ``body(client, ns)`` with an asyncua Client on the encrypted endpoint, logged in as
+    ``user`` (the first Administrator by default; None: anonymous); ns = {di, rob, pendant}."""
     async def run() -> object:
-        client = Client(face["server"].endpoint, timeout=10)
-        if user is not None:
-            client.set_user(user)
-            client.set_password(password)
+        client = await secure_client(face["server"].endpoint, face["cert"], user, password)
         async with client:
-            ns = {"di": await client.get_namespace_index(DI_URI),
-                  "rob": await client.get_namespace_index(ROBOTICS_URI),
-                  "pendant": await client.get_namespace_index(PENDANT_URI)}
-            return await body(client, ns)
+            return await body(client, await namespaces(client))
     return asyncio.run(run())
 
 
-def poll(face: dict, body, settled: Callable[[object], bool],  # noqa: ANN001
+def poll(face: dict, body, settled: Callable[[object], bool],
          timeout_s: float = 15.0) -> object:
     """``on_client(face, body)`` every 0.1 s until ``settled(outcome)`` or ``timeout_s`` ran out:
     the server takes a REST change from the database at its next poll (every 0.1 s here, later
@@ -154,7 +141,7 @@ def test_a_rest_change_reaches_a_subscribed_client_within_a_second(face: dict) -
         def __init__(self) -> None:
             self.seen: list[tuple[float, object]] = []
 
-        def datachange_notification(self, node, val, data) -> None:  # noqa: ANN001
+        def datachange_notification(self, node, val, data) -> None:
             self.seen.append((time.monotonic(), val))
 
     async def body(client: Client, ns: dict) -> float:
@@ -277,38 +264,41 @@ def test_instances_have_every_mandatory_child_of_their_types(face: dict) -> None
         assert expected in " ".join(checked), expected
 
 
-def test_serve_with_an_opcua_port_starts_the_face_beside_the_rest_service(tmp_path) -> None:  # noqa: ANN001
+def test_serve_with_an_opcua_port_starts_the_face_beside_the_rest_service(tmp_path) -> None:
     """``pendant serve --opcua-port``: both faces as processes on one SQLite file."""
     import subprocess
     import sys
 
     import httpx
 
+    from server.cli import main
+
     rest_port, ua_port = free_port(), free_port()
     db_url = f"sqlite:///{tmp_path / 'pendant.db'}"
     env = {**os.environ, "PENDANT_ADMIN_TOKEN": ADMIN_TOKEN}
+    mes = client_certificate(tmp_path / "mes")
+    assert main(["opcua", "trust", mes.cert, "--db", db_url]) == 0  # the face's own PKI folder
+    assert default_pki_dir(db_url) == tmp_path / "pendant.db-opcua-pki"
+    log = tmp_path / "serve.log"
     proc = subprocess.Popen([sys.executable, "-m", "server.cli", "serve", "--port", str(rest_port),
                              "--opcua-port", str(ua_port), "--db", db_url, "--job-workers", "0"],
-                            stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL, env=env)
+                            stdout=subprocess.DEVNULL, stderr=log.open("w"), env=env)
 
     async def a1() -> float:
         deadline = time.monotonic() + 120
         while True:
             try:
-                client = Client(f"opc.tcp://127.0.0.1:{ua_port}/pendant/", timeout=5)
-                client.set_user("admin")
-                client.set_password(ADMIN_TOKEN)
+                client = await secure_client(f"opc.tcp://127.0.0.1:{ua_port}/pendant/", mes,
+                                             "admin", ADMIN_TOKEN, timeout=5)
                 async with client:
-                    ns = {"di": await client.get_namespace_index(DI_URI),
-                          "rob": await client.get_namespace_index(ROBOTICS_URI),
-                          "pendant": await client.get_namespace_index(PENDANT_URI)}
+                    ns = await namespaces(client)
                     devices = await (await cell(client, ns)).get_child([f"{ns['rob']}:MotionDevices"])
                     (arm,) = await devices.get_children()
                     node = await arm.get_child([f"{ns['rob']}:Axes", f"{ns['rob']}:A2",
                                                 f"{ns['di']}:ParameterSet",
                                                 f"{ns['rob']}:ActualPosition"])
                     return await node.read_value()
-            except (OSError, asyncio.TimeoutError, ua.UaError):
+            except (TimeoutError, OSError, ua.UaError):
                 if time.monotonic() > deadline:
                     raise
                 await asyncio.sleep(0.5)
@@ -318,6 +308,10 @@ def test_serve_with_an_opcua_port_starts_the_face_beside_the_rest_service(tmp_pa
         joints = httpx.get(f"http://127.0.0.1:{rest_port}/controllers/1/robot",
                            headers={"Authorization": f"Bearer {ADMIN_TOKEN}"}).json()["joints_deg"]
         assert value == pytest.approx(joints[1])
+        assert f"pendant OPC UA server ready at opc.tcp://127.0.0.1:{ua_port}/pendant/" in \
+            log.read_text()  # the OPC UA port opens after REST's: the log says when
+        pki = tmp_path / "pendant.db-opcua-pki"
+        assert oct(pki.stat().st_mode & 0o777) == "0o700"
     finally:
         proc.terminate()
         proc.wait(timeout=20)
@@ -328,7 +322,7 @@ def test_a_frame_committed_over_rest_arrives_as_an_opcua_event(face: dict) -> No
         def __init__(self) -> None:
             self.events: list[tuple[float, object]] = []
 
-        def event_notification(self, event) -> None:  # noqa: ANN001
+        def event_notification(self, event) -> None:
             self.events.append((time.monotonic(), event))
 
     async def body(client: Client, ns: dict) -> tuple[float, object]:
@@ -366,13 +360,14 @@ async def commit(client: Client, ns: dict, number: int, frame: list[float], name
         ua.Variant(version, ua.VariantType.UInt64))
 
 
-def test_an_anonymous_session_may_read_nothing(face: dict) -> None:
+def test_an_anonymous_session_is_refused(face: dict) -> None:
+    """As REST answers 401 without a credential: no session without a login."""
     async def body(client: Client, ns: dict) -> object:
         return await (await cell(client, ns)).read_browse_name()
 
     with pytest.raises(ua.UaStatusCodeError) as err:
         on_client(face, body, user=None)
-    assert err.value.code == ua.StatusCodes.BadUserAccessDenied
+    assert err.value.code == ua.StatusCodes.BadIdentityTokenRejected
 
 
 def test_a_wrong_password_is_refused_at_login(face: dict) -> None:
@@ -449,58 +444,28 @@ def test_a_stale_version_is_refused_and_a_bad_frame_is_a_bad_argument(face: dict
     assert err.value.code == ua.StatusCodes.BadInvalidArgument
 
 
-def client_certificate(folder, uri: str) -> tuple[str, str]:  # noqa: ANN001
-    """A client's self-signed application certificate and key (as a cell PC would have)."""
-    import socket
-
-    from asyncua.crypto.cert_gen import (dump_private_key_as_pem, generate_private_key,
-                                         generate_self_signed_app_certificate)
-    from cryptography import x509
-    from cryptography.hazmat.primitives.serialization import Encoding
-    from cryptography.x509.oid import ExtendedKeyUsageOID
-
-    key = generate_private_key()
-    cert = generate_self_signed_app_certificate(
-        key, "mes-client", {"organizationName": "pendant tests"},
-        [x509.UniformResourceIdentifier(uri), x509.DNSName(socket.gethostname())],
-        [ExtendedKeyUsageOID.CLIENT_AUTH])
-    cert_path, key_path = folder / "client-cert.der", folder / "client-key.pem"
-    cert_path.write_bytes(cert.public_bytes(Encoding.DER))
-    key_path.write_bytes(dump_private_key_as_pem(key))
-    return str(cert_path), str(key_path)
-
-
 def test_a_registered_certificate_logs_in_over_the_encrypted_endpoint(face: dict,
-                                                                    tmp_path) -> None:  # noqa: ANN001
-    from asyncua.crypto.security_policies import SecurityPolicyBasic256Sha256
-
+                                                                    tmp_path) -> None:
     from server.cli import main
 
-    uri = "urn:pendant:tests:mes-client"
-    cert, key = client_certificate(tmp_path, uri)
-    (tmp_path / "other").mkdir()
-    stranger = client_certificate(tmp_path / "other", uri)  # valid, but no user's
+    user_cert = client_certificate(tmp_path / "user", "mes-cell-3")
+    stranger = client_certificate(tmp_path / "other", "stranger")  # valid, but no user's
     ok(face["rest"].post("/users", json={"name": "mes-cell-3", "role": "Expert"}))
-    assert main(["users", "cert", "mes-cell-3", cert, "--db", face["db_url"]]) == 0
+    assert main(["users", "cert", "mes-cell-3", user_cert.cert, "--db", face["db_url"]]) == 0
     version = int(face["rest"].get(f"{C}/tools/11").headers["ETag"].strip('W/"'))
 
-    async def login(cert: str, key: str) -> int:
-        client = Client(face["server"].endpoint, timeout=10)
-        client.application_uri = uri
-        await client.set_security(SecurityPolicyBasic256Sha256, cert, key,
-                                  mode=ua.MessageSecurityMode.SignAndEncrypt)
-        await client.load_client_certificate(cert)  # the X509 identity token
-        await client.load_private_key(key)
+    async def login(identity) -> int:
+        client = await secure_client(face["server"].endpoint, face["cert"], identity=identity)
         async with client:
             ns = {"pendant": await client.get_namespace_index(PENDANT_URI)}
             return await commit(client, ns, 11, [5.0, 5.0, 90.0, 0.0, 0.0, 0.0], "scanner",
                                 version)
 
-    assert asyncio.run(login(cert, key)) == version + 1
+    assert asyncio.run(login(user_cert)) == version + 1
     (rec,) = [r for r in ok(face["rest"].get("/audit", params={"user": "mes-cell-3"}))
               if r.get("number") == 11]
     assert (rec["source"], rec["role"]) == ("opcua", "Expert")
     with pytest.raises(ua.UaStatusCodeError) as err:
-        asyncio.run(login(*stranger))
+        asyncio.run(login(stranger))
     assert err.value.code == ua.StatusCodes.BadUserAccessDenied
     assert ok(face["rest"].get(f"{C}/tools/11"))["name"] == "scanner"

@@ -116,6 +116,15 @@ ROUTES: Final[dict[tuple[str, str], str]] = {
 }
 
 
+# the OPC UA face's methods (server/opcua): each needs what the REST route it mirrors needs
+OPCUA_METHODS: Final[dict[str, tuple[str, str]]] = {
+    "ReadFrame": ("GET", C + "/tools/{number}"),
+    "ExportFile": ("GET", C + "/export"),
+    "CommitFrame": ("PUT", C + "/tools/{number}"),
+}
+BACKUP_EXPORT: Final = "backup:write"  # GET /export?format=json and ExportFile("json") also need it
+
+
 def required(method: str, path: str) -> str | None:
     """The permission ``method path`` needs (HEAD as GET); None when the route is undeclared."""
     return ROUTES.get(("GET" if method == "HEAD" else method, path))

@@ -1,40 +1,49 @@
 """Who may do what over OPC UA: the REST service's users, roles and permissions (docs/security.md).
 
-Logins (OPC 10000-4 §7.36 identity tokens):
+Logins (OPC 10000-4 §7.36 identity tokens), only on a signed and encrypted channel:
 
 - *Username/password*: the user's name and one of its API tokens as the password (the same
-  bearer token REST takes; ``pendant tokens create NAME`` makes one).
+  bearer token REST takes; ``pendant tokens create NAME``). The token must come encrypted
+  with the server's key together with the session's server nonce (a plaintext password, or
+  one captured from another session, is refused).
 - *Certificate* (X509 identity token): a certificate registered for a user with
-  ``pendant users cert NAME FILE`` (stored as a token derived from the certificate's SHA-256
-  fingerprint: revocable and expiring like any token).
-- *Anonymous*: a session, but every Read, Browse, subscription and Call is refused
-  (``BadUserAccessDenied``), as REST answers 401 without a credential. With ``--no-auth``
-  everyone is an Administrator, as on REST.
+  ``pendant users cert NAME FILE``, with the client's signature over the server's
+  certificate and nonce (the proof it holds the private key), valid now. The certificate a
+  client opens its channel with is *not* a login.
+- *Anonymous*: refused (``BadIdentityTokenRejected``), as REST answers 401 without a
+  credential. With ``--no-auth`` (loopback only) everyone is an Administrator, as on REST.
 
-Every request after login is checked against the user's role at that moment (a revoked user
-or a changed role takes effect at once): reading needs ``frames:read``; each method its own
-permission (``METHOD_PERMISSIONS``). The user of the current request is in :data:`CURRENT`,
-for the audit record of what the method changes (source ``opcua``).
+Every request after login is checked against the login's token and the user's role at that
+moment (a revoked token or user, or a changed role, takes effect within ``ttl_s``): reading
+needs ``frames:read``; each of pendant's methods checks its own permission
+(:data:`server.auth.permissions.OPCUA_METHODS`) and fails only its own call result. The user
+of the current request is in :data:`CURRENT`, for the audit record (source ``opcua``).
 """
 
 from __future__ import annotations
 
 import contextvars
+import secrets
 import time
 import uuid
 from dataclasses import dataclass, field
+from struct import error as StructError
+from struct import unpack_from
 from typing import Any
 
 from asyncua import ua
-from asyncua.ua.ua_binary import struct_from_binary
+from asyncua.common.utils import ServiceError
+from asyncua.crypto import uacrypto
 from asyncua.crypto.permission_rules import PermissionRuleset, User, UserRole
 from asyncua.server.user_managers import UserManager
-from sqlalchemy import select
+from asyncua.ua.ua_binary import struct_from_binary
+from cryptography import x509
 from sqlalchemy.orm import Session, sessionmaker
 
-from db.auth_models import User as DbUser
 from server.auth import tokens
+from server.auth.permissions import BACKUP_EXPORT, OPCUA_METHODS, required
 from server.auth.tokens import certificate_secret
+from server.opcua import pki
 
 # requests that need no permission: opening and closing sessions and channels, discovery
 SESSION_TYPES = {ua.NodeId(t) for t in (
@@ -44,6 +53,11 @@ SESSION_TYPES = {ua.NodeId(t) for t in (
     ua.ObjectIds.CloseSecureChannelRequest_Encoding_DefaultBinary,
     ua.ObjectIds.GetEndpointsRequest_Encoding_DefaultBinary,
     ua.ObjectIds.FindServersRequest_Encoding_DefaultBinary,
+)}
+# requests asyncua serves without a session (the rest need one: else BadSessionIdInvalid)
+SESSIONLESS_TYPES = SESSION_TYPES | {ua.NodeId(t) for t in (
+    ua.ObjectIds.RegisterServerRequest_Encoding_DefaultBinary,
+    ua.ObjectIds.RegisterServer2Request_Encoding_DefaultBinary,
 )}
 # changing the address space itself: nobody from outside
 ADMIN_TYPES = {ua.NodeId(t) for t in (
@@ -56,10 +70,41 @@ ADMIN_TYPES = {ua.NodeId(t) for t in (
     ua.ObjectIds.WriteRequest_Encoding_DefaultBinary,  # values change through methods only
 )}
 CALL = ua.NodeId(ua.ObjectIds.CallRequest_Encoding_DefaultBinary)
+# requests naming subscriptions: only their owner (the same user) may use them
+_R = ua.ObjectIds
+SUBSCRIPTION_REQUESTS: dict[ua.NodeId, tuple[type, str]] = {
+    ua.NodeId(t): (params, attr) for t, params, attr in (
+        (_R.TransferSubscriptionsRequest_Encoding_DefaultBinary,
+         ua.TransferSubscriptionsParameters, "SubscriptionIds"),
+        (_R.DeleteSubscriptionsRequest_Encoding_DefaultBinary,
+         ua.DeleteSubscriptionsParameters, "SubscriptionIds"),
+        (_R.SetPublishingModeRequest_Encoding_DefaultBinary,
+         ua.SetPublishingModeParameters, "SubscriptionIds"),
+        (_R.ModifySubscriptionRequest_Encoding_DefaultBinary,
+         ua.ModifySubscriptionParameters, "SubscriptionId"),
+        (_R.RepublishRequest_Encoding_DefaultBinary, ua.RepublishParameters, "SubscriptionId"),
+        (_R.CreateMonitoredItemsRequest_Encoding_DefaultBinary,
+         ua.CreateMonitoredItemsParameters, "SubscriptionId"),
+        (_R.ModifyMonitoredItemsRequest_Encoding_DefaultBinary,
+         ua.ModifyMonitoredItemsParameters, "SubscriptionId"),
+        (_R.DeleteMonitoredItemsRequest_Encoding_DefaultBinary,
+         ua.DeleteMonitoredItemsParameters, "SubscriptionId"),
+        (_R.SetMonitoringModeRequest_Encoding_DefaultBinary,
+         ua.SetMonitoringModeParameters, "SubscriptionId"),
+        (_R.SetTriggeringRequest_Encoding_DefaultBinary, ua.SetTriggeringParameters,
+         "SubscriptionId"),
+    )}
+# standard methods a reader may call (OPC 10000-5 §9): they only read
+READ_METHODS = {ua.NodeId(m) for m in (_R.Server_GetMonitoredItems, _R.Server_ResendData)}
 
-#: the permission each method needs, by its browse name
-METHOD_PERMISSIONS = {"ReadFrame": "frames:read", "ExportFile": "frames:read",
-                      "CommitFrame": "frames:commit"}
+
+def method_permission(method: str, fmt: object = None) -> set[str]:
+    """What calling pendant's ``method`` needs: what its REST route needs (one table), and for
+    ``ExportFile("json")`` (a backup) what ``GET /export?format=json`` also needs."""
+    need = {required(*OPCUA_METHODS[method]) or "controllers:admin"}
+    if method == "ExportFile" and fmt == "json":
+        need.add(BACKUP_EXPORT)
+    return need
 
 
 @dataclass(frozen=True)
@@ -75,10 +120,115 @@ class Caller:
         return {"user_name": self.name, "role": self.role, "source": "opcua",
                 "request_id": str(uuid.uuid4()), "client": client}
 
+    def may(self, need: set[str]) -> bool:
+        return "*" in self.permissions or need <= self.permissions
+
 
 NO_AUTH = Caller("no-auth", "Administrator", frozenset({"*"}))
 CURRENT: contextvars.ContextVar[Caller | None] = contextvars.ContextVar("pendant_opcua_caller",
                                                                        default=None)
+
+
+@dataclass(frozen=True)
+class Channel:
+    """The secure channel a connection's requests come on (set when it is opened: asyncua
+    handles each connection's messages in one task, so this holds for all of them)."""
+
+    mode: ua.MessageSecurityMode
+    peer_certificate: bytes | None
+
+
+CHANNEL: contextvars.ContextVar[Channel | None] = contextvars.ContextVar("pendant_opcua_channel",
+                                                                        default=None)
+
+
+def _signed() -> bool:
+    ch = CHANNEL.get()
+    return ch is not None and ch.mode in (ua.MessageSecurityMode.Sign,
+                                          ua.MessageSecurityMode.SignAndEncrypt)
+
+
+class VerifiedCertificate(bytes):
+    """An X509 identity token's certificate whose signature over the server's certificate and
+    nonce was checked: only this is a certificate login (a channel's certificate is not)."""
+
+
+@dataclass
+class PendantUser(User):
+    """asyncua's session user, with the token secret the login was made with."""
+
+    secret: str | None = None
+
+
+def install_login_checks(iserver: Any) -> None:
+    """Wrap asyncua's identity token handling: passwords only encrypted with the session's
+    server nonce and certificate logins only with a verified signature, both on a signed
+    channel. (asyncua accepts plaintext, never checks the nonce, and takes the channel's
+    certificate as a certificate login.)"""
+    verify_x509 = iserver.verify_x509_token
+
+    def decrypt_user_token(isession: Any, token: ua.UserNameIdentityToken) -> tuple[str, str]:
+        if not _signed() or not token.EncryptionAlgorithm or not token.Password:
+            raise ServiceError(ua.StatusCodes.BadIdentityTokenInvalid)
+        decrypt = {"http://www.w3.org/2001/04/xmlenc#rsa-oaep": uacrypto.decrypt_rsa_oaep,
+                   "http://opcfoundation.org/UA/security/rsa-oaep-sha2-256":
+                       uacrypto.decrypt_rsa_oaep_sha256}.get(token.EncryptionAlgorithm)
+        if decrypt is None:  # rsa-1_5 (Basic128Rsa15) is not offered
+            raise ServiceError(ua.StatusCodes.BadIdentityTokenInvalid)
+        try:
+            raw = decrypt(iserver.private_key, token.Password)
+            length = unpack_from("<I", raw)[0]
+        except (ValueError, TypeError, StructError):  # not encrypted with our key
+            raise ServiceError(ua.StatusCodes.BadIdentityTokenInvalid) from None
+        nonce = isession.nonce or b""
+        body = raw[4:4 + length]
+        if not nonce or length != len(body) or length < len(nonce) or body[-len(nonce):] != nonce:
+            raise ServiceError(ua.StatusCodes.BadIdentityTokenInvalid)  # replayed or no nonce
+        try:
+            return token.UserName, body[:-len(nonce)].decode("utf-8")
+        except UnicodeDecodeError:
+            raise ServiceError(ua.StatusCodes.BadIdentityTokenInvalid) from None
+
+    def verify_x509_token(isession: Any, token: ua.X509IdentityToken,
+                          signature: ua.SignatureData) -> bytes:
+        if not _signed():
+            raise ServiceError(ua.StatusCodes.BadIdentityTokenRejected)
+        der = verify_x509(isession, token, signature)  # raises without a valid signature
+        if pki.check_time(x509.load_der_x509_certificate(der)) is not None:
+            raise ServiceError(ua.StatusCodes.BadIdentityTokenRejected)
+        return VerifiedCertificate(der)
+
+    iserver.decrypt_user_token = decrypt_user_token
+    iserver.verify_x509_token = verify_x509_token
+
+
+def unguessable_subscription_ids(service: Any) -> None:
+    """Subscription ids drawn at random (asyncua counts up from 78: easy to guess)."""
+    create = service.create_subscription
+
+    async def create_subscription(*args: Any, **kwargs: Any) -> Any:
+        while True:
+            service._sub_id_counter = secrets.randbelow(2 ** 31 - 2) + 1  # it adds one
+            if service._sub_id_counter + 1 not in service.subscriptions:
+                return await create(*args, **kwargs)
+
+    service.create_subscription = create_subscription
+
+
+def republish_with_status(service: Any) -> None:
+    """Republish of a message the server no longer holds answers ``BadMessageNotAvailable``
+    (of an unknown subscription ``BadSubscriptionIdInvalid``), as OPC 10000-4 §5.13.6 has it.
+    asyncua answers Good with an empty message: after a restart of the face, node-opcua asked
+    again at once, forever (~2,500 requests/s)."""
+    def republish(params: ua.RepublishParameters) -> ua.NotificationMessage:
+        sub = service.subscriptions.get(params.SubscriptionId)
+        if sub is None:
+            raise ServiceError(ua.StatusCodes.BadSubscriptionIdInvalid)
+        if params.RetransmitSequenceNumber not in sub._not_acknowledged_results:
+            raise ServiceError(ua.StatusCodes.BadMessageNotAvailable)
+        return sub.republish(params.RetransmitSequenceNumber)
+
+    service.republish = republish
 
 
 @dataclass
@@ -90,51 +240,86 @@ class PendantUsers(UserManager):
 
     def get_user(self, iserver: object, username: str | None = None, password: str | None = None,
                  certificate: Any = None) -> User | None:
+        if CHANNEL.get() is None:
+            return None  # a discovery-only channel (no endpoint of that policy is offered)
         if not self.auth:
-            return User(role=UserRole.User, name=NO_AUTH.name)
-        if username is None and certificate is None:
-            return User(role=UserRole.Anonymous)  # a session that may do nothing
-        secret = password if username is not None else certificate_secret(bytes(certificate))
+            return PendantUser(role=UserRole.User, name=NO_AUTH.name)
+        if username is not None:
+            secret = password
+        elif isinstance(certificate, VerifiedCertificate):
+            secret = certificate_secret(bytes(certificate))
+        else:
+            return None  # anonymous, or only a channel's certificate: not a login
         if not secret:
             return None
         with self.make_session() as db:
             found = tokens.actor_of_token(db, secret)
         if found is None or (username is not None and found[0].name != username):
             return None
-        return User(role=UserRole.User, name=found[0].name)
+        return PendantUser(role=UserRole.User, name=found[0].name, secret=secret)
 
 
 @dataclass
 class PendantRules(PermissionRuleset):
-    """asyncua's per-request check: the caller's role must grant what the request needs."""
+    """asyncua's per-request check: the caller's token and role must grant what it needs."""
 
     make_session: sessionmaker[Session]
     auth: bool = True
     method_names: dict[ua.NodeId, str] = field(default_factory=dict)  # method node -> name
-    ttl_s: float = 1.0
+    ttl_s: float = 0.5
+    iserver: Any = None  # for the owners of subscriptions
     _cache: dict[str, tuple[float, Caller | None]] = field(default_factory=dict)
 
-    def caller(self, name: str) -> Caller | None:
-        """The user's role and permissions now (cached ``ttl_s``); None if revoked or gone."""
-        hit = self._cache.get(name)
-        if hit is not None and time.monotonic() - hit[0] < self.ttl_s:
+    def caller(self, secret: str, fresh: bool = False) -> Caller | None:
+        """The login's user, role and permissions now (cached ``ttl_s`` unless ``fresh``);
+        None if its token or user was revoked, or expired."""
+        hit = self._cache.get(secret)
+        if not fresh and hit is not None and time.monotonic() - hit[0] < self.ttl_s:
             return hit[1]
         with self.make_session() as db:
-            u = db.scalar(select(DbUser).where(DbUser.name == name))
-            found = None
-            if u is not None and u.revoked_at is None:
-                found = Caller(u.name, u.role, tokens.role_permissions(db, u.role))
-        self._cache[name] = (time.monotonic(), found)
-        return found
+            found = tokens.actor_of_token(db, secret)
+            caller = None if found is None else Caller(
+                found[0].name, found[0].role, tokens.role_permissions(db, found[0].role))
+        if len(self._cache) > 10_000:
+            self._cache.clear()
+        self._cache[secret] = (time.monotonic(), caller)
+        return caller
+
+    def revoked(self, user: User | None) -> bool:
+        """Whether the session's login no longer holds (its token or user revoked, expired)."""
+        secret = getattr(user, "secret", None)
+        return self.auth and bool(secret) and self.caller(secret) is None
 
     def needs(self, action_type: ua.NodeId, body: Any) -> set[str]:
         """What the request needs; ``body`` is the undecoded request (asyncua's Buffer), so a
-        call is decoded from a copy to see which methods it names (unknown: frames:commit)."""
+        call is decoded from a copy to see which methods it names. pendant's methods check
+        their own permission (a refusal fails only that call's result); a standard method that
+        only reads needs ``frames:read``, any other ``controllers:admin``."""
+        need = {"frames:read"}
         if action_type == CALL:
             call = struct_from_binary(ua.CallParameters, body.copy())
-            return {METHOD_PERMISSIONS.get(self.method_names.get(m.MethodId, ""), "frames:commit")
-                    for m in call.MethodsToCall or []}
-        return {"frames:read"}
+            for m in call.MethodsToCall or []:
+                if m.MethodId not in self.method_names and m.MethodId not in READ_METHODS:
+                    need.add("controllers:admin")
+        return need
+
+    def owners_ok(self, action_type: ua.NodeId, body: Any, caller: Caller) -> bool:
+        """Every subscription the request names belongs to a session of the same user."""
+        params_type, attr = SUBSCRIPTION_REQUESTS[action_type]
+        ids = getattr(struct_from_binary(params_type, body.copy()), attr)
+        ids = ids if isinstance(ids, list) else [ids]
+        if self.iserver is None:
+            return False
+        subs = self.iserver.subscription_service.subscriptions
+        sessions = {s.session_id: s for s in self.iserver._external_sessions.values()}
+        for sid in ids:
+            sub = subs.get(sid)
+            if sub is None:
+                continue  # asyncua answers BadSubscriptionIdInvalid
+            owner = sessions.get(sub.session_id)
+            if owner is None or getattr(owner.user, "name", None) != caller.name:
+                return False
+        return True
 
     def check_validity(self, user: User | None, action_type: ua.NodeId, body: Any) -> bool:
         if action_type in SESSION_TYPES:
@@ -144,10 +329,13 @@ class PendantRules(PermissionRuleset):
         if not self.auth:
             CURRENT.set(NO_AUTH)
             return True
-        if user is None or user.role == UserRole.Anonymous or not user.name:
+        secret = getattr(user, "secret", None)
+        if not secret:
             return False
-        caller = self.caller(user.name)
-        if caller is None or not self.needs(action_type, body) <= caller.permissions:
+        caller = self.caller(secret)
+        if caller is None or not caller.may(self.needs(action_type, body)):
+            return False
+        if action_type in SUBSCRIPTION_REQUESTS and not self.owners_ok(action_type, body, caller):
             return False
         CURRENT.set(caller)  # the request that follows runs in this context (the audit's who)
         return True

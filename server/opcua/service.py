@@ -14,17 +14,119 @@ import asyncio
 import logging
 from dataclasses import dataclass, field
 from pathlib import Path
+from urllib.parse import urlparse
 
-from asyncua import Server, ua
+from asyncua import Node, Server, ua
+from asyncua.common.utils import ServiceError
+from asyncua.crypto import security_policies
+from asyncua.server.binary_server_asyncio import BinaryServer, OPCUAProtocol
+from asyncua.server.uaprocessor import UaProcessor
+from cryptography import x509
+from cryptography.hazmat.primitives.serialization import Encoding
 from sqlalchemy.orm import Session, sessionmaker
 
 from db import crud
-from server.opcua import access, commit, space
+from server.opcua import access, commit, pki, space
 from server.opcua.state import ControllerState, events_after, latest_event_id, read_cells
+from server.settings import LOOPBACK_HOSTS
 
 log = logging.getLogger("pendant.opcua")
 TABLES = {"tool": 16, "base": 32}
 FORMATS = ("kuka", "abb", "fanuc", "ur", "json")
+
+
+class CheckedPolicyFactory(security_policies.SecurityPolicyFactory):
+    """asyncua's per-channel policy maker, checking the client's certificate first: trusted
+    (``pki/trusted``) and valid now, else the channel is refused. On the None policy the
+    client's certificate is dropped (nothing proves it is the client's)."""
+
+    def __init__(self, base: security_policies.SecurityPolicyFactory,
+                 trust_list: pki.TrustList) -> None:
+        super().__init__(base.cls, base.mode, base.certificate, base.private_key,
+                         base.permission_ruleset, base.certificate_chain)
+        self.trust_list = trust_list
+
+    def create(self, peer_certificate: bytes | None) -> security_policies.SecurityPolicy:
+        if self.cls is security_policies.SecurityPolicyNone:
+            peer_certificate = None
+        else:
+            self.trust_list.check(peer_certificate)
+        access.CHANNEL.set(access.Channel(self.mode, peer_certificate))
+        return super().create(peer_certificate)
+
+
+async def _same_as_channel(cert: x509.Certificate, _app: ua.ApplicationDescription) -> None:
+    """CreateSession's client certificate must be the one its signed channel was opened with."""
+    ch = access.CHANNEL.get()
+    if ch is not None and ch.peer_certificate is not None and \
+            cert.public_bytes(Encoding.DER) != ch.peer_certificate:
+        raise ServiceError(ua.StatusCodes.BadCertificateInvalid)
+
+
+class SessionProcessor(UaProcessor):
+    """A request on a channel without a (valid) session gets ``BadSessionIdInvalid``, as OPC
+    10000-4 §7.29 has it, so a client makes a new session; a session whose login was revoked
+    is closed at its next request and answered the same. asyncua answers
+    ``BadUserAccessDenied``: after a restart of the face, node-opcua then resent its
+    Publish requests at once, forever (thousands a second)."""
+
+    async def _process_message(self, typeid, requesthdr, seqhdr, body):
+        if self.session is None and typeid not in access.SESSIONLESS_TYPES:
+            raise ServiceError(ua.StatusCodes.BadSessionIdInvalid)
+        rules = self._connection.security_policy.permissions
+        if self.session is not None and typeid not in access.SESSION_TYPES and \
+                isinstance(rules, access.PendantRules) and rules.revoked(self.session.user):
+            # the login's token or user was revoked (or expired): the session ends, its
+            # subscriptions with it (refusing each request made node-opcua resend at once)
+            await self.session.close_session(True)
+            self.session = None
+            raise ServiceError(ua.StatusCodes.BadSessionIdInvalid)
+        return await super()._process_message(typeid, requesthdr, seqhdr, body)
+
+
+class SessionProtocol(OPCUAProtocol):
+    def connection_made(self, transport) -> None:
+        super().connection_made(transport)
+        if self.processor is not None:
+            self.processor.__class__ = SessionProcessor
+
+
+class PendantBinaryServer(BinaryServer):
+    def _make_protocol(self) -> OPCUAProtocol:
+        return SessionProtocol(iserver=self.iserver, policies=self._policies, clients=self.clients,
+                               closing_tasks=self.closing_tasks, limits=self.limits)
+
+
+class PendantServer(Server):
+    """asyncua's Server with the trust list on every channel and endpoints as a plant needs
+    them: a None endpoint offers Anonymous only; a password is always encrypted with the
+    session's server nonce (the token policy names the endpoint's security policy)."""
+
+    trust_list: pki.TrustList
+
+    async def start(self) -> None:
+        """asyncua's ``Server.start`` with :class:`PendantBinaryServer`."""
+        await self._setup_server_nodes()
+        await self.iserver.start()
+        try:
+            host, port = self._get_bind_socket_info()
+            self.bserver = PendantBinaryServer(self.iserver, host, port, self.limits)
+            self.bserver.set_policies(self._policies)
+            await self.bserver.start()
+        except Exception:
+            await self.iserver.stop()
+            raise
+
+    async def _setup_server_nodes(self) -> None:
+        await super()._setup_server_nodes()
+        self._policies = [CheckedPolicyFactory(p, self.trust_list) for p in self._policies]
+        for edp in self.iserver.endpoints:
+            if edp.SecurityMode == ua.MessageSecurityMode.None_:
+                edp.UserIdentityTokens = [t for t in edp.UserIdentityTokens
+                                          if t.TokenType == ua.UserTokenType.Anonymous]
+            for t in edp.UserIdentityTokens:
+                if t.TokenType == ua.UserTokenType.UserName:
+                    t.SecurityPolicyUri = edp.SecurityPolicyUri
 
 
 @dataclass
@@ -35,8 +137,8 @@ class PendantOpcUa:
     endpoint: str = "opc.tcp://127.0.0.1:4840/pendant/"
     poll_s: float = 0.2
     auth: bool = True  # False: the --no-auth demo, everyone an Administrator (as on REST)
-    pki_dir: Path | None = None  # the server's certificate and key (made on first start):
-    # with it, a Basic256Sha256 SignAndEncrypt endpoint and certificate (X509) logins
+    pki_dir: Path | None = None  # the server's certificate and key, the trust list (server.opcua.pki)
+    none_endpoint: bool = False  # also a SecurityPolicy None endpoint (Anonymous only)
     server: Server = field(init=False)
     cells: dict[int, space.CellNodes] = field(default_factory=dict, init=False)
     states: dict[int, ControllerState] = field(default_factory=dict, init=False)
@@ -47,16 +149,31 @@ class PendantOpcUa:
     _task: asyncio.Task | None = field(default=None, init=False)
 
     async def start(self) -> None:
-        self.server = Server(user_manager=access.PendantUsers(self.make_session, self.auth))
+        host = urlparse(self.endpoint).hostname or ""
+        if not self.auth and host not in LOOPBACK_HOSTS:
+            raise ValueError(f"host: no-auth serves loopback only (127.0.0.1, localhost, ::1), "
+                             f"not {host}")
+        if self.pki_dir is None:
+            raise ValueError("pki_dir: the SignAndEncrypt endpoint needs the server's PKI folder")
+        self.server = PendantServer(user_manager=access.PendantUsers(self.make_session, self.auth))
         await self.server.init()
         self.server.set_endpoint(self.endpoint)
-        self.rules = access.PendantRules(self.make_session, self.auth)
-        policies = [ua.SecurityPolicyType.NoSecurity]
-        identities: list[type] = [ua.AnonymousIdentityToken, ua.UserNameIdentityToken]
-        if self.pki_dir is not None:
-            await self._load_certificate(self.pki_dir)
-            policies.append(ua.SecurityPolicyType.Basic256Sha256_SignAndEncrypt)
-            identities.append(ua.X509IdentityToken)
+        self.rules = access.PendantRules(self.make_session, self.auth, iserver=self.server.iserver)
+        access.install_login_checks(self.server.iserver)
+        access.unguessable_subscription_ids(self.server.iserver.subscription_service)
+        access.republish_with_status(self.server.iserver.subscription_service)
+        cert, key = await pki.server_certificate(self.pki_dir, space.PENDANT_URI)
+        await self.server.load_certificate(str(cert))
+        await self.server.load_private_key(str(key))
+        self.server.trust_list = pki.TrustList(self.pki_dir)
+        self.server.set_certificate_validator(_same_as_channel)
+        policies = [ua.SecurityPolicyType.Basic256Sha256_SignAndEncrypt]
+        if self.none_endpoint:
+            policies.append(ua.SecurityPolicyType.NoSecurity)
+        # Anonymous: only the --no-auth demo (everyone an Administrator); else no login
+        identities: list[type] = [ua.UserNameIdentityToken, ua.X509IdentityToken]
+        if not self.auth:
+            identities.append(ua.AnonymousIdentityToken)
         self.server.set_security_policy(policies, permission_ruleset=self.rules)
         self.server.set_identity_tokens(identities)
         self.server.set_server_name("pendant")
@@ -67,22 +184,6 @@ class PendantOpcUa:
         await self.sync()
         await self.server.start()
         self._task = asyncio.create_task(self._poll_forever(), name="pendant-opcua-poll")
-
-    async def _load_certificate(self, pki: Path) -> None:
-        """The server's application certificate (self-signed, made once, kept in ``pki``)."""
-        import socket
-
-        from asyncua.crypto.cert_gen import setup_self_signed_certificate
-        from cryptography.x509.oid import ExtendedKeyUsageOID
-
-        pki.mkdir(parents=True, exist_ok=True)
-        key, cert = pki / "pendant-server-key.pem", pki / "pendant-server-cert.der"
-        await setup_self_signed_certificate(
-            key, cert, space.PENDANT_URI, socket.gethostname(),
-            [ExtendedKeyUsageOID.SERVER_AUTH, ExtendedKeyUsageOID.CLIENT_AUTH],
-            {"organizationName": "pendant", "commonName": "pendant OPC UA"})
-        await self.server.load_certificate(str(cert))
-        await self.server.load_private_key(str(key))
 
     async def stop(self) -> None:
         if self._task is not None:
@@ -98,12 +199,36 @@ class PendantOpcUa:
             except Exception:  # a DB hiccup must not end the face; say it and poll again
                 log.exception("OPC UA poll of the database failed")
 
+    async def end_revoked_sessions(self) -> int:
+        """Close every session whose login was revoked or expired (its subscriptions with it:
+        no more data goes out); returns how many. Run before each poll's writes."""
+        sessions = [s for s in list(self.server.iserver._external_sessions.values())
+                    if getattr(s.user, "secret", None)]
+        if not sessions or not self.auth:
+            return 0
+        gone = await asyncio.to_thread(
+            lambda: {s.user.secret for s in sessions if self.rules.caller(s.user.secret, fresh=True) is None})
+        ended = 0
+        for s in sessions:
+            if s.user.secret in gone:
+                log.warning("OPC UA: the login of %s was revoked or expired: session ended",
+                            s.user.name)
+                await s.close_session(True)  # and asyncua forgets it
+                ended += 1
+        return ended
+
     async def sync(self) -> int:
         """Read every controller from the database and update the address space; returns writes."""
+        await self.end_revoked_sessions()
         new = await asyncio.to_thread(read_cells, self.make_session)
         writes = 0
-        for cid in set(self.states) - set(new):  # deleted controllers leave the space
+        gone = {cid for cid in self.states
+                if cid not in new or new[cid].node_key != self.states[cid].node_key}
+        for cid in gone:  # deleted controllers leave the space (an id made again: a new one)
             nodes = self.cells.pop(cid)
+            for method_id in [m for m in self.rules.method_names
+                              if str(m.Identifier).startswith(f"{nodes.pendant.nodeid.Identifier}.")]:
+                del self.rules.method_names[method_id]
             await space.remove(nodes.system)
             await space.remove(nodes.pendant)
             self.states.pop(cid)
@@ -130,32 +255,30 @@ class PendantOpcUa:
                 a.ArrayDimensions = [0]
             return a
 
-        def read_frame(_parent: ua.NodeId, table: ua.Variant,
-                       number: ua.Variant) -> list[ua.Variant] | ua.StatusCode:
-            key = _slot_key(table.Value, number.Value)
+        async def read_frame(table: str, number: int) -> list[ua.Variant] | ua.StatusCode:
+            key = _slot_key(table, number)
             st = self.states[cid].slot(*key) if key else None
             if st is None:
                 return ua.StatusCode(ua.StatusCodes.BadInvalidArgument)
             return [ua.Variant(st.name, S), ua.Variant(st.kind, S),
                     ua.Variant(list(st.pose), D), ua.Variant(st.version, ua.VariantType.UInt64)]
 
-        async def export_file(_parent: ua.NodeId, fmt: ua.Variant) -> list[ua.Variant] | ua.StatusCode:
-            if fmt.Value not in FORMATS:
+        async def export_file(fmt: str) -> list[ua.Variant] | ua.StatusCode:
+            if fmt not in FORMATS:
                 return ua.StatusCode(ua.StatusCodes.BadInvalidArgument)
-            text = await asyncio.to_thread(self._export, cid, fmt.Value)
+            text = await asyncio.to_thread(self._export, cid, fmt)
             return [ua.Variant(text, S)]
 
-        async def commit_frame(_parent: ua.NodeId, table: ua.Variant, number: ua.Variant,
-                               frame: ua.Variant, slot_name: ua.Variant,
-                               expected: ua.Variant) -> list[ua.Variant] | ua.StatusCode:
-            key = _slot_key(table.Value, number.Value)
+        async def commit_frame(table: str, number: int, frame: list[float], slot_name: str,
+                               expected: int) -> list[ua.Variant] | ua.StatusCode:
+            key = _slot_key(table, number)
+            if key is None:
+                return ua.StatusCode(ua.StatusCodes.BadInvalidArgument)
             caller = access.CURRENT.get()
-            if key is None or caller is None:
-                return ua.StatusCode(ua.StatusCodes.BadInvalidArgument if key is None
-                                     else ua.StatusCodes.BadUserAccessDenied)
+            assert caller is not None  # checked by _method
             outcome = await asyncio.to_thread(
-                commit.commit_frame, self.make_session, cid, *key, frame.Value, slot_name.Value,
-                expected.Value, caller.audit_actor())
+                commit.commit_frame, self.make_session, cid, *key, frame, slot_name,
+                expected, caller.audit_actor())
             if isinstance(outcome, ua.StatusCode):
                 return outcome
             await self.sync()  # the client reads its own write at once
@@ -177,9 +300,8 @@ class PendantOpcUa:
              [arg("NewVersion", ua.VariantType.UInt64)]),
         )
         for method_name, func, inputs, outputs in methods:
-            node = await nodes.pendant.add_method(
-                ua.NodeId(f"Pendant.{name}.{method_name}", ns), ua.QualifiedName(method_name, ns),
-                func, inputs, outputs)
+            node = await _add_method(self.server, nodes.pendant, method_name, ns,
+                                     _method(method_name, func, inputs), inputs, outputs)
             self.rules.method_names[node.nodeid] = method_name
 
     def _export(self, cid: int, fmt: str) -> str:
@@ -190,6 +312,75 @@ class PendantOpcUa:
             return export_text(db, cid, fmt)
 
 
+async def _add_method(server: Server, parent: Node, name: str, ns: int, callback,
+                      inputs: list[ua.Argument], outputs: list[ua.Argument]) -> Node:
+    """A method of ``parent`` and its argument properties, every NodeId derived from the
+    parent's (asyncua's ``add_method`` numbers the properties: another id after a restart)."""
+    from asyncua.common.manage_nodes import create_property
+
+    method_id = ua.NodeId(f"{parent.nodeid.Identifier}.{name}", ns)
+    attrs = ua.MethodAttributes(DisplayName=ua.LocalizedText(name), Executable=True,
+                                UserExecutable=True)
+    (res,) = await server.iserver.isession.add_nodes([ua.AddNodesItem(
+        ParentNodeId=parent.nodeid, ReferenceTypeId=ua.NodeId(ua.ObjectIds.HasComponent),
+        RequestedNewNodeId=method_id, BrowseName=ua.QualifiedName(name, ns),
+        NodeClass=ua.NodeClass.Method, NodeAttributes=attrs)])
+    res.StatusCode.check()
+    method = server.get_node(method_id)
+    for prop, args in (("InputArguments", inputs), ("OutputArguments", outputs)):
+        await create_property(method, ua.NodeId(f"{method_id.Identifier}.{prop}", ns),
+                              ua.QualifiedName(prop, 0), args,
+                              varianttype=ua.VariantType.ExtensionObject,
+                              datatype=ua.ObjectIds.Argument)
+    server.link_method(method, callback)
+    return method
+
+
+INTEGERS = {ua.VariantType.SByte, ua.VariantType.Byte, ua.VariantType.Int16,
+            ua.VariantType.UInt16, ua.VariantType.Int32, ua.VariantType.UInt32,
+            ua.VariantType.Int64, ua.VariantType.UInt64}
+
+
+def _accepts(decl: ua.Argument, v: object) -> bool:
+    """Whether the Variant ``v`` fits the declared argument: its type (any integer type for an
+    integer argument, in range for an unsigned one) and scalar or one-dimensional array."""
+    if not isinstance(v, ua.Variant) or v.is_array != (decl.ValueRank == 1):
+        return False
+    want = ua.VariantType(decl.DataType.Identifier)
+    if want == v.VariantType:
+        return True
+    if want in INTEGERS and v.VariantType in INTEGERS:
+        values = v.Value if v.is_array else [v.Value]
+        lo, hi = (0, 2 ** 64 - 1) if want == ua.VariantType.UInt64 else (-2 ** 31, 2 ** 31 - 1)
+        return all(lo <= x <= hi for x in values)
+    return False
+
+
+def _method(name: str, func, inputs: list[ua.Argument]):
+    """asyncua's method callback around ``func(*values)``: first the caller's permission for
+    this call (:func:`access.method_permission`, one table with REST), then the arguments'
+    count and types (OPC 10000-4 §5.11.2: BadArgumentsMissing, BadTooManyArguments,
+    BadTypeMismatch with the offending argument's result). A refusal fails this call only."""
+    async def call(_parent: ua.NodeId, *args: ua.Variant) -> ua.CallMethodResult | list | ua.StatusCode:
+        caller = access.CURRENT.get()
+        fmt = args[0].Value if name == "ExportFile" and args else None
+        if caller is None or not caller.may(access.method_permission(name, fmt)):
+            return ua.StatusCode(ua.StatusCodes.BadUserAccessDenied)
+        if len(args) < len(inputs):
+            return ua.StatusCode(ua.StatusCodes.BadArgumentsMissing)
+        if len(args) > len(inputs):
+            return ua.StatusCode(ua.StatusCodes.BadTooManyArguments)
+        fits = [_accepts(d, v) for d, v in zip(inputs, args)]
+        if not all(fits):
+            return ua.CallMethodResult(
+                StatusCode=ua.StatusCode(ua.StatusCodes.BadInvalidArgument),
+                InputArgumentResults=[ua.StatusCode() if ok else
+                                      ua.StatusCode(ua.StatusCodes.BadTypeMismatch)
+                                      for ok in fits])
+        return await func(*[v.Value for v in args])
+    return call
+
+
 def _slot_key(table: object, number: object) -> tuple[str, int] | None:
     """The (table, number) a client asked for, or None where there is no such slot."""
     if table not in TABLES or isinstance(number, bool) or not isinstance(number, int):
@@ -198,15 +389,18 @@ def _slot_key(table: object, number: object) -> tuple[str, int] | None:
 
 
 async def run(make_session: sessionmaker[Session], host: str, port: int, auth: bool = True,
-              pki_dir: Path | None = None, parent_pid: int | None = None) -> None:
+              pki_dir: Path | None = None, parent_pid: int | None = None,
+              none_endpoint: bool = False) -> None:
     """Serve until cancelled (``pendant opcua``), or until ``parent_pid`` (``pendant serve``,
     which started this face) is gone."""
     import os
 
     face = PendantOpcUa(make_session, f"opc.tcp://{host}:{port}/pendant/", auth=auth,
-                        pki_dir=pki_dir)
+                        pki_dir=pki_dir, none_endpoint=none_endpoint)
     await face.start()
-    log.warning("pendant OPC UA server at %s", face.endpoint)
+    log.warning("pendant OPC UA server ready at %s (%s; PKI %s)", face.endpoint,
+                "Basic256Sha256 SignAndEncrypt" + (" and None (Anonymous only)"
+                                                   if none_endpoint else ""), pki_dir)
     try:
         while parent_pid is None or os.getppid() == parent_pid:
             await asyncio.sleep(1.0)

@@ -16,6 +16,7 @@ from __future__ import annotations
 
 import json
 from dataclasses import dataclass, field
+from datetime import UTC, datetime
 from pathlib import Path
 
 from asyncua import Node, Server, ua
@@ -32,7 +33,7 @@ PENDANT_URI = "urn:pendant:opcua"
 MOTION_DEVICE_SYSTEM_TYPE = 1002
 LOAD_TYPE = 1018
 MOTION_DEVICE_CATEGORY_ARTICULATED_ROBOT = 1  # MotionDeviceCategoryEnumeration
-AXIS_MOTION_PROFILE_ROTARY = 2  # AxisMotionProfileEnumeration: 1 other, 2 rotary, ...
+AXIS_MOTION_PROFILE_ROTARY = 1  # AxisMotionProfileEnumeration: 0 OTHER, 1 ROTARY (bounded), 2 ROTARY_ENDLESS
 
 
 def opc_orientation(a_deg: float, b_deg: float, c_deg: float) -> tuple[float, float, float]:
@@ -79,6 +80,9 @@ class CellNodes:
     pendant: Node
     axes: list[Node]
     flange_mass: Node
+    flange_com_frame: Node  # 3DFrame: the CenterOfMass, orientation 0
+    flange_com_coords: Node  # its CartesianCoordinates (3DCartesianCoordinates)
+    flange_inertia_vector: Node  # 3DVector: the principal moments
     flange_com: tuple[Node, Node, Node]
     flange_inertia: tuple[Node, Node, Node]
     current_user: Node
@@ -101,6 +105,7 @@ async def _fill_placeholders(parent: Node, names: dict[str, list[str]], ns: int)
             await remove(child)
             for real in names.get(bname.Name, []):
                 made = await instantiate(parent, Node(parent.session, type_def),
+                                         nodeid=ua.NodeId(f"{parent.nodeid.Identifier}.{real}", ns),
                                          bname=ua.QualifiedName(real, bname.NamespaceIndex),
                                          dname=ua.LocalizedText(real), instantiate_optional=False)
                 await _fill_placeholders(made[0], names, ns)
@@ -123,7 +128,9 @@ async def remove(node: Node) -> None:
 
 
 async def _set(node: Node, value: object, variant: ua.VariantType) -> None:
-    await node.write_value(ua.DataValue(ua.Variant(value, variant)))
+    """Write a value with its SourceTimestamp (when the face saw it in the database)."""
+    await node.write_value(ua.DataValue(ua.Variant(value, variant),
+                                        SourceTimestamp=datetime.now(UTC)))
 
 
 async def add_cell(server: Server, ns_ids: tuple[int, int, int], st: ControllerState) -> CellNodes:
@@ -139,7 +146,7 @@ async def add_cell(server: Server, ns_ids: tuple[int, int, int], st: ControllerS
              "<SoftwareIdentifier>": ["pendant"], "<TaskControlIdentifier>": ["Calibration"]}
     system = (await instantiate(
         device_set, server.get_node(ua.NodeId(MOTION_DEVICE_SYSTEM_TYPE, rob)),
-        nodeid=ua.NodeId(f"{st.name}", ns), bname=ua.QualifiedName(st.name, ns),
+        nodeid=ua.NodeId(st.node_key, ns), bname=ua.QualifiedName(st.name, ns),
         dname=ua.LocalizedText(st.name), instantiate_optional=False))[0]
     await _fill_placeholders(system, names, ns)
 
@@ -156,13 +163,12 @@ async def add_cell(server: Server, ns_ids: tuple[int, int, int], st: ControllerS
                    ua.VariantType.Int32)
         pos = await _child(axis, f"{di}:ParameterSet", f"{rob}:ActualPosition")
         await _set(pos, st.joints_deg[i], ua.VariantType.Double)
-        await _set(await _child(pos, "0:EngineeringUnits"), ua.EUInformation(
-            NamespaceUri="http://www.opcfoundation.org/UA/units/un/cefact", UnitId=17476,
-            DisplayName=ua.LocalizedText("°"), Description=ua.LocalizedText("degree")),
-            ua.VariantType.ExtensionObject)
+        await _set(await _child(pos, "0:EngineeringUnits"), UNITS["deg"],
+                   ua.VariantType.ExtensionObject)
         axes.append(pos)
 
     load = (await instantiate(device, server.get_node(ua.NodeId(LOAD_TYPE, rob)),
+                              nodeid=ua.NodeId(f"{device.nodeid.Identifier}.FlangeLoad", ns),
                               bname=ua.QualifiedName("FlangeLoad", rob),
                               dname=ua.LocalizedText("FlangeLoad"), instantiate_optional=True))[0]
     com = await _child(load, f"{rob}:CenterOfMass", "0:CartesianCoordinates")
@@ -170,11 +176,14 @@ async def add_cell(server: Server, ns_ids: tuple[int, int, int], st: ControllerS
 
     ctrl = await _child(system, f"{rob}:Controllers", f"{rob}:{st.name}")
     user = await _child(ctrl, f"{rob}:CurrentUser", f"{rob}:Level")
+    await _identify(system, device, ctrl, load, st, ns_ids)
 
     pendant, slot_ids = await _pendant_object(server, ns, st)
     nodes = CellNodes(
         system=system, pendant=pendant, axes=axes,
         flange_mass=await _child(load, f"{rob}:Mass"),
+        flange_com_frame=await _child(load, f"{rob}:CenterOfMass"), flange_com_coords=com,
+        flange_inertia_vector=inertia,
         flange_com=tuple([await _child(com, f"0:{k}") for k in "XYZ"]),  # type: ignore[arg-type]
         flange_inertia=tuple([await _child(inertia, f"0:{k}") for k in "XYZ"]),  # type: ignore[arg-type]
         current_user=user,
@@ -186,12 +195,101 @@ async def add_cell(server: Server, ns_ids: tuple[int, int, int], st: ControllerS
     return nodes
 
 
+UNECE = "http://www.opcfoundation.org/UA/units/un/cefact"
+UNITS = {  # OPC 10000-8 §5.6.3: UNECE Rec. 20 codes, UnitId = the code's ASCII as an int
+    "deg": ua.EUInformation(NamespaceUri=UNECE, UnitId=17476, DisplayName=ua.LocalizedText("°"),
+                            Description=ua.LocalizedText("degree")),
+    "mm": ua.EUInformation(NamespaceUri=UNECE, UnitId=5066068, DisplayName=ua.LocalizedText("mm"),
+                           Description=ua.LocalizedText("millimetre")),
+    "kg": ua.EUInformation(NamespaceUri=UNECE, UnitId=4933453, DisplayName=ua.LocalizedText("kg"),
+                           Description=ua.LocalizedText("kilogram")),
+    "degC": ua.EUInformation(NamespaceUri=UNECE, UnitId=4408652, DisplayName=ua.LocalizedText("°C"),
+                             Description=ua.LocalizedText("degree Celsius")),
+}
+ORIENTATION_ORDER = ("A about X (roll), B about Y (pitch), C about Z (yaw), degrees; "
+                     "R = Rz(C) Ry(B) Rx(A), intrinsic z-y'-x'' (OPC 10000-5 12.29). "
+                     "KUKA's A is this C, KUKA's C this A.")
+OPERATIONAL_MODE_T1 = 1  # OperationalModeEnumeration MANUAL_REDUCED_SPEED: a teach pendant's T1
+
+
+async def _identify(system: Node, device: Node, ctrl: Node, load: Node, st: ControllerState,
+                    ns_ids: tuple[int, int, int]) -> None:
+    """The mandatory values an emulated cell knows (the robot catalogue: maker and model;
+    pendant: the software; the emulator: T1, no stop, full speed), and ``BadNotReadable`` for
+    the rest (a motor's serial number, its temperature): never a Good Null."""
+    from importlib.metadata import PackageNotFoundError, version
+
+    di, rob, _ns = ns_ids
+    try:
+        revision = version("pendant")
+    except PackageNotFoundError:
+        revision = "unknown"
+    maker = st.robot_name.split()[0]
+    lt, s_ = ua.VariantType.LocalizedText, ua.VariantType.String
+    values: list[tuple[Node, object, ua.VariantType]] = [
+        (await _child(device, f"{di}:ProductCode"), st.robot_key, s_),
+        (await _child(device, f"{di}:SerialNumber"), f"emulated:{st.node_key}", s_),
+        (await _child(device, f"{di}:ParameterSet", f"{rob}:SpeedOverride"), 100.0,
+         ua.VariantType.Double),
+        (await _child(ctrl, f"{di}:Manufacturer"), ua.LocalizedText("pendant"), lt),
+        (await _child(ctrl, f"{di}:Model"), ua.LocalizedText(f"emulated {maker} controller"), lt),
+        (await _child(ctrl, f"{di}:ProductCode"), "pendant-emulator", s_),
+        (await _child(ctrl, f"{di}:SerialNumber"), f"emulated:{st.node_key}", s_),
+    ]
+    software = await _child(ctrl, f"{rob}:Software", f"{rob}:pendant")
+    values += [(await _child(software, f"{di}:Manufacturer"), ua.LocalizedText("pendant"), lt),
+               (await _child(software, f"{di}:Model"), ua.LocalizedText("pendant"), lt),
+               (await _child(software, f"{di}:SoftwareRevision"), revision, s_)]
+    task = await _child(ctrl, f"{rob}:TaskControls", f"{rob}:Calibration")
+    values += [(await _child(task, f"{di}:ComponentName"), ua.LocalizedText("Calibration"), lt),
+               (await _child(task, f"{di}:ParameterSet", f"{rob}:TaskProgramName"),
+                "calibration menus", s_),
+               (await _child(task, f"{di}:ParameterSet", f"{rob}:TaskProgramLoaded"), True,
+                ua.VariantType.Boolean)]
+    safety = await _child(system, f"{rob}:SafetyStates", f"{rob}:SafetyState", f"{di}:ParameterSet")
+    values += [(await _child(safety, f"{rob}:EmergencyStop"), False, ua.VariantType.Boolean),
+               (await _child(safety, f"{rob}:ProtectiveStop"), False, ua.VariantType.Boolean),
+               (await _child(safety, f"{rob}:OperationalMode"), OPERATIONAL_MODE_T1,
+                ua.VariantType.Int32),
+               (await _child(load, f"{rob}:Mass", "0:EngineeringUnits"), UNITS["kg"],
+                ua.VariantType.ExtensionObject)]
+    # the centre of mass frame's orientation: the flange's (the inertia is about its axes)
+    orient = await _child(load, f"{rob}:CenterOfMass", "0:Orientation")
+    values += [(orient, ua.ThreeDOrientation(), ua.VariantType.ExtensionObject)]
+    values += [(await _child(orient, f"0:{k}"), 0.0, ua.VariantType.Double) for k in "ABC"]
+    for i in range(len(st.joints_deg)):
+        motor = await _child(device, f"{rob}:PowerTrains", f"{rob}:PT{i + 1}", f"{rob}:Motor")
+        values += [(await _child(motor, f"{di}:Manufacturer"), ua.LocalizedText(maker), lt),
+                   (await _child(motor, f"{di}:Model"),
+                    ua.LocalizedText(f"{st.robot_name} A{i + 1} motor"), lt),
+                   (await _child(motor, f"{di}:ParameterSet", f"{rob}:MotorTemperature",
+                                 "0:EngineeringUnits"), UNITS["degC"],
+                    ua.VariantType.ExtensionObject)]
+    for node, value, variant in values:
+        await _set(node, value, variant)
+    await _no_good_nulls(system)
+
+
+async def _no_good_nulls(node: Node) -> None:
+    """Every variable below ``node`` still Null reads ``BadNotReadable`` (the emulator does
+    not know it: a motor's serial number, its temperature)."""
+    for child in await node.get_children(refs=ua.ObjectIds.HierarchicalReferences):
+        cls = await child.read_node_class()
+        if cls == ua.NodeClass.Variable:
+            dv = await child.read_data_value(raise_on_bad_status=False)
+            if dv.Value is None or dv.Value.Value is None:
+                await child.write_value(ua.DataValue(
+                    StatusCode=ua.StatusCode(ua.StatusCodes.BadNotReadable)))
+        if cls in (ua.NodeClass.Object, ua.NodeClass.Variable):
+            await _no_good_nulls(child)
+
+
 async def _pendant_object(server: Server, ns: int, st: ControllerState
                           ) -> tuple[Node, dict[tuple[str, int], dict[str, ua.NodeId]]]:
     """Objects/Pendant/<controller>: the tables, the active frames, the sessions (one batch)."""
     root = await _pendant_root(server, ns)
     batch = NodeBatch(ns)
-    obj = batch.obj(root.nodeid, st.name, in_folder=True)
+    obj = batch.obj(root.nodeid, st.name, in_folder=True, node_id=f"Pendant.{st.node_key}")
     folders = {"tool": batch.obj(obj, "Tools", folder=True),
                "base": batch.obj(obj, "Bases", folder=True)}
     I32 = ua.VariantType.Int32
@@ -222,26 +320,40 @@ class NodeBatch:
         self.items: list[ua.AddNodesItem] = []
 
     def obj(self, parent: ua.NodeId, name: str, folder: bool = False,
-            in_folder: bool = False) -> ua.NodeId:
+            in_folder: bool = False, node_id: str | None = None) -> ua.NodeId:
         attrs = ua.ObjectAttributes(DisplayName=ua.LocalizedText(name), EventNotifier=0)
         return self._add(parent, name, ua.NodeClass.Object, attrs,
                          ua.ObjectIds.FolderType if folder else ua.ObjectIds.BaseObjectType,
-                         ua.ObjectIds.Organizes if in_folder else ua.ObjectIds.HasComponent)
+                         ua.ObjectIds.Organizes if in_folder else ua.ObjectIds.HasComponent,
+                         node_id=node_id)
 
     def var(self, parent: ua.NodeId, name: str, value: object, variant: ua.VariantType,
             data_type: int, type_def: int = ua.ObjectIds.BaseDataVariableType,
-            name_ns: int | None = None) -> ua.NodeId:
+            name_ns: int | None = None, description: str = "") -> ua.NodeId:
         attrs = ua.VariableAttributes(
             DisplayName=ua.LocalizedText(name), Value=ua.Variant(value, variant),
+            Description=ua.LocalizedText(description or name),
             DataType=ua.NodeId(data_type), ValueRank=ua.ValueRank.Scalar,
             AccessLevel=ua.AccessLevel.CurrentRead.mask,
             UserAccessLevel=ua.AccessLevel.CurrentRead.mask)
         return self._add(parent, name, ua.NodeClass.Variable, attrs, type_def,
                          ua.ObjectIds.HasComponent, name_ns)
 
+    def prop(self, parent: ua.NodeId, name: str, value: object, data_type: int) -> ua.NodeId:
+        """A property (HasProperty, PropertyType) in namespace 0's browse names, as the
+        standard types declare them (LengthUnit, AngleUnit)."""
+        attrs = ua.VariableAttributes(
+            DisplayName=ua.LocalizedText(name),
+            Value=ua.Variant(value, ua.VariantType.ExtensionObject),
+            DataType=ua.NodeId(data_type), ValueRank=ua.ValueRank.Scalar,
+            AccessLevel=ua.AccessLevel.CurrentRead.mask,
+            UserAccessLevel=ua.AccessLevel.CurrentRead.mask)
+        return self._add(parent, name, ua.NodeClass.Variable, attrs, ua.ObjectIds.PropertyType,
+                         ua.ObjectIds.HasProperty, 0)
+
     def _add(self, parent: ua.NodeId, name: str, cls: ua.NodeClass, attrs: object, type_def: int,
-             ref: int, name_ns: int | None = None) -> ua.NodeId:
-        node_id = ua.NodeId(f"{parent.Identifier}.{name}", self.ns)
+             ref: int, name_ns: int | None = None, node_id: str | None = None) -> ua.NodeId:
+        node_id = ua.NodeId(node_id or f"{parent.Identifier}.{name}", self.ns)
         self.items.append(ua.AddNodesItem(
             ParentNodeId=parent, ReferenceTypeId=ua.NodeId(ref),
             RequestedNewNodeId=node_id,
@@ -267,7 +379,9 @@ def _add_slot(batch: NodeBatch, folder: ua.NodeId, s: SlotState) -> dict[str, ua
                        O.ThreeDCartesianCoordinatesType, name_ns=0)
     orient = batch.var(frame, "Orientation", _frame_value(s.pose).Orientation,
                        ua.VariantType.ExtensionObject, O.ThreeDOrientation,
-                       O.ThreeDOrientationType, name_ns=0)
+                       O.ThreeDOrientationType, name_ns=0, description=ORIENTATION_ORDER)
+    batch.prop(coords, "LengthUnit", UNITS["mm"], O.EUInformation)  # CartesianCoordinatesType
+    batch.prop(orient, "AngleUnit", UNITS["deg"], O.EUInformation)  # OrientationType
     ids = {"frame": frame, "coords": coords, "orient": orient}
     for k in "XYZ":
         ids[k] = batch.var(coords, k, 0.0, D, O.Double, name_ns=0)
@@ -304,6 +418,7 @@ async def update_cell(nodes: CellNodes, old: ControllerState | None, new: Contro
     """Write the values that differ between ``old`` and ``new``; returns how many were written."""
     writes: list[tuple[Node, object, ua.VariantType]] = []
     dbl, s_, i32 = ua.VariantType.Double, ua.VariantType.String, ua.VariantType.Int32
+    ext = ua.VariantType.ExtensionObject
     for i, q in enumerate(new.joints_deg):
         if old is None or old.joints_deg[i] != q:
             writes.append((nodes.axes[i], q, dbl))
@@ -320,6 +435,12 @@ async def update_cell(nodes: CellNodes, old: ControllerState | None, new: Contro
         com = tool_new.com_mm if tool_new else (0.0, 0.0, 0.0)
         inertia = tool_new.inertia_kgm2 if tool_new else (0.0, 0.0, 0.0)
         writes.append((nodes.flange_mass, mass, dbl))
+        coords = ua.ThreeDCartesianCoordinates(X=com[0], Y=com[1], Z=com[2])
+        writes += [(nodes.flange_com_frame, ua.ThreeDFrame(
+                        CartesianCoordinates=coords, Orientation=ua.ThreeDOrientation()), ext),
+                   (nodes.flange_com_coords, coords, ext),
+                   (nodes.flange_inertia_vector,
+                    ua.ThreeDVector(X=inertia[0], Y=inertia[1], Z=inertia[2]), ext)]
         writes += [(n, v, dbl) for n, v in zip(nodes.flange_com, com)]
         writes += [(n, v, dbl) for n, v in zip(nodes.flange_inertia, inertia)]
     if old is None or old.sessions != new.sessions:
@@ -349,7 +470,7 @@ async def update_cell(nodes: CellNodes, old: ControllerState | None, new: Contro
     return len(writes)
 
 
-async def event_generator(server: Server, ns: int):  # noqa: ANN201
+async def event_generator(server: Server, ns: int):
     """``PendantEventType`` (a BaseEventType) raised by the Server object for every outbox
     event: Kind, Controller, Payload (the JSON the webhooks carry), EventRecordId."""
     etype = await server.create_custom_event_type(
@@ -359,7 +480,7 @@ async def event_generator(server: Server, ns: int):  # noqa: ANN201
     return await server.get_event_generator(etype, server.nodes.server)
 
 
-async def raise_event(gen, ev: EventState) -> None:  # noqa: ANN001
+async def raise_event(gen, ev: EventState) -> None:
     gen.event.Kind = ev.kind
     gen.event.Controller = ev.controller or ""
     gen.event.Payload = json.dumps(ev.payload, separators=(",", ":"))

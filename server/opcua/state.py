@@ -54,7 +54,9 @@ class SessionState:
 class ControllerState:
     id: int
     name: str
+    created_at: str  # the row's creation time, UTC, as YYYYMMDDTHHMMSSffffffZ
     robot_name: str
+    robot_key: str  # solvers.robots.ROBOTS key, "custom" for a custom DH table
     joints_deg: tuple[float, ...]
     joint_limits_deg: tuple[tuple[float, float], ...]
     active_tool_no: int
@@ -62,6 +64,14 @@ class ControllerState:
     current_user: str  # the role (user level) of whoever last changed this controller, or ""
     slots: tuple[SlotState, ...]
     sessions: tuple[SessionState, ...]
+
+    @property
+    def node_key(self) -> str:
+        """The root of this controller's NodeIds (docs/opcua.md): its name and when it was made,
+        so a restart gives the same ids and a controller made again (same name, or an id
+        SQLite hands out again) never gets a deleted one's. ``@`` keeps them apart from the
+        face's own nodes (``Pendant``, the event type)."""
+        return f"{self.name}@{self.created_at}"
 
     def slot(self, table: str, number: int) -> SlotState | None:
         return next((s for s in self.slots if s.table == table and s.number == number), None)
@@ -97,6 +107,8 @@ def controller_state(db: Session, c: Controller) -> ControllerState:
                       .order_by(AuditRecord.id.desc()).limit(1)).first()
     return ControllerState(
         id=c.id, name=c.name, robot_name=robot.name,
+        robot_key="custom" if c.custom_robot else (c.robot_key or "kuka_kr6_r900_sixx"),
+        created_at=c.created_at.strftime("%Y%m%dT%H%M%S%fZ"),
         current_user=(last[1] or "") if last else "",
         joints_deg=tuple(float(q) for q in c.joints_deg),
         joint_limits_deg=tuple((float(lo), float(hi)) for lo, hi in robot.limits_deg()),
