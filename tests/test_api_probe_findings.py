@@ -86,3 +86,56 @@ def test_openapi_documents_401_403_404_409(client):
     assert {"401", "403"} <= set(listing) and "404" not in listing and "409" not in listing
     assert "401" not in paths["/auth/login"]["post"]["responses"]
     assert "403" not in paths["/auth/me"]["get"]["responses"]
+
+
+# ------------------------------------------------------------- issue 21: round three's probe
+
+def _user(client, name: str, role: str) -> dict[str, str]:
+    """A user with ``role``; the headers of a fresh token of theirs."""
+    ok(client.post("/users", json={"name": name, "role": role}))
+    return {"Authorization": "Bearer " + ok(client.post(f"/users/{name}/tokens", json={}))["token"]}
+
+
+JOG = {"mode": "joint", "axis": "A1", "increment": 0.5}
+
+
+def test_idempotency_keys_belong_to_their_user(client):
+    """Item 3: an Operator replaying an Expert's keyed jog got the Expert's stored answer; now
+    the Operator's request is one of its own (an Operator may jog: it runs again)."""
+    expert, operator = _user(client, "eve", "Expert"), _user(client, "otto", "Operator")
+    a1 = ok(client.get(f"{C}/robot"))["joints_deg"][0]
+    key = {"Idempotency-Key": "jog-by-eve-1"}
+    first = client.post(f"{C}/robot/jog", json=JOG, headers={**expert, **key})
+    assert first.status_code == 200
+    again = client.post(f"{C}/robot/jog", json=JOG, headers={**expert, **key})
+    assert again.content == first.content  # the Expert's own replay
+    theirs = client.post(f"{C}/robot/jog", json=JOG, headers={**operator, **key})
+    assert theirs.status_code == 200 and theirs.content != first.content
+    assert ok(client.get(f"{C}/robot"))["joints_deg"][0] - a1 == pytest.approx(1.0)
+    # and a replay of the Operator's is the Operator's
+    assert client.post(f"{C}/robot/jog", json=JOG,
+                       headers={**operator, **key}).content == theirs.content
+
+
+def test_token_creation_refuses_an_idempotency_key_and_stores_no_secret(client, db_url):
+    """Item 3: the new token was stored in plain text with the keyed answer (24 h), and another
+    Administrator replaying the key got the same working token."""
+    from sqlalchemy import create_engine, text
+
+    ok(client.post("/users", json={"name": "olga", "role": "Operator"}))
+    before = len(ok(client.get("/audit")))
+    r = client.post("/users/olga/tokens", json={}, headers={"Idempotency-Key": "tok-1"})
+    assert r.status_code == 400, r.text
+    assert r.json()["detail"][0]["loc"] == ["header", "Idempotency-Key"]
+    assert "secret" in r.json()["detail"][0]["msg"]
+    assert "pdt_" not in r.text
+    assert [a["action"] for a in ok(client.get("/audit"))[before:]] == []  # no token made
+    engine = create_engine(db_url)
+    try:
+        with engine.connect() as conn:
+            bodies = [bytes(b or b"") for b in conn.execute(text(
+                "SELECT body FROM idempotency_key")).scalars()]
+    finally:
+        engine.dispose()
+    assert not any(b"pdt_" in b for b in bodies)
+    assert client.post("/users/olga/tokens", json={}).status_code == 201  # without the key
