@@ -10,7 +10,9 @@
     pendant users add|list|revoke ...; pendant tokens create USER; pendant roles add|list
     pendant calibrate METHOD FILE [--robot KEY] [--tcp X,Y,Z] [--json]
     pendant export CONTROLLER --format kuka|abb|fanuc|ur|json [--db URL]
-    pendant import FILE --controller NAME [--format kuka|abb|fanuc|ur] [--dry-run] [--db URL]
+    pendant import FILE --controller NAME [--format kuka|abb|fanuc|ur|json] [--dry-run] [--db URL]
+    pendant backup CONTROLLER [-o FILE] [--db URL]
+    pendant restore FILE --controller NAME [--dry-run] [--db URL]
 
 ``calibrate`` reads taught poses from a JSON or CSV file (format in docs/api.md, "pendant
 calibrate") and prints the report; it needs no service and no DB.
@@ -44,6 +46,7 @@ import numpy as np
 
 from server import __version__
 from server.analysis_cli import add_analysis_commands
+from server.backup import add_backup_commands
 from server.auth.cli import add_auth_commands
 from server.slot_cli import add_slot_command
 from server.methods import METHODS, MethodInputs, TaughtData
@@ -277,13 +280,14 @@ def build_parser() -> argparse.ArgumentParser:
                                       "(--dry-run: show what would change)")
     i.add_argument("file", type=Path)
     i.add_argument("--controller", required=True, help="controller name (or id)")
-    i.add_argument("--format", choices=["kuka", "abb", "fanuc", "ur"],
+    i.add_argument("--format", choices=["kuka", "abb", "fanuc", "ur", "json"],
                    help="default from the file name: .dat kuka, .mod/.modx/.sys abb, "
-                        ".txt/.ls fanuc, .script ur")
+                        ".txt/.ls fanuc, .script ur, .json a backup (as pendant restore)")
     i.add_argument("--dry-run", action="store_true", help="write nothing")
     i.add_argument("--db", help="database URL")
 
     add_analysis_commands(sub)
+    add_backup_commands(sub)
     add_slot_command(sub)
     add_auth_commands(sub)
     add_opcua_commands(sub)
@@ -291,7 +295,7 @@ def build_parser() -> argparse.ArgumentParser:
 
 
 IMPORT_SUFFIXES = {".dat": "kuka", ".mod": "abb", ".modx": "abb", ".sys": "abb", ".txt": "fanuc",
-                   ".ls": "fanuc", ".script": "ur"}
+                   ".ls": "fanuc", ".script": "ur", ".json": "json"}
 
 
 def import_file(args: argparse.Namespace) -> int:
@@ -303,7 +307,11 @@ def import_file(args: argparse.Namespace) -> int:
     fmt = args.format or IMPORT_SUFFIXES.get(args.file.suffix.lower())
     if fmt is None:
         raise CalibrationError(("--format",), f"cannot tell the format of {args.file.name}; "
-                               "give --format kuka|abb|fanuc|ur")
+                               "give --format kuka|abb|fanuc|ur|json")
+    if fmt == "json":  # a JSON backup: what pendant restore does
+        from server.backup import run_restore_file
+
+        return run_restore_file(args)
     raw = args.file.read_bytes()
     try:
         text = raw.decode("utf-8")

@@ -10,8 +10,10 @@ from datetime import datetime
 from typing import Annotated, Any, Literal
 
 import numpy as np
-from pydantic import AfterValidator, BaseModel, ConfigDict, Field, model_validator
+from pydantic import (AfterValidator, BaseModel, ConfigDict, Field, ValidationInfo,
+                      field_validator, model_validator)
 
+from server.limits import IMPORT_LIMIT_BYTES
 from server.bounds import MAX_MM, MECH_UNIT_CHARS, NAME_CHARS, Deg, Kg, Kgm2, Mm, check_name
 from server.methods import METHODS
 from solvers.frames import Pose
@@ -534,10 +536,24 @@ class RunCycleOut(Out):
 
 # ------------------------------------------------------------------------------ import/export
 
+FILE_CHARS = 5_000_000  # a controller file (KUKA, ABB, FANUC, UR) is far below
+
+
 class ImportIn(In):
     format: ImportFormat
-    text: str = Field(min_length=1, max_length=5_000_000)
+    text: str = Field(min_length=1, max_length=IMPORT_LIMIT_BYTES,
+                      description="the file; a controller file has at most 5 000 000 characters, "
+                                  "a JSON backup as many as the body's 64 MiB limit holds")
     dry_run: bool = Field(False, description="say what would change; write nothing")
+
+    @field_validator("text")
+    @classmethod
+    def _file_length(cls, text: str, info: ValidationInfo) -> str:
+        fmt = info.data.get("format")
+        if fmt != "json" and len(text) > FILE_CHARS:
+            raise ValueError(f"a {fmt} controller file has at most {FILE_CHARS} characters, "
+                             f"got {len(text)}")
+        return text
 
 
 class SlotChangeOut(Out):
