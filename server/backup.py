@@ -20,7 +20,7 @@ from pydantic import BaseModel, ConfigDict, Field, ValidationError, field_valida
 from db.crud import MAX_ID, SLOTS, KINDS_OF_TABLE
 from db.models import EXT_KIN_SLOTS
 from server.methods import METHODS
-from server.bounds import MECH_UNIT_CHARS, Deg, Kg, Kgm2, Mm
+from server.bounds import MAX_T_S, MECH_UNIT_CHARS, Deg, Kg, Kgm2, Mm
 from server.schemas import (EntryKind, MethodName, ReportOut, SessionParamsIn, SlotName,
                             TableName)
 from solvers.errors import CalibrationError
@@ -171,7 +171,7 @@ class PointIn(_Doc):
     beam_id: str | None = Field(None, min_length=1, max_length=32)
     edge: Literal["enter", "leave", "tip"] | None = None
     velocity_mm_s: Annotated[list[Mm], Field(min_length=3, max_length=3)] | None = None
-    t_s: float | None = Field(None, ge=0.0, le=1e12)
+    t_s: float | None = Field(None, ge=0.0, le=MAX_T_S)
     motion_sign: list[Annotated[float, Field(ge=-1.0, le=1.0)]] | None = Field(
         None, min_length=1, max_length=7)
     external_axes: dict[Literal["E1", "E2", "E3", "E4", "E5", "E6"],

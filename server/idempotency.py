@@ -13,8 +13,8 @@ Field", draft-ietf-httpapi-idempotency-key-header).
 - Keys belong to the user who sent them: the stored key is the SHA-256 of the user's name and
   the key, so another user's request with the same key runs as a request of its own and never
   gets the first user's answer.
-- A route whose answer holds a secret (``POST /users/{user_name}/tokens``: the new token)
-  refuses the header (**400**): the store keeps answers for 24 h, and a secret is never stored.
+- A route whose answer holds a secret (``POST /users/{user_name}/tokens``: the new token;
+  ``POST /webhooks``: the signing secret) refuses the header (**400**): the store keeps answers for 24 h, and a secret is never stored.
 
 The key is claimed inside the command's own transaction (:func:`claim`, called from
 ``server.deps``), so it exists exactly when the command's changes were committed.
@@ -41,7 +41,8 @@ HEADER = "idempotency-key"
 KEEP = timedelta(hours=24)
 MAX_KEY = 255
 STORED_HEADERS = ("content-type", "etag", "location")
-SECRET_ROUTES = frozenset({("POST", "/users/{user_name}/tokens")})  # answers hold a secret
+SECRET_ROUTES = frozenset({("POST", "/users/{user_name}/tokens"),  # answers hold a secret
+                           ("POST", "/webhooks")})
 
 
 class IdempotencyError(Exception):

@@ -14,7 +14,7 @@ from pydantic import (AfterValidator, BaseModel, ConfigDict, Field, ValidationIn
                       field_validator, model_validator)
 
 from server.limits import IMPORT_LIMIT_BYTES
-from server.bounds import MAX_MM, MECH_UNIT_CHARS, NAME_CHARS, Deg, Kg, Kgm2, Mm, check_name
+from server.bounds import MAX_MM, MECH_UNIT_CHARS, ClockS, NAME_CHARS, Deg, Kg, Kgm2, Mm, check_name
 from server.methods import METHODS
 from solvers.frames import Pose
 from solvers.report import CalibrationResult
@@ -244,7 +244,8 @@ class PhysicsOut(Out):
 
 
 class ClockIn(In):
-    clock_s: float = Field(ge=0.0, description="emulated seconds since the cell was powered")
+    clock_s: ClockS = Field(description="emulated seconds since the cell was powered "
+                                        "(0..1e9; server/bounds.py)")
 
 
 class ClockOut(Out):

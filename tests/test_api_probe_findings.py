@@ -139,3 +139,78 @@ def test_token_creation_refuses_an_idempotency_key_and_stores_no_secret(client, 
         engine.dispose()
     assert not any(b"pdt_" in b for b in bodies)
     assert client.post("/users/olga/tokens", json={}).status_code == 201  # without the key
+
+
+def _field_refused(r, *loc) -> None:
+    assert r.status_code == 422, r.text
+    assert r.json()["detail"][0]["loc"][:len(loc) + 1] == ["body", *loc], r.text
+
+
+def test_out_of_range_clock_is_422_and_a_touch_up_never_stores_it(client):
+    """Item 4: PUT cell/clock 1e308 answered 200; a touch-up then stored t_s = 1e308 and the
+    controller's own backup no longer restored."""
+    for bad in (1e308, 1e10, -1.0):
+        _field_refused(client.put(f"{C}/cell/clock", json={"clock_s": bad},
+                                  headers={"If-Match": "*"}), "clock_s")
+    assert ok(client.get(f"{C}/cell/clock"))["clock_s"] < 1e9
+    ok(client.put(f"{C}/cell/clock", json={"clock_s": 1e9}, headers={"If-Match": "*"}))
+    s = open_session(client, "tool.xyz_4point", 1)
+    ok(client.post(f"{s}/touch-up"))
+    text = client.get(f"{C}/export", params={"format": "json"}).text
+    job = client.post(f"{C}/import", json={"format": "json", "text": text, "dry_run": True})
+    assert job.status_code == 200, job.text  # the backup checks: it restores
+
+
+def test_plan_recording_joints_and_plan_workspace_in_range(client):
+    """Item 4: /plan/recording stored joints of +-1e308; /plan took a workspace of -1e308."""
+    poses = [[0.0, -90.0, 90.0, 0.0, 90.0, 0.0]] * 4
+    bad = [p[:] for p in poses]
+    bad[2][1] = 1e308
+    _field_refused(client.post("/plan/recording", json={"robot": "ur10", "joints_deg": bad}),
+                   "joints_deg", 2, 1)
+    bad[2][1] = 400.0  # a number, but outside ur10's joint 2 limits
+    r = client.post("/plan/recording", json={"robot": "ur10", "joints_deg": bad})
+    _field_refused(r, "joints_deg", 2, 1)
+    assert "joint 2" in r.json()["detail"][0]["msg"]
+    short = [p[:5] for p in poses]
+    _field_refused(client.post("/plan/recording", json={"robot": "ur10", "joints_deg": short}),
+                   "joints_deg", 0)
+    ws = [-1e308, -500.0, 0.0, 800.0, 500.0, 900.0]
+    _field_refused(client.post("/plan", json={"robot": "ur10", "effects": ["joint_offset"],
+                                              "workspace": ws}), "workspace", 0)
+
+
+def test_clock_and_webhooks_are_audited(client):
+    """Item 5: PUT cell/clock and POST /webhooks left no audit record."""
+    ok(client.put(f"{C}/cell/clock", json={"clock_s": 3600.0}, headers={"If-Match": "*"}))
+    hook = client.post("/webhooks", json={"url": "http://127.0.0.1:9/hook",
+                                          "secret": "s" * 20})
+    assert hook.status_code == 201
+    assert client.delete(f"/webhooks/{hook.json()['id']}").status_code == 204
+    records = ok(client.get("/audit"))
+    clock = [r for r in records if r["action"] == "emulator.clock"]
+    assert len(clock) == 1 and clock[0]["after"] == {"clock_s": 3600.0}
+    assert clock[0]["controller_id"] == 1 and clock[0]["user"] == "admin"
+    made = [r for r in records if r["action"] == "webhook.create"]
+    assert len(made) == 1 and made[0]["after"]["url"] == "http://127.0.0.1:9/hook"
+    assert "s" * 20 not in json.dumps(records)  # never the signing secret
+    assert [r["action"] for r in records].count("webhook.delete") == 1
+    r = client.post("/webhooks", json={"url": "http://127.0.0.1:9/x"},
+                    headers={"Idempotency-Key": "hook-1"})
+    assert r.status_code == 400  # its answer holds the secret: never stored
+
+
+def test_audit_filters_by_extkin(client):
+    """Item 5: records name the table extkin, and ?table=extkin gave 422."""
+    r = client.get("/audit", params={"table": "extkin"})
+    assert r.status_code == 200, r.text
+    assert client.get("/audit", params={"table": "nonsense"}).status_code == 422
+
+
+def test_two_500s_are_404_and_422(client):
+    """Item 6."""
+    anonymous = type(client)(client.app, raise_server_exceptions=False)
+    assert anonymous.get("/index.html%00.js").status_code == 404
+    assert anonymous.get("/pendant.js%00").status_code == 404
+    r = client.get("/audit", params={"controller_id": 1180591620717411303424})
+    assert r.status_code == 422 and r.json()["detail"][0]["loc"] == ["query", "controller_id"]
