@@ -246,6 +246,10 @@ def build_parser() -> argparse.ArgumentParser:
                    help="an origin whose pages may call the API (CORS; closed by default)")
     s.add_argument("--no-auth", action="store_true",
                    help="demo only: no login, everyone an Administrator; loopback hosts only")
+    s.add_argument("--trusted-proxy", action="append", default=[], metavar="IP",
+                   help="a reverse proxy whose X-Forwarded-For/-Proto is believed (repeatable; "
+                        "PENDANT_TRUSTED_PROXIES, comma-separated, adds more); from anyone "
+                        "else the headers are ignored (the audit records the peer)")
     s.add_argument("--opcua-port", type=int, metavar="PORT",
                    help="also serve the OPC UA face on this port (a process of its own on the "
                         "same database; docs/opcua.md)")
@@ -443,7 +447,19 @@ def _open_app(db: str | None, **overrides: object):  # noqa: ANN202
         raise CalibrationError(("--db",), f"cannot open {settings.db_url!r}: {reason}") from None
 
 
-def _serve(app, host: str, port: int) -> None:  # noqa: ANN001
+ENV_TRUSTED_PROXIES = "PENDANT_TRUSTED_PROXIES"
+
+
+def proxy_options(args: argparse.Namespace) -> dict[str, object]:
+    """uvicorn's options for forwarded headers: believed only from ``--trusted-proxy`` /
+    $PENDANT_TRUSTED_PROXIES (uvicorn's default believes 127.0.0.1, so any local process
+    could write another client address into the audit)."""
+    env = [p.strip() for p in os.environ.get(ENV_TRUSTED_PROXIES, "").split(",") if p.strip()]
+    trusted = list(getattr(args, "trusted_proxy", []) or []) + env
+    return {"proxy_headers": bool(trusted), "forwarded_allow_ips": ",".join(trusted) or ""}
+
+
+def _serve(app, host: str, port: int, **options: object) -> None:  # noqa: ANN001
     """uvicorn on ``app``, whose second Ctrl-C stops at once with one line instead of
     cancelling the requests in flight (a 500 and a CancelledError trace per request and for
     the lifespan). What a request had committed stays; the interrupted one saves nothing more."""
@@ -461,7 +477,7 @@ def _serve(app, host: str, port: int) -> None:  # noqa: ANN001
             self.interrupted = self.interrupted or sig == signal.SIGINT
             super().handle_exit(sig, frame)
 
-    server = Server(uvicorn.Config(app, host=host, port=port))
+    server = Server(uvicorn.Config(app, host=host, port=port, **options))
     server.run()
     if server.interrupted:  # uvicorn before 0.29 returns after a Ctrl-C; later ones re-raise it
         raise KeyboardInterrupt
@@ -576,7 +592,7 @@ def serve(args: argparse.Namespace) -> int:
     try:
         if args.workers == 1:
             application.state.freeze_gc = True  # a service process (server.app.lifespan)
-            _serve(application, args.host, args.port)
+            _serve(application, args.host, args.port, **proxy_options(args))
         else:
             # each worker builds server.app:app from the environment (server.settings)
             os.environ.update({
@@ -587,7 +603,7 @@ def serve(args: argparse.Namespace) -> int:
             # a worker imports numpy/scipy before it can answer the supervisor's ping: on a busy
             # host that takes longer than uvicorn's 5 s default, and it would be killed as hung
             uvicorn.run("server.app:app", host=args.host, port=args.port, workers=args.workers,
-                        timeout_worker_healthcheck=WORKER_HEALTHCHECK_S)
+                        timeout_worker_healthcheck=WORKER_HEALTHCHECK_S, **proxy_options(args))
     finally:
         signal.signal(signal.SIGINT, signal.SIG_IGN)  # stopping: one more Ctrl-C changes nothing
         for child in (workers, face):

@@ -34,10 +34,12 @@ REFUSED_S = 1.0  # the service refuses the token within this after the command r
 
 
 @contextlib.contextmanager
-def service(db_url: str):
-    """``pendant serve`` on ``db_url`` (no job workers), its first Administrator ADMIN_TOKEN."""
+def service(db_url: str, **env_extra: str):
+    """``pendant serve`` on ``db_url`` (no job workers), its first Administrator ADMIN_TOKEN;
+    ``env_extra`` goes into its environment."""
     port = free_port()
-    env = {**os.environ, "PYTHONPATH": str(ROOT), "PENDANT_ADMIN_TOKEN": ADMIN_TOKEN}
+    env = {**os.environ, "PYTHONPATH": str(ROOT), "PENDANT_ADMIN_TOKEN": ADMIN_TOKEN,
+           **env_extra}
     proc = subprocess.Popen([sys.executable, "-m", "server.cli", "serve", "--port", str(port),
                              "--db", db_url, "--job-workers", "0"], env=env,
                             stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL)
