@@ -25,6 +25,7 @@ Physical = Annotated[float, Field(ge=-1e3, le=1e3)]  # an imperfection of the em
 
 MethodName = Literal[tuple(METHODS)]  # type: ignore[valid-type]
 EntryKind = Literal["tool", "workpiece", "base", "fixed_tool", "coordinated_base"]
+SessionState = Literal["open", "computed", "saved", "discarded"]
 SlotName = Annotated[str, Field(max_length=NAME_CHARS),
                      AfterValidator(lambda v: check_name(v, ("name",)))]
 TableName = Literal["tool", "base"]
@@ -512,7 +513,7 @@ class SessionOut(Out):
     controller_id: int
     method: str
     title: str
-    state: Literal["open", "computed", "saved", "discarded"]
+    state: SessionState
     target_table: Literal["tool", "base", "extkin"]
     target_no: int
     params: dict[str, Any]

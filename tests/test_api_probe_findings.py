@@ -214,3 +214,11 @@ def test_two_500s_are_404_and_422(client):
     assert anonymous.get("/pendant.js%00").status_code == 404
     r = client.get("/audit", params={"controller_id": 1180591620717411303424})
     assert r.status_code == 422 and r.json()["detail"][0]["loc"] == ["query", "controller_id"]
+
+
+def test_a_session_state_filter_that_no_session_can_have_is_422(client):
+    """Item 9: ?state=junk answered [] (a typo looked like "no sessions")."""
+    open_session(client, "tool.xyz_4point", 1)
+    assert len(ok(client.get(f"{C}/sessions", params={"state": "open"}))) == 1
+    r = client.get(f"{C}/sessions", params={"state": "junk"})
+    assert r.status_code == 422 and r.json()["detail"][0]["loc"] == ["query", "state"]
