@@ -222,3 +222,21 @@ def test_a_session_state_filter_that_no_session_can_have_is_422(client):
     assert len(ok(client.get(f"{C}/sessions", params={"state": "open"}))) == 1
     r = client.get(f"{C}/sessions", params={"state": "junk"})
     assert r.status_code == 422 and r.json()["detail"][0]["loc"] == ["query", "state"]
+
+
+def test_sqlite_out_of_memory_in_a_job_is_the_memory_limit():
+    """Item 9: a job whose process hit a low --job-memory-mb while SQLite opened the database
+    failed as a 500 ``worker``; it is the memory limit (413), as a MemoryError is."""
+    import sqlite3
+
+    from sqlalchemy.exc import OperationalError
+
+    from server.worker import _error_of, out_of_memory
+
+    wrapped = OperationalError("PRAGMA journal_mode=WAL", {}, sqlite3.OperationalError(
+        "out of memory"))
+    assert out_of_memory(wrapped) and out_of_memory(MemoryError())
+    assert _error_of(wrapped)["status"] == 413
+    assert _error_of(wrapped)["detail"][0]["type"] == "memory_limit"
+    locked = OperationalError("BEGIN", {}, sqlite3.OperationalError("database is locked"))
+    assert not out_of_memory(locked) and _error_of(locked)["status"] == 500
