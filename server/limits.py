@@ -29,7 +29,7 @@ BODY_LIMIT_BYTES = 1 * 2**20  # 1 MiB: any JSON command of the pendant is far be
 UPLOAD_LIMIT_BYTES = 16 * 2**20  # 16 MiB: ~70 000 tracker samples
 UPLOAD_SUFFIXES = ("/recordings", "/beam-recording")
 # 64 MiB: a JSON backup sent as POST .../import {"format": "json", "text": ...} with about
-# 40 000 history rows (~1.6 kB each once escaped into the string; tests/test_backup_restore.py).
+# 39 000 history rows (~1.7 kB each once escaped into the string; tests/test_backup_restore.py).
 # The import's ``text`` may be as long (server.schemas.ImportIn): the body, never the string,
 # is the limit a backup meets first. A longer history restores with ``pendant restore``.
 IMPORT_LIMIT_BYTES = 64 * 2**20
