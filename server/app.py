@@ -211,6 +211,8 @@ def _mount_web(app: FastAPI, web: Path) -> None:
 
     @app.api_route("/{name}", methods=["GET", "HEAD"], include_in_schema=False)
     def web_file(name: str) -> FileResponse:
+        if "\0" in name or not name.isprintable():  # "/index.html%00.js": no such file
+            raise StarletteHTTPException(status_code=404)
         path = (root / name).resolve()
         if path.parent != root or path.suffix not in WEB_SUFFIXES or not path.is_file():
             raise StarletteHTTPException(status_code=404)

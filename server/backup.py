@@ -20,7 +20,7 @@ from pydantic import BaseModel, ConfigDict, Field, ValidationError, field_valida
 from db.crud import MAX_ID, SLOTS, KINDS_OF_TABLE
 from db.models import EXT_KIN_SLOTS
 from server.methods import METHODS
-from server.bounds import MECH_UNIT_CHARS, Deg, Kg, Kgm2, Mm
+from server.bounds import MAX_T_S, MECH_UNIT_CHARS, Deg, Kg, Kgm2, Mm
 from server.schemas import (EntryKind, MethodName, ReportOut, SessionParamsIn, SlotName,
                             TableName)
 from solvers.errors import CalibrationError
@@ -171,7 +171,7 @@ class PointIn(_Doc):
     beam_id: str | None = Field(None, min_length=1, max_length=32)
     edge: Literal["enter", "leave", "tip"] | None = None
     velocity_mm_s: Annotated[list[Mm], Field(min_length=3, max_length=3)] | None = None
-    t_s: float | None = Field(None, ge=0.0, le=1e12)
+    t_s: float | None = Field(None, ge=0.0, le=MAX_T_S)
     motion_sign: list[Annotated[float, Field(ge=-1.0, le=1.0)]] | None = Field(
         None, min_length=1, max_length=7)
     external_axes: dict[Literal["E1", "E2", "E3", "E4", "E5", "E6"],
@@ -314,3 +314,96 @@ def parse_backup(text: str) -> dict[str, Any]:
             msg = msg[len("Value error, "):]
         raise CalibrationError(("text", *err["loc"]), msg) from None
     return backup.model_dump(mode="json", exclude_unset=True)
+
+
+# --------------------------------------------------------------- pendant backup / restore
+
+def check_controller_joints(robot: Any, doc: dict[str, Any]) -> None:
+    """The backup's ``controller.joints_deg`` fits ``robot`` (count and limits), else
+    CalibrationError at ``("text", "controller", "joints_deg", ...)``; the same check as
+    ``POST .../import``."""
+    from solvers.dh import check_joint_limits
+
+    joints = (doc.get("controller") or {}).get("joints_deg")
+    if joints is None:
+        return
+    loc = ("text", "controller", "joints_deg")
+    if len(joints) != robot.dof:
+        raise CalibrationError(loc, f"has {len(joints)} values; this controller's robot has "
+                               f"{robot.dof} joints")
+    try:
+        check_joint_limits(robot, joints)
+    except CalibrationError as err:
+        raise CalibrationError(loc + tuple(err.loc[1:]), err.reason) from None
+
+
+def run_backup(args: Any) -> int:
+    """``pendant backup CONTROLLER [-o FILE]``: the controller's ``pendant-backup/1`` (what
+    ``GET .../export?format=json`` answers), written whole or not at all."""
+    import os
+    import sys
+
+    from db import crud
+    from server.auth.cli import cli_session
+    from server.routers.export import export_text
+
+    with cli_session(args.db, write=False) as db:
+        c = crud.find_controller(db, args.controller)
+        text = export_text(db, c.id, "json")
+        n_hist = len(crud.history(db, c.id))
+    if args.output is None:
+        sys.stdout.write(text)
+        return 0
+    tmp = args.output.with_name(args.output.name + ".part")
+    tmp.write_text(text, encoding="utf-8")
+    os.replace(tmp, args.output)
+    print(f"{c.name}: backup with {n_hist} history rows -> {args.output} "
+          f"({len(text)} characters)", file=sys.stderr)
+    return 0
+
+
+def run_restore_file(args: Any) -> int:
+    """``pendant restore FILE --controller NAME [--dry-run]``: the same checks as
+    ``POST .../import`` with ``format=json``, then the restore job's own step, here, in one
+    transaction (audited as ``cli:<os user>``, ``backup.restore``). No body limit applies."""
+    from db import crud
+    from server.auth import audit
+    from server.auth.cli import cli_session
+    from server.job_kinds import run_restore
+    from server.routers.common import robot_of
+
+    text = args.file.read_text(encoding="utf-8")
+    with cli_session(args.db, write=not args.dry_run) as db:
+        c = crud.find_controller(db, args.controller)
+        doc = parse_backup(text)
+        check_controller_joints(robot_of(c), doc)
+        if args.dry_run:
+            print(f"{args.file.name}: a {FORMAT} of {len(doc['entries'])} slots and "
+                  f"{len(doc.get('history', [])) + len(doc.get('external_history', []))} "
+                  f"history rows would replace {c.name}'s (dry run: nothing written)")
+            return 0
+        apply = run_restore(None, {"controller_id": c.id, "doc": doc,  # type: ignore[arg-type]
+                                   "actor": audit.actor()}, lambda *_: None)
+        result = apply(db)
+    print(f"{c.name}: restored {result['entries']} slots and {result['history']} history rows "
+          f"from {args.file.name}")
+    return 0
+
+
+def add_backup_commands(subparsers: Any) -> None:
+    """Register ``backup`` and ``restore`` on the ``pendant`` command's subparsers."""
+    from pathlib import Path
+
+    b = subparsers.add_parser("backup", help="write a controller's JSON backup (tables, "
+                                             "history, sessions)")
+    b.add_argument("controller", help="controller name (or id), e.g. cell-1")
+    b.add_argument("-o", "--output", type=Path, help="the file (default: standard output)")
+    b.add_argument("--db", metavar="URL", help="database URL")
+    b.set_defaults(func=run_backup)
+    r = subparsers.add_parser("restore", help="replace a controller's tables, history and "
+                                              "sessions by a JSON backup")
+    r.add_argument("file", type=Path)
+    r.add_argument("--controller", required=True, help="controller name (or id)")
+    r.add_argument("--dry-run", action="store_true", help="check the backup; write nothing")
+    r.add_argument("--db", metavar="URL", help="database URL")
+    r.set_defaults(func=run_restore_file)

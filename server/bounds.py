@@ -24,6 +24,10 @@ MAX_MM = 1e6  # 1 km: a position, a centre of mass
 MAX_DEG = 1e4  # an angle
 MAX_KG = 1e4  # a mass
 MAX_KGM2 = 1e6  # a moment of inertia
+MAX_CLOCK_S = 1e9  # the emulated clock as set (PUT .../cell/clock): 31.7 years powered
+# a time the clock reached, as stored and restored (a touch-up's t_s in a backup): motions
+# advance the clock by seconds, so from MAX_CLOCK_S they never come near this bound
+MAX_T_S = 1e12
 NAME_CHARS = 64  # a slot's name (DB column String(64))
 MECH_UNIT_CHARS = 32  # a mechanical unit's name (ABB ufmec, KUKA MACHINE_DEF NAME)
 
@@ -31,6 +35,7 @@ Mm = Annotated[float, Field(ge=-MAX_MM, le=MAX_MM)]
 Deg = Annotated[float, Field(ge=-MAX_DEG, le=MAX_DEG)]
 Kg = Annotated[float, Field(ge=0.0, le=MAX_KG)]
 Kgm2 = Annotated[float, Field(ge=0.0, le=MAX_KGM2)]
+ClockS = Annotated[float, Field(ge=0.0, le=MAX_CLOCK_S)]
 
 #: unit of a value -> (low, high)
 LIMITS: dict[str, tuple[float, float]] = {

@@ -12,7 +12,9 @@
     pendant users add|list|revoke ...; pendant tokens create USER; pendant roles add|list
     pendant calibrate METHOD FILE [--robot KEY] [--tcp X,Y,Z] [--json]
     pendant export CONTROLLER --format kuka|abb|fanuc|ur|json [--db URL]
-    pendant import FILE --controller NAME [--format kuka|abb|fanuc|ur] [--dry-run] [--db URL]
+    pendant import FILE --controller NAME [--format kuka|abb|fanuc|ur|json] [--dry-run] [--db URL]
+    pendant backup CONTROLLER [-o FILE] [--db URL]
+    pendant restore FILE --controller NAME [--dry-run] [--db URL]
 
 ``calibrate`` reads taught poses from a JSON or CSV file (format in docs/api.md, "pendant
 calibrate") and prints the report; it needs no service and no DB.
@@ -46,6 +48,7 @@ import numpy as np
 
 from server import __version__
 from server.analysis_cli import add_analysis_commands
+from server.backup import add_backup_commands
 from server.auth.cli import add_auth_commands
 from server.slot_cli import add_slot_command
 from server.methods import METHODS, MethodInputs, TaughtData
@@ -246,6 +249,10 @@ def build_parser() -> argparse.ArgumentParser:
                    help="an origin whose pages may call the API (CORS; closed by default)")
     s.add_argument("--no-auth", action="store_true",
                    help="demo only: no login, everyone an Administrator; loopback hosts only")
+    s.add_argument("--trusted-proxy", action="append", default=[], metavar="IP",
+                   help="a reverse proxy whose X-Forwarded-For/-Proto is believed (repeatable; "
+                        "PENDANT_TRUSTED_PROXIES, comma-separated, adds more); from anyone "
+                        "else the headers are ignored (the audit records the peer)")
     s.add_argument("--opcua-port", type=int, metavar="PORT",
                    help="also serve the OPC UA face on this port (a process of its own on the "
                         "same database; docs/opcua.md)")
@@ -281,9 +288,9 @@ def build_parser() -> argparse.ArgumentParser:
                                       "(--dry-run: show what would change)")
     i.add_argument("file", type=Path)
     i.add_argument("--controller", required=True, help="controller name (or id)")
-    i.add_argument("--format", choices=["kuka", "abb", "fanuc", "ur"],
+    i.add_argument("--format", choices=["kuka", "abb", "fanuc", "ur", "json"],
                    help="default from the file name: .dat kuka, .mod/.modx/.sys abb, "
-                        ".txt/.ls fanuc, .script ur")
+                        ".txt/.ls fanuc, .script ur, .json a backup (as pendant restore)")
     i.add_argument("--dry-run", action="store_true",
                    help="write nothing; print per slot its values before -> after")
     i.add_argument("--slots", help="apply only these slots of the file, e.g. tool3,base1 "
@@ -291,6 +298,7 @@ def build_parser() -> argparse.ArgumentParser:
     i.add_argument("--db", help="database URL")
 
     add_analysis_commands(sub)
+    add_backup_commands(sub)
     add_slot_command(sub)
     add_auth_commands(sub)
     add_opcua_commands(sub)
@@ -298,7 +306,7 @@ def build_parser() -> argparse.ArgumentParser:
 
 
 IMPORT_SUFFIXES = {".dat": "kuka", ".mod": "abb", ".modx": "abb", ".sys": "abb", ".txt": "fanuc",
-                   ".ls": "fanuc", ".script": "ur"}
+                   ".ls": "fanuc", ".script": "ur", ".json": "json"}
 
 
 def import_file(args: argparse.Namespace) -> int:
@@ -310,7 +318,11 @@ def import_file(args: argparse.Namespace) -> int:
     fmt = args.format or IMPORT_SUFFIXES.get(args.file.suffix.lower())
     if fmt is None:
         raise CalibrationError(("--format",), f"cannot tell the format of {args.file.name}; "
-                               "give --format kuka|abb|fanuc|ur")
+                               "give --format kuka|abb|fanuc|ur|json")
+    if fmt == "json":  # a JSON backup: what pendant restore does
+        from server.backup import run_restore_file
+
+        return run_restore_file(args)
     from server.controller_files import value_changes
     from server.formats import decode_file
 
@@ -457,7 +469,19 @@ def _open_app(db: str | None, **overrides: object):  # noqa: ANN202
         raise CalibrationError(("--db",), f"cannot open {settings.db_url!r}: {reason}") from None
 
 
-def _serve(app, host: str, port: int) -> None:  # noqa: ANN001
+ENV_TRUSTED_PROXIES = "PENDANT_TRUSTED_PROXIES"
+
+
+def proxy_options(args: argparse.Namespace) -> dict[str, object]:
+    """uvicorn's options for forwarded headers: believed only from ``--trusted-proxy`` /
+    $PENDANT_TRUSTED_PROXIES (uvicorn's default believes 127.0.0.1, so any local process
+    could write another client address into the audit)."""
+    env = [p.strip() for p in os.environ.get(ENV_TRUSTED_PROXIES, "").split(",") if p.strip()]
+    trusted = list(getattr(args, "trusted_proxy", []) or []) + env
+    return {"proxy_headers": bool(trusted), "forwarded_allow_ips": ",".join(trusted) or ""}
+
+
+def _serve(app, host: str, port: int, **options: object) -> None:  # noqa: ANN001
     """uvicorn on ``app``, whose second Ctrl-C stops at once with one line instead of
     cancelling the requests in flight (a 500 and a CancelledError trace per request and for
     the lifespan). What a request had committed stays; the interrupted one saves nothing more."""
@@ -475,7 +499,7 @@ def _serve(app, host: str, port: int) -> None:  # noqa: ANN001
             self.interrupted = self.interrupted or sig == signal.SIGINT
             super().handle_exit(sig, frame)
 
-    server = Server(uvicorn.Config(app, host=host, port=port))
+    server = Server(uvicorn.Config(app, host=host, port=port, **options))
     server.run()
     if server.interrupted:  # uvicorn before 0.29 returns after a Ctrl-C; later ones re-raise it
         raise KeyboardInterrupt
@@ -606,7 +630,7 @@ def serve(args: argparse.Namespace) -> int:
     try:
         if args.workers == 1:
             application.state.freeze_gc = True  # a service process (server.app.lifespan)
-            _serve(application, args.host, args.port)
+            _serve(application, args.host, args.port, **proxy_options(args))
         else:
             # each worker builds server.app:app from the environment (server.settings)
             os.environ.update({
@@ -617,7 +641,7 @@ def serve(args: argparse.Namespace) -> int:
             # a worker imports numpy/scipy before it can answer the supervisor's ping: on a busy
             # host that takes longer than uvicorn's 5 s default, and it would be killed as hung
             uvicorn.run("server.app:app", host=args.host, port=args.port, workers=args.workers,
-                        timeout_worker_healthcheck=WORKER_HEALTHCHECK_S)
+                        timeout_worker_healthcheck=WORKER_HEALTHCHECK_S, **proxy_options(args))
     finally:
         signal.signal(signal.SIGINT, signal.SIG_IGN)  # stopping: one more Ctrl-C changes nothing
         for running in controller_faces:

@@ -10,6 +10,11 @@ Field", draft-ietf-httpapi-idempotency-key-header).
   storing its response: **409**.
 - A refused request (4xx/5xx) stores nothing: its transaction, with the key, is rolled back,
   so retrying it runs it again.
+- Keys belong to the user who sent them: the stored key is the SHA-256 of the user's name and
+  the key, so another user's request with the same key runs as a request of its own and never
+  gets the first user's answer.
+- A route whose answer holds a secret (``POST /users/{user_name}/tokens``: the new token;
+  ``POST /webhooks``: the signing secret) refuses the header (**400**): the store keeps answers for 24 h, and a secret is never stored.
 
 The key is claimed inside the command's own transaction (:func:`claim`, called from
 ``server.deps``), so it exists exactly when the command's changes were committed.
@@ -36,6 +41,8 @@ HEADER = "idempotency-key"
 KEEP = timedelta(hours=24)
 MAX_KEY = 255
 STORED_HEADERS = ("content-type", "etag", "location")
+SECRET_ROUTES = frozenset({("POST", "/users/{user_name}/tokens"),  # answers hold a secret
+                           ("POST", "/webhooks")})
 
 
 class IdempotencyError(Exception):
@@ -48,7 +55,7 @@ class Replay(Exception):
     """The stored response of an earlier request with this key and this fingerprint."""
 
     def __init__(self, row: IdempotencyKey):
-        super().__init__(row.key)
+        super().__init__(row.method)
         self.status, self.headers, self.body = row.status, dict(row.headers or {}), row.body
 
 
@@ -64,7 +71,18 @@ def _key(request: Request) -> str | None:
     if not key or len(key) > MAX_KEY or not key.isprintable():
         raise IdempotencyError(400, f"Idempotency-Key must be 1..{MAX_KEY} printable "
                                     "characters (a UUID, say)")
+    path = getattr(request.scope.get("route"), "path", None)
+    if (request.method, path) in SECRET_ROUTES:
+        raise IdempotencyError(400, f"{request.method} {path} answers with a secret, which is "
+                                    "never stored: send it without Idempotency-Key")
     return key
+
+
+def _stored_key(request: Request, key: str) -> str:
+    """The key as stored: SHA-256 of the acting user's name and the key (keys are per user)."""
+    actor = getattr(request.state, "actor", None)
+    user = getattr(actor, "name", None) or ""
+    return hashlib.sha256(f"{user}\0{key}".encode()).hexdigest()
 
 
 def has_key(request: Request) -> bool:
@@ -93,17 +111,18 @@ def claim(db: Session, request: Request) -> None:
         return
     fp = _fingerprint(request)
     now = utcnow()
+    stored = _stored_key(request, key)
     db.execute(delete(IdempotencyKey).where(IdempotencyKey.created_at < now - KEEP))
-    row = db.get(IdempotencyKey, key)
+    row = db.get(IdempotencyKey, stored)
     if row is None:
         try:
             with db.begin_nested():
-                db.add(IdempotencyKey(key=key, fingerprint=fp, method=request.method,
+                db.add(IdempotencyKey(key=stored, fingerprint=fp, method=request.method,
                                       path=request.url.path[:512], created_at=now))
         except IntegrityError:  # another process claimed it first (PostgreSQL)
-            row = db.get(IdempotencyKey, key, populate_existing=True)
+            row = db.get(IdempotencyKey, stored, populate_existing=True)
         if row is None:
-            request.state.idempotency_key = key
+            request.state.idempotency_key = stored
             return
     if row.fingerprint != fp:
         raise IdempotencyError(422, f"Idempotency-Key {key!r} was used for another request "

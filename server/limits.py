@@ -4,8 +4,13 @@ An ASGI middleware on every request that has a body (not GET, HEAD, OPTIONS):
 
 - **Size.** A body larger than its limit is refused with 413 naming the limit, from
   ``Content-Length`` before any byte is read, or as soon as a chunked body passes it.
-  Recordings, beam recordings and imports may be ``UPLOAD_LIMIT_BYTES``; every other body
-  ``BODY_LIMIT_BYTES`` (docs/api.md, "Limits").
+  Recordings and beam recordings may be ``UPLOAD_LIMIT_BYTES``, imports (a JSON backup with
+  its whole history) ``IMPORT_LIMIT_BYTES``; every other body ``BODY_LIMIT_BYTES``
+  (docs/api.md, "Limits").
+- **Idle body.** A body that stops arriving (shorter than its ``Content-Length``, or a client
+  that stalls) is given up after ``BODY_IDLE_S`` without a byte: **408**, and the request is
+  cancelled before it changed anything. Between chunks only: a slow upload that keeps sending
+  goes on.
 - **Disconnect.** While the request runs, the middleware listens for the client leaving
   (``http.disconnect`` before the answer was sent) and cancels the request. A route
   computing in a worker thread finishes its step, then the cancellation reaches the request
@@ -21,14 +26,24 @@ import anyio
 from starlette.types import ASGIApp, Message, Receive, Scope, Send
 
 BODY_LIMIT_BYTES = 1 * 2**20  # 1 MiB: any JSON command of the pendant is far below
-UPLOAD_LIMIT_BYTES = 16 * 2**20  # 16 MiB: ~70 000 tracker samples, or a large backup
-UPLOAD_SUFFIXES = ("/recordings", "/beam-recording", "/import")
+UPLOAD_LIMIT_BYTES = 16 * 2**20  # 16 MiB: ~70 000 tracker samples
+UPLOAD_SUFFIXES = ("/recordings", "/beam-recording")
+# 64 MiB: a JSON backup sent as POST .../import {"format": "json", "text": ...} with about
+# 39 000 history rows (~1.7 kB each once escaped into the string; tests/test_backup_restore.py).
+# The import's ``text`` may be as long (server.schemas.ImportIn): the body, never the string,
+# is the limit a backup meets first. A longer history restores with ``pendant restore``.
+IMPORT_LIMIT_BYTES = 64 * 2**20
+IMPORT_SUFFIX = "/import"
 NO_BODY = ("GET", "HEAD", "OPTIONS")
+BODY_IDLE_S = 20.0  # seconds a request body may pause between two chunks (then 408)
 
 
 def limit_for(path: str) -> int:
     """The body limit of ``path`` in bytes."""
-    return UPLOAD_LIMIT_BYTES if path.rstrip("/").endswith(UPLOAD_SUFFIXES) else BODY_LIMIT_BYTES
+    path = path.rstrip("/")
+    if path.endswith(IMPORT_SUFFIX):
+        return IMPORT_LIMIT_BYTES
+    return UPLOAD_LIMIT_BYTES if path.endswith(UPLOAD_SUFFIXES) else BODY_LIMIT_BYTES
 
 
 def _mib(n: int) -> str:
@@ -36,10 +51,13 @@ def _mib(n: int) -> str:
 
 
 async def _too_large(send: Send, limit: int, path: str) -> None:
-    body = json.dumps({"detail": [{
-        "loc": ["body"], "type": "too_large",
-        "msg": f"is larger than the {_mib(limit)} limit of {path} (docs/api.md, Limits)"}]})
-    await send({"type": "http.response.start", "status": 413,
+    await _refuse(send, 413, "too_large",
+                  f"is larger than the {_mib(limit)} limit of {path} (docs/api.md, Limits)")
+
+
+async def _refuse(send: Send, status: int, kind: str, msg: str) -> None:
+    body = json.dumps({"detail": [{"loc": ["body"], "type": kind, "msg": msg}]})
+    await send({"type": "http.response.start", "status": status,
                 "headers": [(b"content-type", b"application/json"),
                             (b"content-length", str(len(body)).encode()),
                             (b"connection", b"close")]})
@@ -73,7 +91,7 @@ class BodyLimits:
                 if declared > limit:
                     await _too_large(send, limit, path)
                     return
-        state = {"started": False, "done": False, "too_large": False}
+        state = {"started": False, "done": False, "too_large": False, "idle": False}
         messages: asyncio.Queue[Message] = asyncio.Queue()
         cancel = anyio.CancelScope()
 
@@ -85,11 +103,20 @@ class BodyLimits:
             await send(message)
 
         async def pump() -> None:
-            total = 0
+            total, body_done = 0, False
             while True:
-                message = await receive()
+                if body_done:
+                    message = await receive()
+                else:
+                    try:
+                        message = await asyncio.wait_for(receive(), BODY_IDLE_S)
+                    except asyncio.TimeoutError:
+                        state["idle"] = True  # the rest of the body never came
+                        cancel.cancel()
+                        return
                 if message["type"] == "http.request":
                     total += len(message.get("body", b""))
+                    body_done = not message.get("more_body", False)
                     if total > limit:
                         state["too_large"] = True
                         cancel.cancel()
@@ -109,3 +136,7 @@ class BodyLimits:
             reader.cancel()  # the answer is out: stop listening
         if state["too_large"] and not state["started"]:
             await _too_large(send, limit, path)
+        elif state["idle"] and not state["started"]:
+            await _refuse(send, 408, "timeout", f"no byte of the request body came for "
+                          f"{BODY_IDLE_S:g} s (shorter than its Content-Length?); nothing "
+                          "was changed")

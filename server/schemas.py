@@ -10,9 +10,11 @@ from datetime import datetime
 from typing import Annotated, Any, Literal
 
 import numpy as np
-from pydantic import AfterValidator, BaseModel, ConfigDict, Field, model_validator
+from pydantic import (AfterValidator, BaseModel, ConfigDict, Field, ValidationInfo,
+                      field_validator, model_validator)
 
-from server.bounds import MAX_MM, MECH_UNIT_CHARS, NAME_CHARS, Deg, Kg, Kgm2, Mm, check_name
+from server.limits import IMPORT_LIMIT_BYTES
+from server.bounds import MAX_MM, MECH_UNIT_CHARS, ClockS, NAME_CHARS, Deg, Kg, Kgm2, Mm, check_name
 from server.methods import METHODS
 from solvers.frames import Pose
 from solvers.report import CalibrationResult
@@ -23,6 +25,7 @@ Physical = Annotated[float, Field(ge=-1e3, le=1e3)]  # an imperfection of the em
 
 MethodName = Literal[tuple(METHODS)]  # type: ignore[valid-type]
 EntryKind = Literal["tool", "workpiece", "base", "fixed_tool", "coordinated_base"]
+SessionState = Literal["open", "computed", "saved", "discarded"]
 SlotName = Annotated[str, Field(max_length=NAME_CHARS),
                      AfterValidator(lambda v: check_name(v, ("name",)))]
 TableName = Literal["tool", "base"]
@@ -249,7 +252,8 @@ class PhysicsOut(Out):
 
 
 class ClockIn(In):
-    clock_s: float = Field(ge=0.0, description="emulated seconds since the cell was powered")
+    clock_s: ClockS = Field(description="emulated seconds since the cell was powered "
+                                        "(0..1e9; server/bounds.py)")
 
 
 class ClockOut(Out):
@@ -546,7 +550,7 @@ class SessionOut(Out):
     controller_id: int
     method: str
     title: str
-    state: Literal["open", "computed", "saved", "discarded"]
+    state: SessionState
     target_table: Literal["tool", "base", "extkin"]
     target_no: int
     params: dict[str, Any]
@@ -571,6 +575,9 @@ class RunCycleOut(Out):
 
 # ------------------------------------------------------------------------------ import/export
 
+FILE_CHARS = 5_000_000  # a controller file (KUKA, ABB, FANUC, UR) is far below
+
+
 class SlotRefIn(In):
     table: TableName
     number: int = Field(ge=1)
@@ -578,7 +585,9 @@ class SlotRefIn(In):
 
 class ImportIn(In):
     format: ImportFormat
-    text: str = Field(min_length=1, max_length=5_000_000)
+    text: str = Field(min_length=1, max_length=IMPORT_LIMIT_BYTES,
+                      description="the file; a controller file has at most 5 000 000 characters, "
+                                  "a JSON backup as many as the body's 64 MiB limit holds")
     dry_run: bool = Field(False, description="say what would change; write nothing")
     encoding: Literal["utf-8", "cp1252"] = Field(
         "utf-8", description="the file's own encoding (the text as decoded from it): an "
@@ -586,6 +595,15 @@ class ImportIn(In):
     slots: list[SlotRefIn] | None = Field(
         None, description="apply only these slots of the file (the preview's tick boxes); "
         "the others keep what they hold. Default: every slot the file names")
+
+    @field_validator("text")
+    @classmethod
+    def _file_length(cls, text: str, info: ValidationInfo) -> str:
+        fmt = info.data.get("format")
+        if fmt != "json" and len(text) > FILE_CHARS:
+            raise ValueError(f"a {fmt} controller file has at most {FILE_CHARS} characters, "
+                             f"got {len(text)}")
+        return text
 
 
 class SlotChangeOut(Out):

@@ -53,9 +53,25 @@ def _memory_limit_error() -> dict[str, Any]:
                             "recording or raise --job-memory-mb", (), "memory_limit")
 
 
+def out_of_memory(exc: BaseException) -> bool:
+    """``exc`` is the memory cap: a MemoryError, or SQLite's "out of memory" (SQLITE_NOMEM,
+    e.g. while it opens the database under a low ``--job-memory-mb``), also when SQLAlchemy
+    wraps it."""
+    import sqlite3
+
+    seen: BaseException | None = exc
+    while seen is not None:
+        if isinstance(seen, MemoryError):
+            return True
+        if isinstance(seen, sqlite3.Error) and "out of memory" in str(seen).lower():
+            return True
+        seen = getattr(seen, "orig", None) or seen.__cause__ or seen.__context__
+    return False
+
+
 def _error_of(exc: BaseException) -> dict[str, Any]:
     """The ``{"status", "detail"}`` a route would have answered for ``exc``."""
-    if isinstance(exc, MemoryError):  # before the imports: at the cap they can fail themselves
+    if out_of_memory(exc):  # before the imports: at the cap they can fail themselves
         return _memory_limit_error()
     from server.errors import body_loc
     from solvers.errors import CalibrationError, KinematicsError
@@ -93,7 +109,7 @@ def run_job(sm: sessionmaker[Session], job_id: int, kind: str, params: dict[str,
                 return "done"
             return "lost"  # cancelled or re-claimed meanwhile: its writes were rolled back
     except Exception as exc:  # noqa: BLE001 - every failure becomes the job's error
-        if not isinstance(exc, (MemoryError,)) and _error_of(exc)["status"] == 500:
+        if not out_of_memory(exc) and _error_of(exc)["status"] == 500:
             log.exception("job %s (%s) failed", job_id, kind)
         exc.__traceback__ = None  # its frames hold the job's data: free it before reporting
         with sm() as db:
@@ -137,8 +153,11 @@ def _child(db_url: str, job_id: int, kind: str, params: dict[str, Any], worker: 
         code = 0
     except MemoryError:  # at the cap before the job ran, or while reporting: the supervisor says 413
         code = MEMORY_EXIT
-    except BaseException:  # noqa: BLE001 - the supervisor reports a child that did not answer
-        log.exception("job %s: its process failed", job_id)
+    except BaseException as exc:  # noqa: BLE001 - the supervisor reports a child that did not answer
+        if out_of_memory(exc):  # SQLite could not open the database under the cap
+            code = MEMORY_EXIT
+        else:
+            log.exception("job %s: its process failed", job_id)
     finally:
         os._exit(code)
 

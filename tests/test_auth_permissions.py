@@ -93,6 +93,7 @@ ISSUE = [
     ("POST", "/controllers", {"name": "cell-x", "robot": "kuka_kr6_r900_sixx"}, {"Administrator"}),
     ("POST", "/controllers/1/import", {"format": "kuka", "text": "x"}, {"Expert", "Administrator"}),
     ("GET", "/audit", None, {"Administrator"}),
+    ("GET", "/controllers/1/cell/clock", None, {"Administrator"}),  # emulator:physics (issue 21)
     ("POST", "/users", {"name": "x", "role": "Operator"}, {"Administrator"}),
 ]
 
@@ -120,3 +121,27 @@ def test_json_backup_needs_backup_permissions(world):  # noqa: ANN001
     assert r.status_code == 403 and "backup:restore" in r.json()["detail"][0]["msg"]
     assert admin.post("/controllers/1/import", json={"format": "json", "text": text}).status_code \
         == 202  # the restore is queued as a job
+
+
+def test_docs_route_table_is_the_permission_table():
+    """docs/security.md's "Every route" table holds exactly server/auth/permissions.py's ROUTES
+    (issue 21, item 7: three routes were missing, and the docs put the clock under
+    emulator:physics while the code let every role read it). Regenerate the table with
+    ``python -m server.auth.permissions``."""
+    import re
+    from pathlib import Path
+
+    from server.auth.permissions import markdown_table
+
+    text = (Path(__file__).resolve().parent.parent / "docs" / "security.md").read_text()
+    m = re.search(r"<!-- routes: [^>]*-->\n(.*?)<!-- /routes -->", text, re.S)
+    assert m, "docs/security.md has no generated route table"
+    documented = {}
+    for line in m.group(1).splitlines()[2:]:
+        method, path, need = (c.strip() for c in line.strip("|").split("|"))
+        documented[(method, path.strip("`"))] = need.strip("`").split(" ")[0]
+    code = {op: {"public": "public", "signed-in": "any"}.get(v, v) for op, v in ROUTES.items()}
+    assert {op: v for op, v in documented.items() if code.get(op) != v} == {}, \
+        "docs/security.md differs from ROUTES: run python -m server.auth.permissions"
+    assert set(code) - set(documented) == set(), "routes missing from docs/security.md"
+    assert m.group(1) == markdown_table()

@@ -32,18 +32,27 @@ from server.auth.permissions import PERMISSIONS
 
 
 @contextmanager
-def cli_session(db_url: str | None) -> Iterator[Session]:
-    """A migrated DB session committed at the end, audited as ``cli:<os user>``."""
-    from db.session import make_engine, make_sessionmaker, run_migrations
+def cli_session(db_url: str | None, write: bool = True) -> Iterator[Session]:
+    """A migrated DB session committed at the end, audited as ``cli:<os user>``.
+
+    A ``write`` session is a writer's from its first statement (SQLite: ``BEGIN IMMEDIATE``,
+    waiting up to the busy timeout for the service's writers; PostgreSQL: row locks): a
+    transaction that read first and then upgraded to a write would lose to the service's
+    writers ("database is locked", at once, in WAL mode) or queue behind them for seconds,
+    and a revocation is an emergency action (issue 21). The schema step runs only when the
+    schema is not the code's (under the migration lock), so a command on a current database
+    takes no other lock."""
+    from db.session import make_engine, make_sessionmaker, upgrade, write_session
     from server.settings import Settings
 
     settings = Settings(db_url=db_url) if db_url else Settings()
     engine = make_engine(settings.db_url)
-    run_migrations(engine)
-    audit.install()
     token = audit.CONTEXT.set(audit.AuditContext(f"cli:{getpass.getuser()}", None, "cli"))
     try:
-        with make_sessionmaker(engine)() as db:
+        upgrade(engine)
+        audit.install()
+        maker = make_sessionmaker(engine)
+        with (write_session(maker) if write else maker()) as db:
             tokens.ensure_default_roles(db)
             yield db
             db.commit()
@@ -58,7 +67,7 @@ def _fail(err: Exception) -> int:
 
 
 def run_users(args: Any) -> int:
-    with cli_session(args.db) as db:
+    with cli_session(args.db, write=args.action != "list") as db:
         try:
             if args.action == "add":
                 u = tokens.add_user(db, args.name, args.role)
@@ -135,7 +144,7 @@ def run_tokens(args: Any) -> int:
 
 
 def run_token_admin(args: Any) -> int:
-    with cli_session(args.db) as db:
+    with cli_session(args.db, write=args.action == "revoke") as db:
         if args.action == "revoke":
             t = tokens.revoke_token(db, args.token_id)
             print(f"token {t.id} revoked")
@@ -151,7 +160,7 @@ def run_token_admin(args: Any) -> int:
 
 
 def run_roles(args: Any) -> int:
-    with cli_session(args.db) as db:
+    with cli_session(args.db, write=args.action == "add") as db:
         try:
             if args.action == "add":
                 r = tokens.add_role(db, args.name, args.permissions, args.description)

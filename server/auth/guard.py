@@ -79,16 +79,17 @@ def _cookie_actor(request: Request, cookie: str) -> tokens.Actor:
         return actor
 
 
-_VERIFYING: dict[tuple[asyncio.AbstractEventLoop, str], asyncio.Task] = {}
+_VERIFYING: dict[tuple[asyncio.AbstractEventLoop, str, int], asyncio.Task] = {}
 
 
 def _verification(request: Request, digest: str) -> asyncio.Task:
     """The one verification of the token ``digest`` running in this event loop (a task of its
     own, which a request that leaves does not cancel): when its cache entry expires, the
     requests that carry the token at that moment (20, under ``wrk``) wait for one lookup
-    instead of taking a thread and three queries each."""
+    instead of taking a thread and three queries each. A request that comes after the cache
+    was emptied (a revocation here) never joins a verification that began before it."""
     loop = asyncio.get_running_loop()
-    key = (loop, digest)
+    key = (loop, digest, tokens.CACHE.generation)
     task = _VERIFYING.get(key)
     if task is None:
         task = _VERIFYING[key] = loop.create_task(

@@ -54,7 +54,7 @@ ROUTES: Final[dict[tuple[str, str], str]] = {
     ("GET", C + "/cell"): "frames:read",
     ("GET", C + "/cell/physics"): "emulator:physics",
     ("PUT", C + "/cell/physics"): "emulator:physics",
-    ("GET", C + "/cell/clock"): "frames:read",
+    ("GET", C + "/cell/clock"): "emulator:physics",  # the hidden state's clock (thermal drift)
     ("PUT", C + "/cell/clock"): "emulator:physics",
     ("GET", C + "/robot"): "frames:read",
     ("PUT", C + "/robot/joints"): "robot:jog",
@@ -128,3 +128,19 @@ BACKUP_EXPORT: Final = "backup:write"  # GET /export?format=json and ExportFile(
 def required(method: str, path: str) -> str | None:
     """The permission ``method path`` needs (HEAD as GET); None when the route is undeclared."""
     return ROUTES.get(("GET" if method == "HEAD" else method, path))
+
+
+def markdown_table() -> str:
+    """The route table of docs/security.md ("Every route"), generated from :data:`ROUTES`
+    (``python -m server.auth.permissions``); tests/test_auth_permissions.py checks that the
+    docs hold exactly this."""
+    lines = ["| Method | Path | Needs |", "|---|---|---|"]
+    for (method, path), need in ROUTES.items():
+        shown = {PUBLIC: "public (no credential)", SIGNED_IN: "any signed-in user"}.get(
+            need, f"`{need}`")
+        lines.append(f"| {method} | `{path}` | {shown} |")
+    return "\n".join(lines) + "\n"
+
+
+if __name__ == "__main__":
+    print(markdown_table(), end="")

@@ -12,6 +12,7 @@ from fastapi import APIRouter, Query, Request, Response
 from pydantic import BaseModel, ConfigDict, Field
 
 from db.auth_models import AuditRecord
+from db.crud import MAX_ID
 from server.auth import audit, tokens
 from server.auth.guard import CSRF_COOKIE, SESSION_COOKIE, _refuse
 from server.deps import SessionDep
@@ -146,16 +147,18 @@ CSV_COLUMNS = list(AuditOut.model_fields)
 
 @router.get("/audit", response_model=None,
             responses={200: {"content": {"application/json": {}, "text/csv": {}}}})
-def get_audit(db: SessionDep, controller_id: int | None = None,
-              table: Literal["tool", "base"] | None = None,
+def get_audit(db: SessionDep,
+              controller_id: Annotated[int | None, Query(ge=1, le=MAX_ID)] = None,
+              table: Literal["tool", "base", "extkin"] | None = None,
               number: Annotated[int | None, Query(ge=1, le=32)] = None,
               user: str | None = None, since: datetime | None = None,
               until: datetime | None = None,
               format: Literal["json", "csv"] = "json",
               limit: Annotated[int, Query(ge=1, le=100000)] = 1000
               ) -> list[AuditOut] | Response:
-    """The audit trail, oldest first: filter by controller, slot (``table`` + ``number``), user
-    and time (ISO 8601, UTC if no zone); ``format=csv`` for a spreadsheet."""
+    """The audit trail, oldest first: filter by controller, slot (``table`` + ``number``;
+    ``extkin`` for an external kinematic), user and time (ISO 8601, UTC if no zone);
+    ``format=csv`` for a spreadsheet."""
     def utc(t: datetime | None) -> datetime | None:
         return t if t is None or t.tzinfo else t.replace(tzinfo=timezone.utc)
 

@@ -24,7 +24,7 @@ from server.auth.permissions import DEFAULT_ROLES, IDLE_ROLE, PERMISSIONS
 
 TOKEN_PREFIX = "pdt_"
 BOOTSTRAP_USER = "admin"
-CACHE_TTL_S = 1.0  # a verified token is trusted this long by one process (docs/security.md)
+CACHE_TTL_S = 0.5  # a verified token is trusted this long by one process (docs/security.md)
 CACHE_MAX = 4096  # tokens remembered per process (the oldest entries go first)
 
 
@@ -188,18 +188,22 @@ def _actor_of_digest(db: Session, digest: str) -> tuple[tuple[User, Role], datet
 class TokenCache:
     """Verified bearer tokens of this process, each trusted for at most ``CACHE_TTL_S``.
 
-    A request whose token was verified less than a second ago skips the three lookups (token,
-    user, role) and the thread they need. The bound on revocation: a change of a token, user
-    or role flushed by *this* process empties the cache at once (a ``before_flush`` hook), so
-    here a revoked token is refused on its next request; another process (the CLI, another
-    worker or host) refuses it within ``CACHE_TTL_S``. An entry never outlives the token's own
-    expiry. Keys are the secrets' SHA-256, never the secrets.
+    A request whose token was verified less than ``CACHE_TTL_S`` ago skips the three lookups
+    (token, user, role) and the thread they need. The bound on revocation: a change of a
+    token, user or role made by *this* process empties the cache when it is flushed and again
+    when it commits (hooks :func:`_forget_on_change`, :func:`_forget_on_commit`), and every
+    emptying starts a new *generation*: a lookup that began in an older generation (it may
+    have read the row before the revoke committed) stores nothing. So here a revoked token is
+    refused on its next request after the commit; another process (the CLI, another worker or
+    host) refuses it within ``CACHE_TTL_S``. An entry never outlives the token's own expiry.
+    Keys are the secrets' SHA-256, never the secrets.
     """
 
     def __init__(self, ttl_s: float = CACHE_TTL_S, max_entries: int = CACHE_MAX) -> None:
         self.ttl_s, self.max_entries = ttl_s, max_entries
         self._entries: dict[str, tuple[float, Actor]] = {}
         self._lock = threading.Lock()
+        self.generation = 0  # +1 at every clear
 
     def get(self, digest: str) -> Actor | None:
         hit = self._entries.get(digest)
@@ -207,47 +211,74 @@ class TokenCache:
             return None
         return hit[1]
 
-    def put(self, digest: str, actor: Actor, expires_at: datetime | None) -> None:
+    def put(self, digest: str, actor: Actor, expires_at: datetime | None,
+            generation: int | None = None) -> bool:
+        """Remember ``actor``, unless the cache was emptied since ``generation`` (the value of
+        :attr:`generation` read before the lookup began); True if it was stored."""
         until = time.monotonic() + self.ttl_s
         if expires_at is not None:  # never trusted past the token's own expiry
             until = min(until, time.monotonic() + (expires_at - utcnow()).total_seconds())
         with self._lock:
+            if generation is not None and generation != self.generation:
+                return False
             if len(self._entries) >= self.max_entries:
                 self._entries.pop(next(iter(self._entries)))
             self._entries[digest] = (until, actor)
+            return True
 
     def clear(self) -> None:
         with self._lock:
             self._entries.clear()
+            self.generation += 1
 
 
 CACHE = TokenCache()
 _AUTH_ROWS = (ApiToken, User, Role)
+_CHANGED = "pendant_auth_changed"  # Session.info key: this transaction changed auth rows
 
 
 def _forget_on_change(db: Session, _ctx: object, _instances: object) -> None:
-    """Empty :data:`CACHE` when a flush changes a token, user or role (revocations included)."""
+    """Empty :data:`CACHE` when a flush changes a token, user or role (revocations included),
+    and mark the session so that its commit empties it again."""
     if any(isinstance(o, _AUTH_ROWS) for o in (*db.dirty, *db.deleted)):
+        db.info[_CHANGED] = True
         CACHE.clear()
+
+
+def _forget_on_commit(db: Session) -> None:
+    """After the commit of a change of auth rows: empty :data:`CACHE` once more (a lookup
+    between the flush and the commit read the old row and may have stored it)."""
+    if db.info.pop(_CHANGED, False):
+        CACHE.clear()
+
+
+def _forget_mark(db: Session, _previous: object = None) -> None:
+    db.info.pop(_CHANGED, None)
 
 
 def install_cache_hook() -> None:
     """Hook every ORM session (idempotent)."""
     if not event.contains(Session, "before_flush", _forget_on_change):
         event.listen(Session, "before_flush", _forget_on_change)
+    if not event.contains(Session, "after_commit", _forget_on_commit):
+        event.listen(Session, "after_commit", _forget_on_commit)
+    if not event.contains(Session, "after_soft_rollback", _forget_mark):
+        event.listen(Session, "after_soft_rollback", _forget_mark)
 
 
 def verified_actor(db_factory, digest: str) -> Actor | None:  # noqa: ANN001
     """The actor of a valid bearer token by its SHA-256, read from the DB (``db_factory()``
-    gives a session) and remembered in :data:`CACHE`; None for an unknown, expired or revoked
-    token. Callers look in ``CACHE.get(digest)`` first (it needs no thread)."""
+    gives a session) and remembered in :data:`CACHE` (unless the cache was emptied while it
+    was read); None for an unknown, expired or revoked token. Callers look in
+    ``CACHE.get(digest)`` first (it needs no thread)."""
+    generation = CACHE.generation
     with db_factory() as db:
         found = _actor_of_digest(db, digest)
     if found is None:
         return None
     (user, role), expires_at = found
     actor = Actor(user.name, role.name, frozenset(role.permissions), "api")
-    CACHE.put(digest, actor, expires_at)
+    CACHE.put(digest, actor, expires_at, generation)
     return actor
 
 

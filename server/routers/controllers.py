@@ -7,6 +7,7 @@ from fastapi import APIRouter, Response
 from db import crud
 from db.models import Controller
 from server import external
+from server.auth import audit
 from server.deps import SessionDep
 from server.preconditions import IfMatch, check, etag, set_etag
 from emulator import (THERMAL_WARMUP_S, home_joints, imperfections_document,
@@ -125,6 +126,9 @@ def put_clock(controller_id: int, body: ClockIn, db: SessionDep, response: Respo
               if_match: IfMatch = None) -> ClockOut:
     """Set the clock: 0 = just powered (cold), ``thermal_warmup_s`` or more = warm."""
     c = changing(db, controller_id, if_match)
+    before = float(c.clock_s or 0.0)
     c.clock_s = float(body.clock_s)
+    audit.record(db, "emulator.clock", controller_id=c.id, before={"clock_s": before},
+                 after={"clock_s": c.clock_s})
     set_etag(response, db, c)
     return ClockOut(clock_s=c.clock_s, thermal_warmup_s=THERMAL_WARMUP_S)

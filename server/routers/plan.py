@@ -13,15 +13,17 @@ naming it.
 
 from __future__ import annotations
 
-from typing import Any, Literal
+from typing import Annotated, Any, Literal
 
 from fastapi import APIRouter, Request
 from pydantic import BaseModel, Field
 from starlette.concurrency import run_in_threadpool
 
 from db.crud import store_document
+from server.bounds import Deg, Mm
 from db.session import write_session
 from solvers.analysis.plan import Workspace, parse_effects, plan_poses, record_plan
+from solvers.dh import check_joint_limits
 from solvers.errors import CalibrationError
 from solvers.physics import Imperfections
 from solvers.robots import ROBOTS
@@ -34,7 +36,7 @@ class PlanIn(BaseModel):
     effects: list[str] = Field(description='effects to identify, e.g. ["joint_compliance:2", '
                                            '"link_length"] (no joint: every joint)')
     n: int = Field(30, ge=6, le=500, description="number of poses")
-    workspace: list[float] | None = Field(None, min_length=6, max_length=6,
+    workspace: list[Mm] | None = Field(None, min_length=6, max_length=6,
                                           description="box xmin,ymin,zmin,xmax,ymax,zmax (mm, "
                                                       "base frame); default in front of the robot")
     instrument: Literal["tracker", "touch"] = "tracker"
@@ -45,7 +47,8 @@ class PlanIn(BaseModel):
 
 class PlanRecordingIn(BaseModel):
     robot: str
-    joints_deg: list[list[float]] = Field(min_length=4, description="the plan's poses")
+    joints_deg: list[Annotated[list[Deg], Field(min_length=1, max_length=7)]] = Field(
+        min_length=4, description="the plan's poses (each within the robot's joint limits)")
     physics: dict[str, Any] = Field(default_factory=dict,
                                     description="hidden physics (GET .../cell/physics body)")
     payload_kg: float = Field(0.0, ge=0.0, le=1000.0)
@@ -90,6 +93,14 @@ async def make_plan(body: PlanIn) -> dict[str, Any]:
 async def record_from_plan(request: Request, body: PlanRecordingIn) -> dict[str, Any]:
     """Measure the plan's poses on a simulated arm with ``physics``; stores the recording."""
     robot = _robot(body.robot)
+    for k, q in enumerate(body.joints_deg):
+        if len(q) != robot.dof:
+            raise CalibrationError(("joints_deg", k), f"has {len(q)} values; {robot.name} has "
+                                   f"{robot.dof} joints")
+        try:
+            check_joint_limits(robot, q)
+        except CalibrationError as err:
+            raise CalibrationError(("joints_deg", k, *err.loc[1:]), err.reason) from None
     physics = {k: v for k, v in body.physics.items() if k != "rigid"}
     try:
         imp = Imperfections.from_dict(physics).check(robot.dof)

@@ -25,7 +25,7 @@ from server.routers.common import (cell_of, entry_matrix, entry_out, resolve_inp
                                    state_of, step_out, store_state, taught_data)
 from server.routers.robot import physics_of
 from server.schemas import (EntryOut, ExtSlotOut, ReportOut, RunCycleOut, SessionIn, SessionOut,
-                            TouchUpIn, jsonable)
+                            SessionState, TouchUpIn, jsonable)
 from solvers.dh import forward_kinematics
 from solvers.errors import CalibrationError
 from solvers.frames import Pose
@@ -80,7 +80,8 @@ def open_session(controller_id: int, body: SessionIn, db: SessionDep,
 
 
 @router.get(PREFIX)
-def list_sessions(controller_id: int, db: SessionDep, state: str | None = None) -> list[SessionOut]:
+def list_sessions(controller_id: int, db: SessionDep,
+                  state: SessionState | None = None) -> list[SessionOut]:
     crud.get_controller(db, controller_id)
     return [session_out(s) for s in crud.list_sessions(db, controller_id, state)]
 

@@ -19,6 +19,7 @@ from sqlalchemy import select
 from db import crud
 from db.models import Delivery, Event, Webhook
 from db.outbox import KINDS
+from server.auth import audit
 from server.deps import SessionDep
 from server.schemas import In, Out
 
@@ -92,6 +93,8 @@ def create_webhook(body: WebhookIn, db: SessionDep) -> WebhookOut:
                    kinds=None if body.kinds is None else {"kinds": list(body.kinds)})
     db.add(hook)
     db.flush()
+    audit.record(db, "webhook.create", after={"webhook_id": hook.id, "url": hook.url,
+                                              "kinds": body.kinds})  # never the secret
     return _out(hook, secret)
 
 
@@ -103,7 +106,9 @@ def list_webhooks(db: SessionDep) -> list[WebhookOut]:
 @router.delete("/{webhook_id}", status_code=204)
 def delete_webhook(webhook_id: int, db: SessionDep) -> Response:
     """Unsubscribe; pending deliveries to it are dropped with it."""
-    db.delete(_get(db, webhook_id))
+    hook = _get(db, webhook_id)
+    audit.record(db, "webhook.delete", before={"webhook_id": hook.id, "url": hook.url})
+    db.delete(hook)
     return Response(status_code=204)
 
 
