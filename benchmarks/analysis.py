@@ -82,7 +82,7 @@ def main() -> None:
     t1000 = (float("nan"), float("nan"))
     for n in (50, 200, 1000):
         doc = simulate_recording("tracker", "ur10", SIM_EFFECTS, n, seed=7, payload=(5.0, [0, 0, 80]))
-        dt, _, _ = row(f"simulated UR10", parse_recording(doc))
+        dt, _, _ = row("simulated UR10", parse_recording(doc))
         if n == 1000:
             t1000 = dt
     doc = json.loads(UR10_DATA.read_text(encoding="utf-8"))

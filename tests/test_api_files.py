@@ -234,17 +234,17 @@ def test_cli_dry_run_shows_values_before_and_after_and_slots_choose(db_url, tmp_
         assert client.get(f"{C}/export", params={"format": "kuka"}).content == raw
 
 
-def test_pendant_slot_changes_one_component_and_keeps_every_digit_of_the_others(tmp_path, monkeypatch):
+def test_pendant_slot_changes_one_component_and_keeps_every_digit_of_the_others(
+        fresh_db, tmp_path, monkeypatch):  # noqa: ANN001
     """Issue 23 (1): ``pendant slot tool 1 --x ...`` sends X alone; Y keeps 3.01155138."""
     import httpx
 
     from api_helpers import ADMIN_TOKEN
     from browser_helpers import serve
-    from db_backends import fresh_url
 
     monkeypatch.setenv("PENDANT_TOKEN", ADMIN_TOKEN)
     auth = {"Authorization": f"Bearer {ADMIN_TOKEN}"}
-    with serve(fresh_url(tmp_path)) as url:
+    with serve(fresh_db()) as url:
         r = httpx.put(f"{url}{C}/tools/1", headers={**auth, "If-Match": "*"},
                       json={"pose": {"x": 1, "y": 3.01155138, "z": 357.125, "b": 0.238999218}})
         assert r.status_code == 200, r.text

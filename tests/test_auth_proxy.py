@@ -6,7 +6,6 @@ from __future__ import annotations
 import httpx
 
 from api_helpers import ADMIN_TOKEN, C
-from db_backends import fresh_url
 from test_auth_revoke_load import service
 
 
@@ -20,8 +19,8 @@ def clock_client(url: str, **headers: str) -> str:
         return [a for a in c.get("/audit").json() if a["request_id"] == rid][0]["client"]
 
 
-def test_forwarded_for_ignored_unless_from_a_trusted_proxy(tmp_path):
-    db = fresh_url(tmp_path)
+def test_forwarded_for_ignored_unless_from_a_trusted_proxy(fresh_db, tmp_path):
+    db = fresh_db()
     with service(db, PENDANT_TRUSTED_PROXIES="") as url:
         assert clock_client(url, **{"X-Forwarded-For": "6.6.6.6"}) == "127.0.0.1"
     with service(db, PENDANT_TRUSTED_PROXIES="127.0.0.1") as url:  # a proxy on this host

@@ -20,10 +20,9 @@ import httpx
 import pytest
 from sqlalchemy import select
 
-from api_helpers import ADMIN_TOKEN, C, db_url  # noqa: F401 -- db_url is a fixture
+from api_helpers import ADMIN_TOKEN, C
 from browser_helpers import free_port
 from db.auth_models import ApiToken
-from db_backends import fresh_url
 from server.auth import tokens
 from server.cli import main
 
@@ -128,8 +127,8 @@ def refused_within(url: str, secret: str, seconds: float) -> float | None:
 
 
 @pytest.mark.serial
-def test_cli_revoke_under_jog_load_returns_at_once_and_the_token_stops(tmp_path):
-    db = fresh_url(tmp_path)
+def test_cli_revoke_under_jog_load_returns_at_once_and_the_token_stops(fresh_db, tmp_path):
+    db = fresh_db()
     assert cli("users", "add", "eva", "--role", "Expert", "--db", db)[0] == 0
     took_s, refused_s = [], []
     with service(db) as url, jogging(url) as codes:
@@ -156,8 +155,8 @@ def test_cli_revoke_under_jog_load_returns_at_once_and_the_token_stops(tmp_path)
 
 
 @pytest.mark.serial
-def test_cli_user_revoke_under_jog_load(tmp_path):
-    db = fresh_url(tmp_path)
+def test_cli_user_revoke_under_jog_load(fresh_db, tmp_path):
+    db = fresh_db()
     with service(db) as url, jogging(url) as codes:
         for k in range(5):
             name = f"user{k}"
@@ -172,9 +171,9 @@ def test_cli_user_revoke_under_jog_load(tmp_path):
 
 
 @pytest.mark.serial
-def test_rest_user_revoke_under_jog_load(tmp_path):
+def test_rest_user_revoke_under_jog_load(fresh_db, tmp_path):
     """``DELETE /users/{name}`` while three clients jog: answered within 2 s, refused at once."""
-    db = fresh_url(tmp_path)
+    db = fresh_db()
     admin = {"Authorization": f"Bearer {ADMIN_TOKEN}"}
     with service(db) as url, jogging(url) as codes, \
             httpx.Client(base_url=url, headers=admin, timeout=30) as c:

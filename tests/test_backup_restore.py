@@ -12,7 +12,6 @@ import numpy as np
 import pytest
 from sqlalchemy import func, insert, select
 
-from api_helpers import *  # noqa: F403
 from api_helpers import C, edit_slot, finish_job, ok
 from db.models import EntryHistory, utcnow
 from server.cli import main

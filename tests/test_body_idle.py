@@ -10,7 +10,6 @@ from urllib.parse import urlsplit
 
 from api_helpers import ADMIN_TOKEN, C
 from browser_helpers import serve
-from db_backends import fresh_url
 from server import limits
 
 
@@ -31,9 +30,9 @@ def raw_request(url: str, head: str, body: bytes, wait_s: float) -> bytes:
         return b"".join(chunks)
 
 
-def test_a_body_shorter_than_its_content_length_is_408(tmp_path, monkeypatch):
+def test_a_body_shorter_than_its_content_length_is_408(fresh_db, tmp_path, monkeypatch):
     monkeypatch.setattr(limits, "BODY_IDLE_S", 1.0)
-    with serve(fresh_url(tmp_path)) as url:
+    with serve(fresh_db()) as url:
         import httpx
 
         auth = {"Authorization": f"Bearer {ADMIN_TOKEN}"}

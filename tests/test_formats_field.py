@@ -9,7 +9,6 @@ from pathlib import Path
 
 import pytest
 
-from api_helpers import *  # noqa: F403
 from api_helpers import C, ok
 from server import formats
 from server.formats import FormatError, read_abb, read_kuka

@@ -21,12 +21,11 @@ openshowvar = pytest.importorskip("py_openshowvar").openshowvar
 
 
 @pytest.fixture(scope="module")
-def cell(tmp_path_factory: pytest.TempPathFactory) -> Iterator[dict]:
+def cell(fresh_db, tmp_path_factory: pytest.TempPathFactory) -> Iterator[dict]:
     """REST (TestClient) and the KVP face on loopback, acting as the Expert "cellpc", on the
     demo KUKA controller."""
-    from db_backends import fresh_url
 
-    db_url = fresh_url(tmp_path_factory.mktemp("kvp"))
+    db_url = fresh_db()
     with make_client(db_url) as rest:
         ok(rest.post("/users", json={"name": "cellpc", "role": "Expert"}))
         maker = rest.app.state.sessionmaker

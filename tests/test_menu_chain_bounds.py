@@ -6,7 +6,6 @@ from __future__ import annotations
 
 import numpy as np
 
-from api_helpers import *  # noqa: F403
 from api_helpers import C, CELL, approach, ok, open_session, pose_matrix, walk
 from emulator import external as ext_emu
 from solvers.robots import ROBOTS

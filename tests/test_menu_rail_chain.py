@@ -10,7 +10,6 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from api_helpers import *  # noqa: F403
 from api_helpers import C, approach, calibrate, ok, open_session, pose_matrix
 
 EXT = f"{C}/external-kinematics"

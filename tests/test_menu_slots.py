@@ -4,7 +4,6 @@ another kind, or into a named slot no menu calibrated, is a 409 naming its kind 
 
 from __future__ import annotations
 
-from api_helpers import *  # noqa: F403
 from api_helpers import C, calibrate, edit_slot, ok, open_session, walk
 
 

@@ -39,14 +39,13 @@ def pem_files(cert: ClientCert, folder: Path) -> tuple[str, str]:
 
 
 @pytest.fixture(scope="module")
-def cell(tmp_path_factory: pytest.TempPathFactory) -> Iterator[dict]:
-    from db_backends import fresh_url
+def cell(fresh_db, tmp_path_factory: pytest.TempPathFactory) -> Iterator[dict]:
 
     if not (NODE_DIR / "node_modules" / "node-opcua").is_dir():
         pytest.fail("node-opcua is not installed: run `npm ci` in tests/opcua_node (tests/run "
                     "does)")
     folder = tmp_path_factory.mktemp("opcua-node")
-    db_url = fresh_url(folder)
+    db_url = fresh_db()
     with make_client(db_url) as rest:
         face = start_face(rest.app.state.sessionmaker, folder)
         cert, key = pem_files(face.client, folder)

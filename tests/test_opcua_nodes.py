@@ -15,11 +15,10 @@ from opcua_helpers import namespaces, secure_client, start_face
 
 
 @pytest.fixture(scope="module")
-def cell(tmp_path_factory: pytest.TempPathFactory) -> Iterator[dict]:
-    from db_backends import fresh_url
+def cell(fresh_db, tmp_path_factory: pytest.TempPathFactory) -> Iterator[dict]:
 
     folder = tmp_path_factory.mktemp("opcua-nodes")
-    with make_client(fresh_url(folder)) as rest:
+    with make_client(fresh_db()) as rest:
         face = start_face(rest.app.state.sessionmaker, folder)
         yield {"rest": rest, "face": face}
         face.stop()

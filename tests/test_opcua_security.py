@@ -30,12 +30,11 @@ from server.opcua.service import PendantOpcUa
 
 
 @pytest.fixture(scope="module")
-def cell(tmp_path_factory: pytest.TempPathFactory) -> Iterator[dict]:
+def cell(fresh_db, tmp_path_factory: pytest.TempPathFactory) -> Iterator[dict]:
     """REST and the OPC UA face (with the optional None endpoint) on one SQLite file."""
-    from db_backends import fresh_url
 
     folder = tmp_path_factory.mktemp("opcua-security")
-    db_url = fresh_url(folder)
+    db_url = fresh_db()
     with make_client(db_url) as rest:
         face = start_face(rest.app.state.sessionmaker, folder, none_endpoint=True)
         yield {"rest": rest, "face": face, "db_url": db_url, "folder": folder}

@@ -29,12 +29,11 @@ TOOL = "[TRUE,[[1.5,-2,180.25],[0.707106781186548,0,0,0.707106781186548]],[2.5,[
 
 
 @pytest.fixture(scope="module")
-def cell(tmp_path_factory: pytest.TempPathFactory) -> Iterator[dict]:
+def cell(fresh_db, tmp_path_factory: pytest.TempPathFactory) -> Iterator[dict]:
     """REST (TestClient) and the RWS face (uvicorn on loopback) on one database, an ABB
     controller, an Expert and an Operator with RWS secrets."""
-    from db_backends import fresh_url
 
-    db_url = fresh_url(tmp_path_factory.mktemp("rws"))
+    db_url = fresh_db()
     with make_client(db_url) as rest:
         cid = ok(rest.post("/controllers", json={"name": "abb-1", "robot": "abb_irb120"}))["id"]
         maker = rest.app.state.sessionmaker

@@ -23,12 +23,11 @@ from test_opcua import pendant as pendant_object  # noqa: E402
 
 
 @pytest.fixture(scope="module")
-def face(tmp_path_factory: pytest.TempPathFactory) -> Iterator[dict]:
-    from db_backends import fresh_url
+def face(fresh_db, tmp_path_factory: pytest.TempPathFactory) -> Iterator[dict]:
 
     from server.opcua.service import PendantOpcUa
 
-    db_url = fresh_url(tmp_path_factory.mktemp("rws-opcua"))
+    db_url = fresh_db()
     loop = asyncio.new_event_loop()
     thread = threading.Thread(target=loop.run_forever, name="opcua", daemon=True)
     thread.start()

@@ -38,10 +38,9 @@ def wait_listening(port: int, proc: subprocess.Popen, timeout_s: float = 90.0) -
     raise AssertionError(f"nothing listens on {port} after {timeout_s} s")
 
 
-def test_serve_starts_both_faces(tmp_path: Path) -> None:
-    from db_backends import fresh_url
+def test_serve_starts_both_faces(fresh_db, tmp_path: Path) -> None:
 
-    db_url = fresh_url(tmp_path)
+    db_url = fresh_db()
     r = pendant("users", "add", "cellpc", "--role", "Expert", "--db", db_url)
     assert r.returncode == 0, r.stderr
     r = pendant("users", "rws-password", "cellpc", "--db", db_url, input="cellpc-rws-secret\n")
@@ -73,10 +72,9 @@ def test_serve_starts_both_faces(tmp_path: Path) -> None:
             proc.stderr.close()  # type: ignore[union-attr]
 
 
-def test_kvp_flags_mistakes_name_the_flag(tmp_path: Path) -> None:
-    from db_backends import fresh_url
+def test_kvp_flags_mistakes_name_the_flag(fresh_db, tmp_path: Path) -> None:
 
-    db_url = fresh_url(tmp_path)
+    db_url = fresh_db()
     base = ["serve", "--db", db_url, "--port", str(free_port()), "--job-workers", "0",
             "--kvp-port", str(free_port())]
     r = pendant(*base)

@@ -48,3 +48,15 @@ def test_no_test_returns_early_instead_of_skipping():
                         isinstance(s, ast.Return) and s.value is None for s in node.body):
                     found.append(f"{path.name}:{node.lineno} {fn.name}")
     assert not found, found
+
+
+def test_tests_get_their_database_and_fixtures_from_conftest():
+    """The ``db`` marker follows the ``fresh_db`` fixture: a test calling ``fresh_url`` itself
+    would run in the SQLite pass only; a star import would hide where a fixture comes from."""
+    from pathlib import Path
+
+    here = Path(__file__).parent
+    found = [f"{p.name}: {what}" for p in sorted(here.glob("*.py"))
+             if p.name not in ("conftest.py", "db_backends.py", Path(__file__).name)
+             for what in ("fresh_url(", "import *") if what in p.read_text()]
+    assert not found, found

@@ -31,7 +31,7 @@ from solvers.analysis.baseline import Baseline
 from solvers.analysis.effects import Candidate
 from solvers.analysis.screen import IDENT_TOL, PLAUSIBLE
 from solvers.analysis.selection import (CV, batch_f_tests, f_test, fit_linear, holm_pass,
-                                        identifiable_part, normalise, orth, project_out,
+                                        normalise, orth, project_out,
                                         residual_ratio)
 
 ALPHA = 1e-3            # family-wise level of each selection step (Holm)
