@@ -12,7 +12,6 @@ from __future__ import annotations
 from typing import Any
 
 from fastapi import FastAPI
-from fastapi.openapi.utils import get_openapi
 
 from server.auth.guard import CSRF_HEADER, SESSION_COOKIE
 from server.auth.permissions import PUBLIC, required
@@ -32,12 +31,14 @@ SECURITY = [{"bearer": []}, {"session": [], "csrf": []}]
 
 
 def install(app: FastAPI) -> None:
-    """Have ``app.openapi()`` declare :data:`SCHEMES`: every operation needs one of them, but
-    the public ones, and says which permission it needs."""
+    """Have ``app.openapi()`` (as built so far: ``server.errors`` adds the error answers)
+    declare :data:`SCHEMES`: every operation needs one of them, but the public ones, and says
+    which permission it needs."""
+    built = app.openapi
+
     def openapi() -> dict[str, Any]:
-        if app.openapi_schema is None:
-            doc = get_openapi(title=app.title, version=app.version, description=app.description,
-                              routes=app.routes, tags=app.openapi_tags)
+        doc = built()
+        if "securitySchemes" not in doc.get("components", {}):
             doc.setdefault("components", {})["securitySchemes"] = SCHEMES
             doc["security"] = SECURITY
             for path, ops in doc.get("paths", {}).items():
@@ -48,7 +49,6 @@ def install(app: FastAPI) -> None:
                     elif need is not None:
                         op["description"] = (op.get("description", "") +
                                              f"\n\nPermission: `{need}`.").lstrip()
-            app.openapi_schema = doc
-        return app.openapi_schema
+        return doc
 
     app.openapi = openapi  # type: ignore[method-assign]
