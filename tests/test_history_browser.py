@@ -9,7 +9,7 @@ import re
 
 import pytest
 
-from browser_helpers import browser_page, idle, open_pendant
+from browser_helpers import browser_page, compute, idle, open_menu, open_pendant, save, walk_steps
 
 @pytest.fixture
 def page(chromium, site: str):  # noqa: ANN001, ANN201
@@ -99,7 +99,8 @@ def test_json_backup_restore_previews_then_restores_with_progress(page, site):
     assert api(page, site, "GET", "/tools/9")["name"] == "probe"
     seen = page.evaluate("window.progressSeen")
     assert any(t.startswith("Checking cell-1-backup.json") for t in seen), seen
-    assert any(t.startswith("Restoring the backup: ") for t in seen), seen
+    assert any(re.fullmatch(r"Restore job \d+: (waiting for a worker|restoring the backup: \d+ %)", t)
+               for t in seen), seen
     assert page.locator("#import-progress").inner_text() == ""
     assert "probe" in page.locator("#tool-table tr[data-number='9']").inner_text()
 
@@ -148,3 +149,21 @@ def test_frames_table_fits_at_1280_px_with_whole_words(page, site):
     }""")
     assert fit["broken"] == [], f"names broken mid-word: {fit['broken']}"
     assert fit["overflow"] <= 0 and fit["provRight"] <= fit["wrapRight"] + 0.5, fit
+
+
+def test_the_saved_note_goes_with_the_next_action_an_import(page, site):
+    """"Saved into TOOL 13" does not stay on screen after an import renamed the slot."""
+    from pathlib import Path
+
+    open_pendant(page, site)
+    open_menu(page, "tool.xyz_4point", 13)
+    page.locator("#wizard").get_by_label("Ideal aim").check()
+    walk_steps(page, 4)
+    compute(page)
+    save(page)
+    assert page.locator("#saved-note").inner_text().startswith("Saved into TOOL 13")
+    form = page.locator("#import-form")
+    form.locator("#import-file").set_input_files(str(Path(__file__).parent / "data" / "kuka_cell7_config.dat"))
+    form.get_by_role("button", name="Preview").click()
+    form.locator("#import-preview").wait_for(state="visible")
+    assert page.locator("#saved-note").count() == 0

@@ -161,7 +161,7 @@ async function restoreBackup() {
   $("#import-commit").disabled = true;
   let j = job;
   while (j.state === "queued" || j.state === "running") {
-    progress(`Restoring the backup: ${jobText(j)}`);
+    progress(`Restore job ${job.id}: ${jobText(j)}`); // "restoring the backup: 10 %"
     await new Promise((ok) => setTimeout(ok, 200)); // poll the job's state
     j = await request("GET", `/jobs/${job.id}`);
   }
