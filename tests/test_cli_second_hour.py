@@ -18,7 +18,6 @@ from server.cli import build_parser, main
 
 ROOT = Path(__file__).resolve().parent.parent
 DATA = Path(__file__).parent / "data"
-pytestmark = pytest.mark.db
 
 
 def one_line(capsys, argv: list[str]) -> str:  # noqa: ANN001
