@@ -76,6 +76,14 @@ def test_root_point_then_offset_by_clicking_then_both_exports(page, site):
     assert "Saved into EX_KIN 1 (TURNTABLE)" in w.get_by_role("status").inner_text()
     assert page.get_by_role("tab", name="External (6)").get_attribute("aria-selected") == "true"
     assert "ext.root_point" in page.locator("#ext-table tr[data-number='1']").inner_text()
+    # its history on the page: the calibration, with its quality figures and a Restore
+    page.locator("#ext-table tr[data-number='1']").click()
+    page.locator("#history-view").wait_for(state="visible")
+    idle(page)
+    assert page.locator("#history-title").inner_text().startswith("EX_KIN 1")
+    entry = page.locator("#history-rows tbody tr").first
+    assert "calibration (session" in entry.inner_text() and "ext.root_point · max" in entry.inner_text()
+    assert "[turntable E1]" in entry.inner_text() and entry.get_by_role("button", name="Restore").is_visible()
 
     # ------------------------------------------------------- External kinematics > Offset
     open_menu(page, "ext.offset", 5, tool_no=1, ext_no=1)

@@ -29,7 +29,8 @@ function showError(err) {
 
 /** A snapshot of an external kinematic in the same terms as a tool or base slot. */
 function extSnapshot(s) {
-  return s && { ...s, kind: s.axes ? `${s.kind} ${s.axes.join(",")}` : s.kind };
+  if (!s || !s.axes || !s.axes.length) return s;
+  return { ...s, kind: `${s.kind} ${Array.isArray(s.axes) ? s.axes.join(",") : s.axes}` }; // axes: ["E1"] or "E1"
 }
 
 async function show(table, number) {
