@@ -302,7 +302,24 @@ def build_parser() -> argparse.ArgumentParser:
     add_slot_command(sub)
     add_auth_commands(sub)
     add_opcua_commands(sub)
+    _state_defaults(p)
     return p
+
+
+def _state_defaults(parser: argparse.ArgumentParser) -> None:
+    """Every option's ``--help`` names its default (docs/api.md says so): an option with a
+    default its help does not state gets "(default: VALUE)" appended, in every subcommand."""
+    for action in parser._actions:
+        if isinstance(action, argparse._SubParsersAction):
+            for child in action.choices.values():
+                _state_defaults(child)
+            continue
+        d = action.default
+        if (not action.option_strings or action.help == argparse.SUPPRESS
+                or d is None or d is False or d in (argparse.SUPPRESS, "", [])
+                or "default" in (action.help or "")):
+            continue
+        action.help = f"{action.help} (default: %(default)s)" if action.help else "default: %(default)s"
 
 
 IMPORT_SUFFIXES = {".dat": "kuka", ".mod": "abb", ".modx": "abb", ".sys": "abb", ".txt": "fanuc",
@@ -695,7 +712,14 @@ def main(argv: Sequence[str] | None = None) -> int:
                     sys.stdout.write(export_text(db, controller.id, args.format))
             return 0
         if args.command == "import":
-            return import_file(args)
+            import getpass
+
+            from server.auth import audit
+
+            # audited as the user running it, as `pendant users/tokens/roles` are (cli:<os user>)
+            with audit.acting_as({"user_name": f"cli:{getpass.getuser()}", "role": None,
+                                  "source": "cli"}):
+                return import_file(args)
         if not hasattr(args, "func"):
             return 2
         name = Path(args.file).name if getattr(args, "file", None) else ""
@@ -710,8 +734,14 @@ def main(argv: Sequence[str] | None = None) -> int:
     except LookupError as err:
         print(f"pendant: {err}", file=sys.stderr)
         return 2
-    except OSError as err:
-        print(f"pendant: {err}", file=sys.stderr)
+    except BrokenPipeError:  # `pendant analyze ... | head`: the reader left; not an error to print
+        devnull = os.open(os.devnull, os.O_WRONLY)
+        os.dup2(devnull, sys.stdout.fileno())  # the interpreter's last flush goes nowhere
+        return 141  # 128 + SIGPIPE, as a shell reports a command a pipe stopped
+    except OSError as err:  # a missing file: "pendant: FILE: No such file or directory"
+        where = err.filename if err.filename is not None else None
+        print(f"pendant: {where}: {err.strerror}" if where and err.strerror else f"pendant: {err}",
+              file=sys.stderr)
         return 2
     except UnicodeDecodeError as err:
         print(f"pendant: {args.file}: not UTF-8 text ({err.reason} at byte {err.start})",

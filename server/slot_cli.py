@@ -1,7 +1,7 @@
 """``pendant slot``: read or edit one tool/base slot or external kinematic of a running
 service, with If-Match.
 
-    pendant slot tool 3 [--url http://127.0.0.1:8000] [--controller 1]
+    pendant slot tool 3 [--url URL] [--controller 1]   # URL: --url, else $PENDANT_SERVICE
     pendant slot tool 3 --name pointer --pose 1.5,-2,180,0,0,0 [--etag '"4"']
     pendant slot tool 3 --x 1.75                    # X alone: y, z, a, b, c keep every digit
     pendant slot ext 1 --pose 520,380,80,0,0,0     # EX_KIN 1: --pose is its root frame
@@ -10,12 +10,16 @@ It reads the slot (and its ``ETag``), then writes it with ``If-Match`` so an edi
 overwrites a change someone else made in between: the service answers 412, and this command
 prints what the slot holds now and exits 3 without writing. ``--etag`` sends the ETag of an
 earlier read instead (what you saw, not what is there now).
+
+Mistakes exit 2 with one line naming the field (``--pose: ...``) or the service's refusal
+(``pendant: 404: ...``, ``pendant: 401: ... set PENDANT_TOKEN``), never raw JSON.
 """
 
 from __future__ import annotations
 
 import argparse
 import json
+import os
 import sys
 import urllib.error
 import urllib.request
@@ -24,6 +28,12 @@ from typing import Any
 from server.settings import bearer_headers
 
 EXIT_STALE = 3
+DEFAULT_URL = "http://127.0.0.1:8000"
+URL_ENV = "PENDANT_SERVICE"  # the service's URL, as --url / --service give it
+
+
+class _BadArgument(ValueError):
+    """A command-line value this command cannot use: exit 2 with the field and the reason."""
 
 
 def _call(method: str, url: str, body: dict | None = None,
@@ -34,9 +44,33 @@ def _call(method: str, url: str, body: dict | None = None,
         **(headers or {})})
     try:
         with urllib.request.urlopen(req, timeout=30) as r:
-            return r.status, r.headers, json.loads(r.read() or b"null")
+            return r.status, r.headers, _json(r.read())
     except urllib.error.HTTPError as err:
-        return err.code, err.headers, json.loads(err.read() or b"null")
+        return err.code, err.headers, _json(err.read())
+
+
+def _json(raw: bytes) -> Any:
+    try:
+        return json.loads(raw or b"null")
+    except ValueError:
+        return raw.decode("utf-8", "replace").strip()
+
+
+def _refusal(status: int, answer: Any) -> str:
+    """The service's refusal in one line: ``401: unknown token (...)``, ``404: no tool 99``."""
+    detail = answer.get("detail") if isinstance(answer, dict) else answer
+    if isinstance(detail, list):
+        msgs = []
+        for d in detail:
+            loc = ".".join(str(x) for x in d.get("loc", []) if x not in ("body", "path", "query"))
+            msgs.append(f"{loc}: {d.get('msg')}" if loc else str(d.get("msg")))
+        text = "; ".join(msgs)
+    else:
+        text = str(detail or "").splitlines()[0] if detail else ""
+    if status == 401:
+        text = (text or "not logged in") + (" (set PENDANT_TOKEN to a token: pendant tokens "
+                                            "create NAME)")
+    return f"{status}: {text or 'refused'}"
 
 
 def _pose(text: str) -> dict[str, float]:
@@ -45,7 +79,7 @@ def _pose(text: str) -> dict[str, float]:
     except ValueError:
         v = []
     if len(v) != 6:
-        raise SystemExit(f"pendant: --pose: needs x,y,z,a,b,c (6 numbers), got {text!r}")
+        raise _BadArgument(f"--pose: needs x,y,z,a,b,c (6 numbers), got {text!r}")
     return dict(zip("xyzabc", v))
 
 
@@ -65,14 +99,24 @@ def _show(slot: dict, etag: str | None) -> str:
 
 
 def run_slot(args: argparse.Namespace) -> int:
-    url = f"{args.url.rstrip('/')}/controllers/{args.controller}/{PATHS[args.table]}/{args.number}"
+    try:
+        return _run_slot(args)
+    except _BadArgument as err:
+        print(f"pendant: {err}", file=sys.stderr)
+        return 2
+
+
+def _run_slot(args: argparse.Namespace) -> int:
+    base = args.url or os.environ.get(URL_ENV) or DEFAULT_URL
+    pose = _pose(args.pose) if args.pose is not None else None  # a mistake before any request
+    url = f"{base.rstrip('/')}/controllers/{args.controller}/{PATHS[args.table]}/{args.number}"
     try:
         status, headers, slot = _call("GET", url)
     except (urllib.error.URLError, OSError) as err:
-        print(f"pendant: --url: the service at {args.url} did not answer ({err})", file=sys.stderr)
+        print(f"pendant: --url: the service at {base} did not answer ({err})", file=sys.stderr)
         return 2
     if status != 200:
-        print(f"pendant: {status}: {json.dumps(slot)}", file=sys.stderr)
+        print(f"pendant: {_refusal(status, slot)}", file=sys.stderr)
         return 2
     body: dict[str, Any] = {}
     if args.name is not None:
@@ -80,7 +124,7 @@ def run_slot(args: argparse.Namespace) -> int:
     if args.kind is not None:
         body["kind"] = args.kind
     if args.pose is not None:
-        body["root" if args.table == "ext" else "pose"] = _pose(args.pose)
+        body["root" if args.table == "ext" else "pose"] = pose
     one = {k: getattr(args, k) for k in "xyzabc" if getattr(args, k, None) is not None}
     if one:  # PUT merges (JSON Merge Patch): the other components stay as stored
         if args.table == "ext" or args.pose is not None:
@@ -99,9 +143,7 @@ def run_slot(args: argparse.Namespace) -> int:
               file=sys.stderr)
         return EXIT_STALE
     if status != 200:
-        msgs = "; ".join(f"{'.'.join(str(x) for x in d.get('loc', []))}: {d.get('msg')}"
-                         for d in answer.get("detail", [])) if isinstance(answer, dict) else answer
-        print(f"pendant: {status}: {msgs}", file=sys.stderr)
+        print(f"pendant: {_refusal(status, answer)}", file=sys.stderr)
         return 2
     print(_show(answer, headers.get("ETag")))
     return 0
@@ -114,8 +156,9 @@ def add_slot_command(subparsers: Any) -> None:
                                            "(sends If-Match: never a blind overwrite)")
     s.add_argument("table", choices=list(PATHS), help="tool, base or ext (EX_KIN 1..6)")
     s.add_argument("number", type=int)
-    s.add_argument("--url", default="http://127.0.0.1:8000",
-                   help="the service (its token in $PENDANT_TOKEN: pendant tokens create NAME)")
+    s.add_argument("--url", "--service", dest="url", metavar="URL",
+                   help=f"the service (default: ${URL_ENV}, else {DEFAULT_URL}); its token in "
+                        "$PENDANT_TOKEN (pendant tokens create NAME)")
     s.add_argument("--controller", default="1", help="controller id (1 = cell-1)")
     s.add_argument("--name")
     s.add_argument("--kind", choices=["tool", "workpiece", "base", "fixed_tool", "turntable",

@@ -52,7 +52,10 @@ def idle(page) -> None:  # noqa: ANN001
 
 
 def upload(page, path: Path) -> None:  # noqa: ANN001
+    """Choose the file (the page only reads it), then Analyse."""
     page.get_by_label("Upload a file").set_input_files(str(path))
+    idle(page)
+    page.get_by_role("button", name="Analyse").click()
     idle(page)
 
 

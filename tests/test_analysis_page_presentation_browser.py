@@ -34,6 +34,13 @@ def test_the_ur10_report_reads_plainly(page):  # noqa: ANN001
     page.get_by_label("Held-out split").select_option("random")   # issue 11's report
     page.get_by_label("Upload a file").set_input_files(str(UR10))
     idle(page)
+    # choosing the file only reads it (issue 27: it used to start the analysis, so the
+    # person's Analyse then said "Already analysed")
+    assert "press Analyse" in page.locator("#status").inner_text()
+    assert page.locator("#report").is_hidden()
+    assert sum("/analyze" in u for u in page.posts) == 0
+    page.get_by_role("button", name="Analyse").click()
+    idle(page)
     assert page.locator("#report").is_visible()
     assert sum("/analyze" in u for u in page.posts) == 1
     page.get_by_role("button", name="Analyse").click()  # same text, folds and seed: not again

@@ -39,6 +39,8 @@ def test_root_point_then_offset_by_clicking_then_both_exports(page, site):
     idle(page)
     assert jog.get_by_label("E1 (deg)").inner_text() == "10.000"
     assert jog.get_by_label("E4 (mm)").inner_text() == "0.000"  # the rail, in mm
+    assert jog.locator("#inc-unit").inner_text() == "deg; E4: mm"  # the increment's unit says so
+    assert "6 axes + E1–E4" in page.locator("#robot-name").inner_text()  # not "6 axes"
 
     # ------------------------------------------------ the touching tool: XYZ 4-point, ideal aim
     open_menu(page, "tool.xyz_4point", 1)
@@ -61,6 +63,8 @@ def test_root_point_then_offset_by_clicking_then_both_exports(page, site):
     assert top.locator("circle.fit-circle").count() == 1
     # the report suggests a 4th axis value: Move to goes there, Touch up, Compute again
     assert w.locator("#prompt").inner_text().startswith("Optional: touch the mark with E1 at")
+    guidance = report.locator(".guidance")  # an axis value, not an "orientation"
+    assert guidance.count() == 1 and guidance.inner_text().endswith("it goes to that axis value."), guidance.all_inner_texts()
     w.get_by_role("button", name="Move to", exact=True).click()
     idle(page)
     w.get_by_role("button", name="Touch up", exact=True).click()
@@ -72,6 +76,14 @@ def test_root_point_then_offset_by_clicking_then_both_exports(page, site):
     assert "Saved into EX_KIN 1 (TURNTABLE)" in w.get_by_role("status").inner_text()
     assert page.get_by_role("tab", name="External (6)").get_attribute("aria-selected") == "true"
     assert "ext.root_point" in page.locator("#ext-table tr[data-number='1']").inner_text()
+    # its history on the page: the calibration, with its quality figures and a Restore
+    page.locator("#ext-table tr[data-number='1']").click()
+    page.locator("#history-view").wait_for(state="visible")
+    idle(page)
+    assert page.locator("#history-title").inner_text().startswith("EX_KIN 1")
+    entry = page.locator("#history-rows tbody tr").first
+    assert "calibration (session" in entry.inner_text() and "ext.root_point · max" in entry.inner_text()
+    assert "[turntable E1]" in entry.inner_text() and entry.get_by_role("button", name="Restore").is_visible()
 
     # ------------------------------------------------------- External kinematics > Offset
     open_menu(page, "ext.offset", 5, tool_no=1, ext_no=1)

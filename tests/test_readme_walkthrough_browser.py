@@ -53,9 +53,33 @@ def test_the_readme_says_what_this_test_does():
     text = README.read_text(encoding="utf-8")
     for phrase in ("**Jog.**", "refused with the joint, its value and its limit", "**Move to**",
                    "Ideal aim", "**Touch up**", "**Compute**", "suggested orientation",
-                   "jog World X + 1 mm", "names touch-up 5", "**Save into TOOL 1**", "**Base > 3-point**",
+                   "jog World X + 1 mm", "names touch-up 5", "**Save into TOOL 1**",
+                   "click the slot's row in *Frames*", "**Restore**", "**Base > 3-point**",
                    "KUKA `$config.dat`"):
         assert phrase in text, phrase
+
+
+CAPTION = re.compile(r"!\[([^\]]*)\]\(docs/pendant\.png\)")
+
+
+def check_caption_against_the_screen(page) -> None:  # noqa: ANN001
+    """The README's caption of docs/pendant.png says what the screenshot shows: taken at the
+    viewport of the shot, every element the caption names is on screen."""
+    caption = CAPTION.search(README.read_text(encoding="utf-8")).group(1)
+    view = page.viewport_size
+
+    def on_screen(locator) -> bool:  # noqa: ANN001
+        box = locator.bounding_box()
+        return bool(box) and box["y"] >= 0 and box["y"] + box["height"] <= view["height"] \
+            and box["x"] >= 0 and box["x"] + box["width"] <= view["width"]
+
+    assert caption == "The pendant after step 4 of the walk-through: the report names the sloppy touch-up 5", caption
+    bad = page.locator("#report .bad-point")
+    assert "point 5 is" in bad.inner_text() and on_screen(bad), bad.bounding_box()
+    assert on_screen(page.locator("#report svg.chart rect.bar.bad"))
+    assert on_screen(page.locator("#steps li").nth(4)) and "orientation 5" in page.locator("#steps").inner_text()
+    header = page.locator("#topbar").inner_text()  # the screen of today: E1-E4 and the login
+    assert "6 axes + E1–E4" in header and "admin" in header
 
 
 def test_readme_walk_through(page, site, tmp_path):
@@ -89,6 +113,9 @@ def test_readme_walk_through(page, site, tmp_path):
     # 3. the report: real residuals (the aim), stats, the next orientation in jog terms
     r4 = get(page, site, "/controllers/1/sessions/1")["report"]
     assert 0.01 < r4["max_error_mm"] < 10 * aim, r4["residuals_mm"]
+    # docs/pendant.md, step 4: "residuals between 0.05 and 0.3 mm", "95 % bound about B mm"
+    assert all(0.05 <= v <= 0.3 for v in r4["residuals_mm"]), r4["residuals_mm"]
+    assert 0.3 <= r4["position_bound95_mm"] <= 0.8, r4["position_bound95_mm"]  # "about half a mm"
     assert report.locator("svg.chart rect.bar").count() == 4
     stats = report.locator(".stats").inner_text()
     assert all(word in stats for word in ("Max", "Mean", "RMS", "95% position"))
@@ -114,11 +141,21 @@ def test_readme_walk_through(page, site, tmp_path):
     assert "without it the RMS residual is" in bad.inner_text()
     assert report.get_by_text(re.compile("point 5 is")).count() == 1  # named once, not twice
     assert report.locator("svg.chart rect.bar.bad").count() == 1
+    covered = page.evaluate("""() => {  // no label of the chart lies over a bar (issue 27: bars 4, 5)
+        const chart = document.querySelector('#report svg.chart');
+        const hit = (a, b) => a.left < b.right && b.left < a.right && a.top < b.bottom && b.top < a.bottom;
+        const bars = [...chart.querySelectorAll('rect.bar, rect.loo')].map((r) => r.getBoundingClientRect());
+        return [...chart.querySelectorAll('text')].filter((t) => !t.classList.contains('loo-label'))
+          .filter((t) => bars.some((b) => hit(t.getBoundingClientRect(), b))).map((t) => t.textContent);
+    }""")
+    assert covered == [], covered
+    assert "allowed off the others" in report.locator("#chart-legend").inner_text()
     shot = Path(os.environ.get("PENDANT_SCREENSHOT", tmp_path / "pendant.png"))
     shot.parent.mkdir(parents=True, exist_ok=True)
     page.set_viewport_size({"width": 1280, "height": 1160})  # the report and its bad point in view
     page.evaluate("window.scrollTo(0, 0)")
     page.screenshot(path=str(shot))
+    check_caption_against_the_screen(page)
     page.set_viewport_size(VIEWPORT)
     assert shot.read_bytes()[:8] == b"\x89PNG\r\n\x1a\n"
 
@@ -134,6 +171,13 @@ def test_readme_walk_through(page, site, tmp_path):
     click(page, report, "Save into TOOL 1")
     tool = get(page, site, "/controllers/1/tools/1")
     assert tool["provenance"]["method"] == "tool.xyz_4point"
+    # README step 5: the save is a history entry that can be restored (click the slot's row)
+    page.locator("#tool-table tr[data-number='1']").click()
+    page.locator("#history-view").wait_for(state="visible")
+    idle(page)
+    entry = page.locator("#history-rows tbody tr").first
+    assert "calibration (session 1)" in entry.inner_text() and "tool.xyz_4point · max" in entry.inner_text()
+    assert entry.get_by_role("button", name="Restore").is_visible()
     assert np.linalg.norm([tool["pose"][k] - CELL.T_flange_tool[k_i, 3] for k_i, k in enumerate("xyz")]) < 1.0
 
     # 5. Base > 3-point with tool 1: origin, +X, XY plane; save into BASE 1

@@ -19,6 +19,7 @@
 // ?analysis=ID shows the stored report GET /analysis/ID.
 
 import { request, ApiError } from "/api.js";
+import { el, sig as num } from "/ui.js";
 
 const $ = (sel, root = document) => root.querySelector(sel);
 const SVG = "http://www.w3.org/2000/svg";
@@ -98,16 +99,7 @@ async function waitJob(job, what) {
 
 // ------------------------------------------------------------------------------ formatting
 
-function el(tag, attrs = {}, ...children) {
-  const e = document.createElement(tag);
-  for (const [k, v] of Object.entries(attrs)) {
-    if (k === "class") e.className = v;
-    else if (k === "text") e.textContent = v;
-    else e.setAttribute(k, v);
-  }
-  for (const c of children) e.append(c);
-  return e;
-}
+// el() and num() (4 significant digits: ui.js sig()) come from web/ui.js, shared with the pendant
 
 function svg(tag, attrs = {}, text) {
   const e = document.createElementNS(SVG, tag);
@@ -125,15 +117,6 @@ function isNum(v) { return typeof v === "number" && Number.isFinite(v); }
 function mm(v) {
   if (!isNum(v)) return "–";
   return `${Math.abs(v) < 0.01 && v !== 0 ? v.toFixed(4) : v.toFixed(3)} mm`;
-}
-
-function num(v) {
-  if (!isNum(v)) return v === null || v === undefined ? "–" : String(v);
-  if (Number.isInteger(v)) return String(v);
-  const a = Math.abs(v);
-  if (a !== 0 && (a < 1e-5 || a >= 1e6)) return v.toExponential(2);
-  if (a < 1e-3) return v.toPrecision(3);
-  return String(Number(v.toPrecision(4)));
 }
 
 function unitOf(key) {
@@ -697,12 +680,12 @@ function init() {
     busy(async () => {
       const text = await file.text();
       $("#paste").value = text;
-      setStatus(`Read ${file.name} (${text.length} characters).`);
-      await analyseText(text);
+      // choosing a file only reads it: Analyse (with the folds and seed as set) runs it
+      setStatus(`Read ${file.name} (${text.length} characters): press Analyse.`);
     });
   });
   $("#analyse").addEventListener("click", () => busy(async () => {
-    if (page.report && page.analysed === inputKey()) { // the file choice ran it already
+    if (page.report && page.analysed === inputKey()) { // pressed again on the same input
       setStatus(`Already analysed: analysis ${page.report.id ?? ""}. Change the text, folds, seed or split to run again.`, "ok");
       return;
     }

@@ -22,7 +22,7 @@ export class ApiError extends Error {
 // this page has read (or written) is kept, and a later write to it sends it as If-Match. A
 // write that would overwrite someone else's change then fails with 412 instead of winning
 // silently. Robot motions (jog, approach) are relative commands and go without it.
-const RESOURCE = /^\/controllers\/\d+\/(?:tools|bases|sessions)\/\d+/;
+const RESOURCE = /^\/controllers\/\d+\/(?:tools|bases|sessions|external-kinematics)\/\d+/;
 const etags = new Map();
 
 /** The slot or session `path` acts on (`/controllers/1/sessions/5/save` -> `.../sessions/5`). */

@@ -5,6 +5,7 @@
 // the element whose data-loc (or name) is that field, else in the panel's own error line.
 
 import { request, ApiError } from "/api.js";
+import { axesLabel, describeSession, el, fmt, incrementUnit, num, parseNumbers } from "/ui.js";
 
 const $ = (sel, root = document) => root.querySelector(sel);
 const $$ = (sel, root = document) => [...root.querySelectorAll(sel)];
@@ -39,7 +40,7 @@ const EXT_KINDS = { "ext.root_point": ["turntable", "positioner"], "ext.linear_u
                     "ext.positioner_2axis": ["positioner"] };
 
 // Tests wait for `window.pendant.pending === 0` (no request in flight).
-const pendant = { pending: 0, state };
+const pendant = { pending: 0, state, reloadTables: () => loadTables() };
 window.pendant = pendant;
 
 // ------------------------------------------------------------------------------ requests
@@ -128,6 +129,7 @@ function showErrors(scope, err, fallback = null) {
  * `fallback`, else to the panel's line). */
 async function act(scope, fn, fallback = null) {
   clearErrors(document);
+  $("#saved-note")?.remove();
   try {
     await fn();
   } catch (err) {
@@ -145,32 +147,7 @@ async function loadAimDefault() {
 
 // ------------------------------------------------------------------------------ formatting
 
-/** A pose coordinate: fixed decimals, no "-0.000". */
-function num(v, digits = 3) {
-  if (v === null || v === undefined) return "—";
-  return (Math.abs(v) < 0.5 * 10 ** -digits ? 0 : v).toFixed(digits);
-}
-
-/** A statistic: fixed decimals, or 1.2e-9 when it would read 0.000. */
-function fmt(v, digits = 3) {
-  if (v === null || v === undefined) return "—";
-  if (typeof v !== "number") return String(v);
-  if (v !== 0 && Math.abs(v) < 10 ** -digits) return v.toExponential(1);
-  return v.toFixed(digits);
-}
-
-function el(tag, attrs = {}, ...children) {
-  const e = document.createElement(tag);
-  for (const [k, v] of Object.entries(attrs)) {
-    if (v === null || v === undefined || v === false) continue;
-    if (k === "class") e.className = v;
-    else if (k === "text") e.textContent = v;
-    else if (k.startsWith("on")) e.addEventListener(k.slice(2), v);
-    else e.setAttribute(k, v === true ? "" : v);
-  }
-  for (const c of children) if (c !== null && c !== undefined) e.append(c);
-  return e;
-}
+// num(), fmt(), el(): web/ui.js (shared with the analysis page)
 
 function poseCells(row, pose) {
   row.replaceChildren(...POSE_KEYS.map((k) => el("td", { text: pose ? num(pose[k], 2) : "—", title: pose ? String(pose[k]) : "" })));
@@ -201,19 +178,15 @@ async function loadControllers() {
 async function selectController(id) {
   state.cid = Number(id);
   state.controller = await api("GET", ctl());
-  $("#robot-name").textContent = `${state.controller.robot_name}, ${state.controller.dof} axes`;
   state.session = null;
   state.report = null;
   state.cell = null;
   await Promise.all([loadTables(), loadRobot()]);
+  $("#robot-name").textContent = axesLabel(state.controller.robot_name, state.controller.dof, state.robot.external_axes);
   renderParams();
   for (const a of $$(".exports a")) a.href = ctl(`/export?format=${a.dataset.format}`);
-  // resume the newest unfinished session (a restart of the page loses nothing)
-  const open = (await api("GET", ctl("/sessions"))).filter((s) => s.state === "open" || s.state === "computed");
-  if (open.length) state.session = open[open.length - 1];
-  state.report = state.session ? state.session.report : null;
   state.step = null;
-  renderSession();
+  renderSession(); // with no session: lists the open ones to resume (none is taken over unasked)
   renderJogRows();
 }
 
@@ -246,6 +219,11 @@ function renderRobot() {
   }
 }
 
+/** The cell's linear external axes (the rail, E4: mm); the others turn (deg). */
+function linearAxes() {
+  return Object.keys((state.robot && state.robot.external_axes) || {}).filter((a) => a === "E4");
+}
+
 function jogMode() {
   return $('#jog-panel input[name="mode"]:checked').value;
 }
@@ -254,7 +232,7 @@ function renderJogRows() {
   const mode = jogMode();
   const rows = $("#jog-rows");
   const dof = state.controller ? state.controller.dof : 6;
-  $("#inc-unit").textContent = mode === "joint" ? "deg" : "mm / deg";
+  $("#inc-unit").textContent = incrementUnit(mode, linearAxes());
   const make = (axis, middle, dataLoc) =>
     el("div", { class: "field jog-row", "data-loc": dataLoc },
       el("span", { class: "axis", text: axis }),
@@ -271,7 +249,7 @@ function renderJogRows() {
     }
     const ext = state.robot && state.robot.external_axes;
     for (const axis of Object.keys(ext || {})) { // the cell's external axes: E1..E4
-      const unit = axis === "E4" ? "mm" : "deg";
+      const unit = linearAxes().includes(axis) ? "mm" : "deg";
       list.push(make(axis, el("output", { "data-ext": axis, "aria-label": `${axis} (${unit})` }), `axis.${axis}`));
     }
     $("#move-joints").hidden = false;
@@ -350,7 +328,8 @@ function renderTable(tbody, rows, table) {
       const by = pv.updated_by ? ` by ${pv.updated_by}` : "";
       if (pv.updated_at) prov.push(el("div", { class: "changed", text: `changed${by} at ${pv.updated_at.slice(0, 16).replace("T", " ")}` }));
     }
-    const cols = (keys) => keys.map((k) => num(p[k]).padStart(9)).join("");
+    const width = Math.max(...POSE_KEYS.map((k) => num(p[k]).length)) + 1; // aligned, no wider than needed
+    const cols = (keys) => keys.map((k) => num(p[k]).padStart(width)).join("");
     const frame = used ? [el("div", { text: cols(["x", "y", "z"]) }), el("div", { class: "abc", text: cols(["a", "b", "c"]) })] : [];
     return el("tr", { class: used ? "used" : "unused", "data-number": e.number, "aria-label": `${table} ${e.number}` },
       el("td", { class: "num", text: String(e.number) }),
@@ -439,10 +418,6 @@ async function prefillKnownPoints(m) {
   if (area && !area.value) area.value = lines.join("\n");
 }
 
-function parseNumbers(text) {
-  return text.split(/[\s,;]+/).filter((s) => s !== "").map(Number);
-}
-
 function readParams(m) {
   const params = {};
   for (const name of Object.keys(m.required_params)) {
@@ -509,7 +484,10 @@ function renderSession() {
   $("#open-form").hidden = !!s;
   $("#session").hidden = !s;
   renderReport();
-  if (!s) return;
+  if (!s) {
+    loadOpenSessions().catch((err) => showErrors(wizard, err));
+    return;
+  }
   $("#session-title").textContent = `${s.title} → ${TABLE_LABEL[s.target_table]} ${s.target_no}`;
   $("#session-state").textContent = s.state;
   $("#session-params").replaceChildren(...Object.entries(s.params || {}).map(([k, v]) =>
@@ -548,7 +526,8 @@ function renderSession() {
   } else {
     const taught = s.steps.filter((st) => st.filled).length;
     $("#step-label").textContent = taught > n ? `All ${n} steps taught, ${taught - n} optional` : `All ${n} steps taught`;
-    $("#prompt").textContent = n ? (s.extra_steps_allowed ? `Compute: the report then suggests an orientation for an optional step (${s.extra_steps_allowed} left), or touch up again here.` : "Compute.")
+    const what = s.method.startsWith("ext.") ? "an axis value" : "an orientation"; // ext menus: E1 at -45 deg
+    $("#prompt").textContent = n ? (s.extra_steps_allowed ? `Compute: the report then suggests ${what} for an optional step (${s.extra_steps_allowed} left), or touch up again here.` : "Compute.")
                                  : "No touch-up needed: Compute.";
     $("#touch-up").hidden = !(n && s.extra_steps_allowed);
   }
@@ -686,6 +665,31 @@ async function discard() {
   renderSession();
 }
 
+// ------------------------------------------------------------------------------ open sessions
+
+/** The controller's unfinished sessions (open or computed), listed above Open session with
+ * their menu, slot and points taught; Resume takes the one the person picks. A session
+ * opened elsewhere (a script, another page) is never taken over without being picked. */
+async function loadOpenSessions() {
+  const cid = state.cid;
+  const open = (await api("GET", ctl("/sessions"))).filter((s) => s.state === "open" || s.state === "computed");
+  if (cid !== state.cid || state.session) return; // the person moved on meanwhile
+  const box = $("#open-sessions");
+  box.hidden = !open.length;
+  $("#open-sessions-h").textContent = `Open sessions (${open.length}): resume one, or open a new one below`;
+  $("#open-sessions ul").replaceChildren(...open.slice().reverse().map((s) => el("li", { "data-session": s.id },
+    el("span", { class: "session-text", text: describeSession(s, TABLE_LABEL[s.target_table]) }),
+    el("button", { type: "button", class: "small", "aria-label": `Resume session ${s.id}`, text: "Resume",
+                   onclick: () => act($("#wizard"), () => resumeSession(s.id)) }))));
+}
+
+async function resumeSession(id) {
+  state.session = await api("GET", ctl(`/sessions/${id}`)); // keeps its ETag for the next command
+  state.report = state.session.state === "computed" ? state.session.report : null;
+  state.step = null;
+  renderSession();
+}
+
 // ------------------------------------------------------------------------------ report
 
 function stat(label, value, unit = "") {
@@ -744,7 +748,6 @@ function residualChart(r) {
   if (threshold) {
     const y = top + ph - (threshold / vmax) * ph;
     svg.append(s("line", { x1: left, y1: y, x2: W - right, y2: y, class: "threshold" }));
-    svg.append(s("text", { x: W - right, y: y - 3, "text-anchor": "end", class: "tick-label" }, `allowed off the others ${fmt(threshold)} mm`));
   }
   svg.append(s("text", { x: left + pw / 2, y: H - 2, "text-anchor": "middle", class: "tick-label" }, "touch-up"));
   return svg;
@@ -809,10 +812,16 @@ function renderReport() {
     notes.append(el("li", { class: w.severity === "error" ? "error" : "warning", text: `${w.severity}: ${w.message}` }));
   }
   if (!r.bad_point && !r.warnings.length) notes.append(el("li", { class: "ok", text: "No warnings." }));
-  const offer = suggestedStep() ? ". Or press Move to in Calibration: it goes to that orientation." : "";
+  const next = suggestedStep();
+  const offer = next ? `. Or press Move to in Calibration: it goes to that ${next.external_axes ? "axis value" : "orientation"}.` : "";
   const guidance = r.guidance ? el("p", { class: "guidance" }, el("strong", { text: "Guidance: " }), r.guidance + offer) : null;
   const top = r.extras && r.extras.top_view ? [topView(r)] : [];
-  body.replaceChildren(frameRow, stats, residualChart(r), ...top, notes, ...(guidance ? [guidance] : []));
+  // the threshold's label under the chart, not over the bars (it covered bars 4 and 5)
+  const legend = r.bad_point ? el("p", { class: "chart-legend", id: "chart-legend",
+    text: `Dashed line: allowed off the others ${fmt(r.bad_point.threshold_mm)} mm; dashed outline: touch-up ` +
+          `${r.bad_point.index + 1} off the fit of the others ${fmt(r.bad_point.residual_mm)} mm` }) : null;
+  body.replaceChildren(frameRow, stats, residualChart(r), ...(legend ? [legend] : []), ...top, notes,
+                       ...(guidance ? [guidance] : []));
   if (s) $("#save").textContent = `Save into ${TABLE_LABEL[s.target_table]} ${s.target_no}`;
 }
 
