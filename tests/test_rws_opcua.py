@@ -3,14 +3,13 @@ ReadFrame: the faces share the service's slots, versions and database."""
 
 from __future__ import annotations
 
-import asyncio
-import threading
 from collections.abc import Iterator
 
 import pytest
 
 from api_helpers import make_client, ok
 from browser_helpers import free_port
+from opcua_helpers import start_face
 from server.rws import digest, ops
 from server.rws.app import RwsFace, create_rws_app
 from server.rws.service import serve_asgi
@@ -23,33 +22,25 @@ from test_opcua import pendant as pendant_object  # noqa: E402
 
 
 @pytest.fixture(scope="module")
-def face(fresh_db, tmp_path_factory: pytest.TempPathFactory) -> Iterator[dict]:
-
-    from server.opcua.service import PendantOpcUa
-
-    db_url = fresh_db()
-    loop = asyncio.new_event_loop()
-    thread = threading.Thread(target=loop.run_forever, name="opcua", daemon=True)
-    thread.start()
-    with make_client(db_url) as rest:
+def face(fresh_db, tmp_path_factory: pytest.TempPathFactory) -> Iterator[dict]:  # noqa: ANN001
+    """REST, the OPC UA face (its PKI trusting one client certificate) and the RWS face on
+    one database."""
+    with make_client(fresh_db()) as rest:
         cid = ok(rest.post("/controllers", json={"name": "abb-1", "robot": "abb_irb120"}))["id"]
         ok(rest.post("/users", json={"name": "expert", "role": "Expert"}))
         maker = rest.app.state.sessionmaker
         with maker() as db:
             ops.set_rws_ha1(db, "expert", digest.ha1("expert", "expert-secret"))
             db.commit()
-        server = PendantOpcUa(maker, f"opc.tcp://127.0.0.1:{free_port()}/pendant/", poll_s=0.1,
-                              pki_dir=tmp_path_factory.mktemp("pki"))
-        asyncio.run_coroutine_threadsafe(server.start(), loop).result(timeout=120)
+        opcua = start_face(maker, tmp_path_factory.mktemp("face"))
         port = free_port()
         running = serve_asgi(create_rws_app(RwsFace(maker)), "127.0.0.1", port, "rws-test")
         try:
-            yield {"rest": rest, "server": server, "cid": cid, "url": f"http://127.0.0.1:{port}"}
+            yield {"rest": rest, "server": opcua.server, "cert": opcua.client, "cid": cid,
+                   "url": f"http://127.0.0.1:{port}"}
         finally:
             running.stop()
-            asyncio.run_coroutine_threadsafe(server.stop(), loop).result(timeout=30)
-    loop.call_soon_threadsafe(loop.stop)
-    thread.join(timeout=10)
+            opcua.stop()
 
 
 def test_tooldata_set_through_rws_reads_back_through_opcua(face: dict) -> None:
