@@ -35,6 +35,7 @@ from starlette.concurrency import run_in_threadpool
 from db import crud
 from db.session import write_session
 from server import idempotency
+from server.auth import audit
 
 READ_METHODS = ("GET", "HEAD", "OPTIONS")
 LOCK_ON_BEGIN = "pendant_lock_controller"  # Session.info: the controller to lock at BEGIN
@@ -81,7 +82,12 @@ async def get_session(request: Request) -> AsyncIterator[Session]:
             await run_in_threadpool(_begin_write, db, request)
         yield db
         if db.in_transaction():
-            await run_in_threadpool(db.commit)
+            if writes:
+                route = request.scope.get("route")
+                await run_in_threadpool(_audited_commit, db, getattr(route, "name", "request"),
+                                        request.path_params)
+            else:
+                await run_in_threadpool(db.commit)
     except BaseException:
         if db.in_transaction():
             await run_in_threadpool(db.rollback)
@@ -91,6 +97,16 @@ async def get_session(request: Request) -> AsyncIterator[Session]:
 
 
 SessionDep = Annotated[Session, Depends(get_session, scope="function")]
+AUDIT_KEYS = ("controller_id", "session_id")  # path parameters an operation's record names
+
+
+def _audited_commit(db: Session, operation: str, params: dict[str, Any]) -> None:
+    """Commit, with the operation's audit record when it changed rows no hook recorded
+    (``server.auth.audit.operation``): every write request leaves one."""
+    ids = {k: int(v) for k in AUDIT_KEYS
+           if (v := params.get(k)) is not None and str(v).isdigit()}
+    audit.operation(db, operation, **ids)
+    db.commit()
 
 
 def one_thread(endpoint: Callable[..., Any]) -> Callable[..., Any]:
@@ -106,7 +122,7 @@ def one_thread(endpoint: Callable[..., Any]) -> Callable[..., Any]:
             return endpoint(*args, **kwargs)
         try:
             result = endpoint(*args, **kwargs)
-            db.commit()
+            _audited_commit(db, endpoint.__name__, kwargs)
         except BaseException:
             db.rollback()
             raise

@@ -117,7 +117,8 @@ def test_audit_survives_restore_and_delete(client):
     assert client.delete("/controllers/1").status_code == 204
     assert client.get(C).status_code == 404
 
-    recs = audit(client, controller_id=1)
+    recs = [r for r in audit(client, controller_id=1)  # the frame and controller changes;
+            if not r["action"].startswith("op.")]   # the menu run's steps are op.* records
     actions = [(r["action"], r["user"], r["table"], r["number"]) for r in recs]
     assert actions == [
         ("controller.create", None, None, None),  # the demo controller at first start

@@ -85,6 +85,7 @@ def test_cross_origin_page_changes_nothing(chromium, site, attacker):  # noqa: A
     assert page.locator("#who").inner_text().startswith("admin · Administrator")
     cookies = {c["name"]: c for c in context.cookies()}
     assert cookies["pendant_session"]["httpOnly"] and cookies["pendant_session"]["sameSite"] == "Strict"
+    before = snapshot(api, sid)  # the login itself is audited; nothing after it may be
 
     # ... and opens another origin's page in the same browser
     root, evil = attacker

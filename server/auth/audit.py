@@ -33,6 +33,8 @@ from db.auth_models import ApiToken, AuditRecord, Role, User
 from db.models import CalibSession, Controller, EntryHistory, FrameEntry
 
 PENDING_IDS = "pendant_audit_pending_ids"
+AUDITED = "pendant_audit_recorded"  # Session.info: this transaction has an audit record
+WROTE = "pendant_audit_wrote"  # Session.info: this transaction changed a row
 QUALITY_KEYS = ("rms_error_mm", "max_error_mm", "position_bound95_mm", "angle_bound95_deg")
 
 
@@ -95,7 +97,26 @@ def _record(db: Session, ctx: AuditContext, action: str, **kw: Any) -> AuditReco
     rec = AuditRecord(user_name=ctx.user_name, role=ctx.role, source=ctx.source,
                       request_id=ctx.request_id, client=ctx.client, action=action, **kw)
     db.add(rec)
+    db.info[AUDITED] = True
     return rec
+
+
+def _wrote(db: Session, _ctx: object) -> None:
+    """``after_flush``: note that the transaction changed a row (for :func:`operation`)."""
+    if db.new or db.deleted or any(db.is_modified(o) for o in db.dirty):
+        db.info[WROTE] = True
+
+
+def operation(db: Session, name: str, **kw: Any) -> None:
+    """The audit record of an operation (a request, a face's command) that changed rows the
+    row hooks do not record (a touch-up, a jog, a compute, an opened session...): one record
+    ``op.<name>`` of the current actor, in the operation's own transaction, unless a hook
+    already recorded the change (a frame, a controller, a user...). Called by the request
+    path (``server.deps``) just before the commit, so every write is audited."""
+    db.flush()
+    wrote, audited = db.info.pop(WROTE, False), db.info.pop(AUDITED, False)
+    if wrote and not audited:
+        record(db, f"op.{name}"[:32], **{k: v for k, v in kw.items() if v is not None})
 
 
 def _after_flush(db: Session, _ctx: object) -> None:
@@ -196,6 +217,7 @@ def install() -> None:
     if not event.contains(Session, "before_flush", _before_flush):
         event.listen(Session, "before_flush", _before_flush)
         event.listen(Session, "after_flush_postexec", _after_flush)
+        event.listen(Session, "after_flush", _wrote)
 
 
 # ---------------------------------------------------------------------------------- reads
