@@ -26,6 +26,7 @@ from solvers.validate import FloatArray
 
 
 NOISE_FLOOR_MM = 1e-6
+FOLD_IDENT_TOL = 3e-3   # identify.IDENT_TOL: a fold's training rows must determine a direction
 
 
 def normalise(X: FloatArray) -> FloatArray:
@@ -167,10 +168,16 @@ class CV:
             if p:
                 G = np.eye(p) - Qt.T @ Qt
                 rhs = qty - Qt.T @ yt
-                try:
-                    beta = np.linalg.solve(G, rhs)
-                except np.linalg.LinAlgError:
-                    beta = np.linalg.lstsq(G, rhs, rcond=1e-12)[0]
+                # w: each direction's share of its energy on the training rows; a direction
+                # (almost) only on the left-out rows is not determined by the training fold
+                # (identify.py's rule: relative singular value below IDENT_TOL) and is held
+                # at the expansion point (the fit on all samples), as the nonlinear refit
+                # holds what its training poses do not determine; solving for it blew the
+                # held-out error up by orders of magnitude (a blocked fold of a path with a
+                # constant tool orientation: the TCP)
+                w, V = np.linalg.eigh(G)
+                keep = w >= FOLD_IDENT_TOL ** 2
+                beta = V[:, keep] @ ((V[:, keep].T @ rhs) / w[keep])
                 e = yt - Qt @ beta
             else:
                 e = yt
