@@ -192,7 +192,6 @@ def _analyze(rec, *, folds: int = 5, seed: int = 0, alpha: float = ALPHA,
         sel.chosen = _at_base(sel.chosen, prep, base)
     y = -base.g + (prep.columns(base) @ final_fit.beta if sel.chosen else 0.0)
     groups = structure_groups(rec, base)
-    feats = features(rec, base, lib.torques_nm, lib.signs)
     standing = {s.key: s for s in stand_ins(y, base, sel.chosen, groups, n_rows, alpha)}
     findings, M, rank = _findings(rec, base, y, sel, figures, standing, profiles,
                                   final_fit.beta, lib)
@@ -205,6 +204,7 @@ def _analyze(rec, *, folds: int = 5, seed: int = 0, alpha: float = ALPHA,
     final_residuals = per_sample_rms(base.g_mm, m)
     sig = structure_test(resid, Q, groups, n_rows)
     if sig:
+        feats = features(rec, base, lib.torques_nm, lib.signs)   # at the final fit
         corr = correlations(project_out(Q, resid), Q, base, feats)
         what = ", ".join(n for n, _, _ in sig[:3])
         strong = ", ".join(f"{n} (r = {r:.2f})" for n, r in corr[:3])
