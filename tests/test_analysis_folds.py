@@ -39,6 +39,8 @@ def converged_heldout(prep, cv, full) -> float:
 def recordings():
     yield "simulated", parse_recording(simulate_recording(
         "tracker", "ur10", SIM, 150, seed=3, payload=(5.0, [0, 0, 80])))
+    yield "touch", parse_recording(simulate_recording(
+        "touch", "tm5_900", SIM, 40, seed=3, payload=(5.0, [0, 0, 80])))
     if DATA.exists():     # the tool point's axis is not determined here (identify.py)
         doc = json.loads(DATA.read_text(encoding="utf-8"))
         yield "series D", parse_recording({**doc, "samples": doc["samples"][:200]})
@@ -50,7 +52,7 @@ def test_one_step_fold_refit_is_the_converged_refit(split) -> None:
         for k in (0, 2, len(EFFECTS)):
             prep = mdl.Prepared.make(rec, EFFECTS[:k])
             full = mdl.fit(prep)
-            cv = CV.make(rec.n_samples, 3, 5, 0, split)
+            cv = CV.make(rec.n_samples, full.base.m, 5, 0, split)
             steps = mdl._FoldSteps.make(prep, cv, full)
             assert steps is not None, name
             fast = [steps.test_residual(te, tr) for te, tr in zip(cv.test_rows, cv.train_rows)]
