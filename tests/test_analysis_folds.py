@@ -95,3 +95,27 @@ def test_linear_heldout_holds_what_a_blocked_fold_does_not_determine() -> None:
     linear = cv.heldout_rms(-base.g, np.hstack([base.B, a2.columns(base)]))
     model_itself = mdl.heldout(a2, cv, mdl.fit(a2))
     assert 0.5 * model_itself < linear < 1.5 * model_itself, (linear, model_itself)
+
+
+def test_frames_compose_the_dh_link_matrices() -> None:
+    """``kinematics.frames_of`` composes the chain from elementary motions (speed): the same
+    frames as the product of ``solvers.dh.link_matrices``, both conventions, with per-sample
+    joint changes and DH row changes."""
+    from solvers.analysis.kinematics import frames_of, pose_matrix
+    from solvers.dh import dh_angles_rad, link_matrices
+    from solvers.robots import ROBOTS
+
+    rng = np.random.default_rng(1)
+    for robot in ROBOTS.values():
+        q = rng.uniform(-170, 170, (40, robot.dof))
+        dth = rng.normal(size=q.shape) * 1e-2
+        ddh = {k: rng.normal(size=robot.dof) for k in ("a", "d", "alpha")}
+        p = robot.params()
+        links = link_matrices(robot.dh_convention, dh_angles_rad(robot, q) + dth,
+                              p["d_mm"] + ddh["d"], p["a_mm"] + ddh["a"],
+                              np.radians(p["alpha_deg"]) + ddh["alpha"])
+        ref = np.empty((len(q), robot.dof + 1, 4, 4))
+        ref[:, 0] = pose_matrix(robot.base_pose)
+        for i in range(robot.dof):
+            ref[:, i + 1] = ref[:, i] @ links[:, i]
+        np.testing.assert_allclose(frames_of(robot, q, dth, ddh), ref, atol=1e-9)

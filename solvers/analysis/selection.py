@@ -253,11 +253,16 @@ def batch_f_tests(Q: FloatArray, X_all: FloatArray, blocks: list[slice], y_perp:
         # the groups' small Gram matrices, one (rows, b) product per entry (faster than an
         # einsum over a (rows, b, w) copy)
         G = np.empty((len(which), wdt, wdt))
-        cols = [P[:, idx[:, i]] for i in range(wdt)] if wdt > 1 else []
-        for i in range(wdt):
-            G[:, i, i] = sq[idx[:, i]]
-            for j in range(i + 1, wdt):
-                G[:, i, j] = G[:, j, i] = np.einsum("rb,rb->b", cols[i], cols[j])
+        if wdt > 3:       # wide groups (the structure test's): one matrix product each
+            for b, ix in enumerate(idx):
+                Pb = P[:, ix]
+                G[b] = Pb.T @ Pb
+        else:
+            cols = [P[:, idx[:, i]] for i in range(wdt)] if wdt > 1 else []
+            for i in range(wdt):
+                G[:, i, i] = sq[idx[:, i]]
+                for j in range(i + 1, wdt):
+                    G[:, i, j] = G[:, j, i] = np.einsum("rb,rb->b", cols[i], cols[j])
         c = c_all[idx]                                          # (b, w)
         d = np.einsum("bii->bi", G)
         if ident_tol is not None:
