@@ -108,12 +108,20 @@ def _kabsch(A: FloatArray, B: FloatArray) -> tuple[FloatArray, FloatArray]:
     return R, b0 - R @ a0
 
 
-def fit_tracker(rec, state: State | None = None, ident: Identifiability | None = None) -> Baseline:
+def fit_tracker(rec, state: State | None = None, ident: Identifiability | None = None,
+                start: dict | None = None) -> Baseline:
     robot, q, meas = rec.robot, rec.joints_deg, np.asarray(rec.measured_mm, float)
     tool0 = np.asarray(rec.tool, float)
     F = state_frames(robot, q, state)
     Rf, pf = flange_of(robot, F, state)                # flange pose in base
-    R0, t0 = _kabsch(pf + Rf @ tool0[:3, 3], meas)
+    if start is not None and ident is not None:
+        # warm start at a fitted setup (found along the same determined directions)
+        R0, t0 = np.asarray(start["R_instrument_base"], float), \
+            np.asarray(start["t_instrument_base"], float)
+        tcp0 = np.asarray(start["tcp_mm"], float)
+    else:
+        R0, t0 = _kabsch(pf + Rf @ tool0[:3, 3], meas)
+        tcp0 = tool0[:3, 3]
 
     def model(x):
         R = Rotation.from_rotvec(x[:3]).as_matrix() @ R0
@@ -132,7 +140,7 @@ def fit_tracker(rec, state: State | None = None, ident: Identifiability | None =
         J[:, :, 6:9] = R @ Rf
         return J.reshape(3 * N, 9)
 
-    x0 = np.concatenate([np.zeros(3), t0, tool0[:3, 3]])
+    x0 = np.concatenate([np.zeros(3), t0, tcp0])
     names = ["instrument_rx", "instrument_ry", "instrument_rz", "instrument_x_mm",
              "instrument_y_mm", "instrument_z_mm", "tcp_x_mm", "tcp_y_mm", "tcp_z_mm"]
     if ident is None:
@@ -181,7 +189,8 @@ def fit_tracker(rec, state: State | None = None, ident: Identifiability | None =
                                         "tcp_mm": x[6:9].copy()}, B_full=Jx)
 
 
-def fit_touch(rec, state: State | None = None, ident: Identifiability | None = None) -> Baseline:
+def fit_touch(rec, state: State | None = None, ident: Identifiability | None = None,
+              start: dict | None = None) -> Baseline:
     robot, q = rec.robot, rec.joints_deg
     tool0 = np.asarray(rec.tool, float)
     F = state_frames(robot, q, state)
@@ -263,7 +272,8 @@ def beam_sensitivity(c, u, b, v, w, edge, radius) -> FloatArray:
     return S
 
 
-def fit_beam(rec, state: State | None = None, ident: Identifiability | None = None) -> Baseline:
+def fit_beam(rec, state: State | None = None, ident: Identifiability | None = None,
+             start: dict | None = None) -> Baseline:
     robot, q = rec.robot, rec.joints_deg
     tool0 = np.asarray(rec.tool, float)
     b, v, w, edge, radius = _beam_inputs(rec)
@@ -328,11 +338,12 @@ def fit_beam(rec, state: State | None = None, ident: Identifiability | None = No
                     setup={"tool": tool.copy()})
 
 
-def fit_baseline(rec, state: State | None = None, ident: Identifiability | None = None
-                 ) -> Baseline:
+def fit_baseline(rec, state: State | None = None, ident: Identifiability | None = None,
+                 start: dict | None = None) -> Baseline:
     """The kind's rigid fit (dispatch on ``rec.kind``), optionally with effects applied;
-    ``ident``: the determined directions to fit along (default: found on this recording)."""
+    ``ident``: the determined directions to fit along (default: found on this recording);
+    ``start``: a fitted ``setup`` to start the iteration at (tracker; with ``ident``)."""
     fits = {"tracker": fit_tracker, "touch": fit_touch, "beam": fit_beam}
     if rec.kind not in fits:
         raise CalibrationError(("kind",), f"must be touch, tracker or beam, got {rec.kind!r}")
-    return fits[rec.kind](rec, state, ident)
+    return fits[rec.kind](rec, state, ident, start)

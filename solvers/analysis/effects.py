@@ -193,12 +193,10 @@ def build_library(rec, base: Baseline, torques_nm: FloatArray | None = None,
         travel = float(np.ptp(theta_deg[:, j]))
         if travel < 1e-6:
             continue
-        short = []
-        for k in range(1, GEAR_HARMONICS + 1):
-            if travel * k / 360.0 >= GEAR_MIN_PERIODS:
-                cands.append(gear_candidate(base, theta_deg[:, j], j, k))
-            else:
-                short.append(k)
+        short = [k for k in range(1, GEAR_HARMONICS + 1)
+                 if travel * k / 360.0 < GEAR_MIN_PERIODS]
+        cands += gear_candidates(base, theta_deg[:, j], j,
+                                 [k for k in range(1, GEAR_HARMONICS + 1) if k not in short])
         if short:
             skipped.append({"effect": "gear_transmission_error", "joint": j + 1,
                             "periods_per_turn": short,
@@ -230,6 +228,27 @@ def build_library(rec, base: Baseline, torques_nm: FloatArray | None = None,
                                regressor="the payload weight across the tool axis",
                                feature=np.linalg.norm(fperp, axis=1), shift_per_unit=tw[:, :3, None]))
     return Library(cands, tau, sg, skipped)
+
+
+def gear_candidates(base: Baseline, theta_deg: FloatArray, j: int, ks: list[int]
+                    ) -> list[Candidate]:
+    """:func:`gear_candidate` of every harmonic in ``ks`` (one residual product for all)."""
+    if not ks:
+        return []
+    N = len(theta_deg)
+    n = base.sens.theta.shape[2]
+    arg = np.radians(np.outer(theta_deg, ks))                       # (N, K)
+    waves = np.stack([np.sin(arg), np.cos(arg)], axis=2).reshape(N, -1)   # (N, 2K)
+    th = base.sens.theta[:, :, j] * DEG
+    X = _apply(base, th[:, :, None] * waves[:, None, :])
+    out = []
+    for i, k in enumerate(ks):
+        unit = np.zeros((N, n, 2))
+        unit[:, j, :] = waves[:, 2 * i:2 * i + 2] * DEG
+        out.append(Candidate("gear_transmission_error", j + 1, X[:, 2 * i:2 * i + 2],
+                             "amplitude_deg", regressor=f"sin/cos({k} q{j + 1})",
+                             feature=waves[:, 2 * i], theta_per_unit=unit, periods=k))
+    return out
 
 
 def gear_candidate(base: Baseline, theta_deg: FloatArray, j: int, k: int) -> Candidate:

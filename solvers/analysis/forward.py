@@ -73,11 +73,19 @@ def model(base: Baseline, chosen: list[Candidate], extra: list | None = None) ->
     return np.hstack([base.B] + [c.columns for c in chosen] + (extra or []))
 
 
+_GROUP_X: dict = {}   # the stacked, normalised columns of the last groups seen (and the
+                      # groups themselves, so their ids stay valid while cached)
+
+
 def group_gains(y_perp, Q, groups, n_rows):
     """(name, gain, p, k) of each structure group; only its identifiable directions count."""
     if not groups:
         return []
-    X = np.hstack([normalise(cols) for _, cols in groups])
+    key = tuple(id(cols) for _, cols in groups)
+    if _GROUP_X.get("key") != key:        # the same groups at every step of a selection
+        _GROUP_X.update(key=key, X=np.hstack([normalise(cols) for _, cols in groups]),
+                        groups=groups)
+    X = _GROUP_X["X"]
     ends = np.cumsum([cols.shape[1] for _, cols in groups])
     blocks = [slice(int(e - cols.shape[1]), int(e)) for (_, cols), e in zip(groups, ends)]
     _, gain, p, k = batch_f_tests(Q, X, blocks, y_perp, n_rows, IDENT_TOL)

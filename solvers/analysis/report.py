@@ -24,6 +24,8 @@ with its own reference:
 
 from __future__ import annotations
 
+from dataclasses import replace as dc_replace
+
 import numpy as np
 
 from solvers.analysis.baseline import Baseline, fit_baseline, per_sample_rms
@@ -121,7 +123,7 @@ def _analyze(rec, *, folds: int = 5, seed: int = 0, alpha: float = ALPHA,
         hidden |= {"instrument_a_deg", "instrument_b_deg", "instrument_c_deg"}
     rigid_parameters = {k: v for k, v in base.parameters.items() if k not in hidden}
     # the rigid model's own figures: refitted on each fold
-    rigid_prep = Prepared.make(rec, [], torques=lib.torques_nm)
+    rigid_prep = Prepared.make(rec, [], torques=lib.torques_nm, signs=lib.signs)
     rigid_fit = Fit(np.zeros(0), base, float(np.sum(base.g_mm ** 2)), N, 0)
     base_rms = rigid_fit.rms_mm
     base_cv = model_heldout(rigid_prep, cv, rigid_fit)
@@ -133,21 +135,28 @@ def _analyze(rec, *, folds: int = 5, seed: int = 0, alpha: float = ALPHA,
     sel = backward(y, base, forward(y, base, screened.candidates, cv, groups, alpha,
                                     max_findings), alpha)
     if sel.chosen:
-        prep = Prepared.make(rec, [Effect.of(c) for c in sel.chosen], torques=lib.torques_nm)
+        prep = Prepared.make(rec, [Effect.of(c) for c in sel.chosen], torques=lib.torques_nm, signs=lib.signs)
         f = fit(prep)
         rss_lin = float(np.sum((project_out(orth(model(base, sel.chosen)), y)
                                 * base.row_scale) ** 2))
         linear = abs(f.rss_mm2 - rss_lin) <= RELIN_TOL * rss_lin
         base = f.base
-        lib = build_library(rec, base, torques_nm=lib.torques_nm, include_twist=include_twist)
-        by_key = {c.key: c for c in lib.candidates}
-        cands = [by_key[c.key] for c in screened.candidates if c.key in by_key]
         y = -base.g + prep.columns(base) @ f.beta
-        groups = structure_groups(rec, base)
-        sel2 = None if linear else backward(
-            y, base, forward(y, base, cands, cv, groups, alpha, max_findings), alpha)
-        sel = sel2 if sel2 is not None and sel2.chosen else Selection(
-            [by_key[c.key] for c in sel.chosen if c.key in by_key], sel.steps)
+        sel2 = None
+        if not linear:
+            lib = build_library(rec, base, torques_nm=lib.torques_nm,
+                                include_twist=include_twist)
+            by_key = {c.key: c for c in lib.candidates}
+            cands = [by_key[c.key] for c in screened.candidates if c.key in by_key]
+            groups = structure_groups(rec, base)
+            sel2 = backward(y, base, forward(y, base, cands, cv, groups, alpha, max_findings),
+                            alpha)
+        if sel2 is None or not sel2.chosen:
+            # the chosen effects' columns at the nonlinear fit (the model's own Jacobian;
+            # all that is used of them from here on)
+            sel = Selection(_at_base(sel.chosen, prep, base), sel.steps)
+        else:
+            sel = sel2
     profiles: dict[str, TauProfile] = {}
     for i, c in enumerate(sel.chosen):
         if c.effect == "thermal_drift":
@@ -160,8 +169,9 @@ def _analyze(rec, *, folds: int = 5, seed: int = 0, alpha: float = ALPHA,
     for i, c in enumerate(sel.chosen):
         trial = kept + [i]
         prep = Prepared.make(rec, [Effect.of(sel.chosen[j]) for j in trial],
-                             torques=lib.torques_nm)
-        f = fit(prep, beta0=np.concatenate([prev_beta, np.zeros(prep.effects[-1].size)]))
+                             torques=lib.torques_nm, signs=lib.signs)
+        f = fit(prep, beta0=np.concatenate([prev_beta, np.zeros(prep.effects[-1].size)]),
+                ident=cur.base.ident, base0=cur.base)
         h = model_heldout(prep, cv, f)
         if h < prev_cv * (1.0 - MIN_CV_GAIN):
             kept.append(i)
@@ -173,19 +183,15 @@ def _analyze(rec, *, folds: int = 5, seed: int = 0, alpha: float = ALPHA,
                             "reason": "lowered the linearised residual but not the held-out "
                                       "error of the model itself (refitted on each fold)"})
     sel = Selection([sel.chosen[i] for i in kept], [sel.steps[i] for i in kept])
-    prep = Prepared.make(rec, [Effect.of(c) for c in sel.chosen], torques=lib.torques_nm)
+    prep = Prepared.make(rec, [Effect.of(c) for c in sel.chosen], torques=lib.torques_nm, signs=lib.signs)
     final_fit = cur
     base = final_fit.base
     # regressors at the final fit (parameter uncertainties, stand-ins, the structure test)
     if sel.chosen:
-        lib = build_library(rec, base, torques_nm=lib.torques_nm, include_twist=include_twist)
-        by_key = {c.key: c for c in lib.candidates}
-        sel.chosen = [by_key.get(c.key, c) for c in sel.chosen]
-        for c, col in zip(sel.chosen, _split_columns(prep, base)):
-            c.columns = col
+        # only the chosen effects' columns are needed there (the model's own Jacobian)
+        sel.chosen = _at_base(sel.chosen, prep, base)
     y = -base.g + (prep.columns(base) @ final_fit.beta if sel.chosen else 0.0)
     groups = structure_groups(rec, base)
-    feats = features(rec, base, lib.torques_nm, lib.signs)
     standing = {s.key: s for s in stand_ins(y, base, sel.chosen, groups, n_rows, alpha)}
     findings, M, rank = _findings(rec, base, y, sel, figures, standing, profiles,
                                   final_fit.beta, lib)
@@ -198,6 +204,7 @@ def _analyze(rec, *, folds: int = 5, seed: int = 0, alpha: float = ALPHA,
     final_residuals = per_sample_rms(base.g_mm, m)
     sig = structure_test(resid, Q, groups, n_rows)
     if sig:
+        feats = features(rec, base, lib.torques_nm, lib.signs)   # at the final fit
         corr = correlations(project_out(Q, resid), Q, base, feats)
         what = ", ".join(n for n, _, _ in sig[:3])
         strong = ", ".join(f"{n} (r = {r:.2f})" for n, r in corr[:3])
@@ -270,6 +277,13 @@ def lib_masses(rec) -> str:
     from solvers.gravity import link_masses
     lm = getattr(rec, "link_masses", None)
     return (lm or link_masses(rec.robot)).source
+
+
+def _at_base(chosen: list[Candidate], prep: Prepared, base: Baseline) -> list[Candidate]:
+    """The chosen candidates with their columns at ``base`` (``prep``'s effects, in order)."""
+    return [dc_replace(c, columns=col, frame=None if c.frame is None
+                       else base.R_instrument_base)
+            for c, col in zip(chosen, _split_columns(prep, base))]
 
 
 def _split_columns(prep: Prepared, base: Baseline) -> list:

@@ -26,6 +26,7 @@ from solvers.validate import FloatArray
 
 
 NOISE_FLOOR_MM = 1e-6
+FOLD_IDENT_TOL = 3e-3   # identify.IDENT_TOL: a fold's training rows must determine a direction
 
 
 def normalise(X: FloatArray) -> FloatArray:
@@ -167,10 +168,16 @@ class CV:
             if p:
                 G = np.eye(p) - Qt.T @ Qt
                 rhs = qty - Qt.T @ yt
-                try:
-                    beta = np.linalg.solve(G, rhs)
-                except np.linalg.LinAlgError:
-                    beta = np.linalg.lstsq(G, rhs, rcond=1e-12)[0]
+                # w: each direction's share of its energy on the training rows; a direction
+                # (almost) only on the left-out rows is not determined by the training fold
+                # (identify.py's rule: relative singular value below IDENT_TOL) and is held
+                # at the expansion point (the fit on all samples), as the nonlinear refit
+                # holds what its training poses do not determine; solving for it blew the
+                # held-out error up by orders of magnitude (a blocked fold of a path with a
+                # constant tool orientation: the TCP)
+                w, V = np.linalg.eigh(G)
+                keep = w >= FOLD_IDENT_TOL ** 2
+                beta = V[:, keep] @ ((V[:, keep].T @ rhs) / w[keep])
                 e = yt - Qt @ beta
             else:
                 e = yt
@@ -235,6 +242,7 @@ def batch_f_tests(Q: FloatArray, X_all: FloatArray, blocks: list[slice], y_perp:
     """
     P = X_all if projected or not Q.shape[1] else X_all - Q @ (Q.T @ X_all)
     c_all = P.T @ y_perp
+    sq = np.einsum("rc,rc->c", P, P)                        # every column's squared norm
     rss0 = float(y_perp @ y_perp)
     nb = len(blocks)
     ratio, gain, kk = np.zeros(nb), np.zeros(nb), np.zeros(nb, dtype=int)
@@ -242,8 +250,19 @@ def batch_f_tests(Q: FloatArray, X_all: FloatArray, blocks: list[slice], y_perp:
     for wdt in np.unique(widths):
         which = np.flatnonzero(widths == wdt)
         idx = np.array([np.arange(blocks[i].start, blocks[i].stop) for i in which])  # (b, w)
-        Pw = P[:, idx]                                          # (rows, b, w)
-        G = np.einsum("rbi,rbj->bij", Pw, Pw)
+        # the groups' small Gram matrices, one (rows, b) product per entry (faster than an
+        # einsum over a (rows, b, w) copy)
+        G = np.empty((len(which), wdt, wdt))
+        if wdt > 3:       # wide groups (the structure test's): one matrix product each
+            for b, ix in enumerate(idx):
+                Pb = P[:, ix]
+                G[b] = Pb.T @ Pb
+        else:
+            cols = [P[:, idx[:, i]] for i in range(wdt)] if wdt > 1 else []
+            for i in range(wdt):
+                G[:, i, i] = sq[idx[:, i]]
+                for j in range(i + 1, wdt):
+                    G[:, i, j] = G[:, j, i] = np.einsum("rb,rb->b", cols[i], cols[j])
         c = c_all[idx]                                          # (b, w)
         d = np.einsum("bii->bi", G)
         if ident_tol is not None:
