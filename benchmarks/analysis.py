@@ -38,7 +38,7 @@ from pathlib import Path
 ROOT = Path(__file__).resolve().parents[1]
 sys.path.insert(0, str(ROOT))
 
-from server.recording import parse_recording  # noqa: E402
+from server.formats.recording import parse_recording  # noqa: E402
 from solvers.analysis import analyze  # noqa: E402
 from solvers.analysis.blind import blind_dh  # noqa: E402
 from solvers.analysis.model import model_document, predict  # noqa: E402

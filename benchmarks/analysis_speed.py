@@ -23,7 +23,7 @@ ROOT = Path(__file__).resolve().parents[1]
 sys.path.insert(0, str(ROOT))
 
 from benchmarks.analysis import SIM_EFFECTS  # noqa: E402
-from server.recording import parse_recording  # noqa: E402
+from server.formats.recording import parse_recording  # noqa: E402
 from solvers.analysis import analyze  # noqa: E402
 from solvers.simulate import simulate_recording  # noqa: E402
 

@@ -1,7 +1,7 @@
 """Benchmark of the pendant service as a user meets it: Debian's ``wrk`` against uvicorn.
 
 For each uvicorn worker count (``--workers 1,2``) the script migrates a fresh SQLite file,
-starts ``uvicorn server.app:app --workers N`` on loopback (no job workers: nothing else takes
+starts ``uvicorn server.api.app:app --workers N`` on loopback (no job workers: nothing else takes
 CPU), opens one XYZ 4-point session per connection with four touch-ups, and drives three
 phases with ``wrk`` (C, two threads, ``--connections`` 20):
 
@@ -103,7 +103,7 @@ def wait_ready(base: str, proc: subprocess.Popen, timeout_s: float = 90.0) -> No
 
 def prepare(db_url: str) -> None:
     """Migrate ``db_url`` and make the demo controller once, before N workers share it."""
-    from server.app import create_app
+    from server.api.app import create_app
     from server.settings import Settings
 
     create_app(Settings(db_url=db_url, bootstrap_token=TOKEN)).state.engine.dispose()
@@ -112,7 +112,7 @@ def prepare(db_url: str) -> None:
 def start(db_url: str, port: int, workers: int) -> subprocess.Popen:
     env = {**os.environ, "PENDANT_DB_URL": db_url, "PENDANT_ADMIN_TOKEN": TOKEN,
            "PYTHONPATH": f"{ROOT}{os.pathsep}{os.environ.get('PYTHONPATH', '')}"}
-    cmd = [sys.executable, "-m", "uvicorn", "server.app:app", "--port", str(port),
+    cmd = [sys.executable, "-m", "uvicorn", "server.api.app:app", "--port", str(port),
            "--workers", str(workers), "--log-level", "warning", "--no-access-log"]
     return subprocess.Popen(cmd, cwd=ROOT, env=env, stdout=subprocess.DEVNULL)
 

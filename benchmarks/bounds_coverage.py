@@ -258,12 +258,12 @@ def scene_light_barrier(rng: np.random.Generator, noise_draws: int = 1) -> list[
 
 #: (row name, scene) of the coverage table; every scene returns one Trial.
 # ------------------------------------------------------------------ chained scenes
-# What the server does (server.external.solve_in_chain) with the same solvers.external.chain
+# What the server does (server.service.external.solve_in_chain) with the same solvers.external.chain
 # functions: the touching tool is itself calibrated (XYZ 4-point, its covariance stored), the
 # rail too (Linear unit); both are carried into the result's bound. Touch noise: the cell's
 # aim AIM_SIGMA_MM, which the menus without redundancy assume.
 
-AIM_SIGMA_MM = 0.1  # server.schemas.AIM_NOISE_MM: the pendant's aim, the assumed sigma
+AIM_SIGMA_MM = 0.1  # server.api.schemas.AIM_NOISE_MM: the pendant's aim, the assumed sigma
 
 
 def _calibrated_tool(rng: np.random.Generator) -> tuple[np.ndarray, np.ndarray, np.ndarray, int | None]:

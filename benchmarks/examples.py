@@ -16,7 +16,7 @@ import numpy as np
 
 from emulator import approach, cell_for, home_joints
 from emulator import external as ext_emu
-from server.methods import METHODS
+from server.menus import METHODS
 from solvers.dh import forward_kinematics
 from solvers.frames import Pose
 from solvers.robots import ROBOTS

@@ -33,7 +33,7 @@ from scipy.spatial.transform import Rotation
 ROOT = Path(__file__).resolve().parents[1]
 sys.path.insert(0, str(ROOT))
 
-from server.recording import parse_recording  # noqa: E402
+from server.formats.recording import parse_recording  # noqa: E402
 from solvers.analysis.baseline import fit_baseline  # noqa: E402
 from solvers.analysis.effects import build_library  # noqa: E402
 from solvers.analysis.plan import (Workspace, parse_effects, plan_poses, reached,  # noqa: E402

@@ -324,7 +324,7 @@ class IdempotencyKey(Base):
 
     The row is inserted in the request's own transaction (so it exists only if the command's
     changes were committed) and the response is stored right after it is sent; see
-    :mod:`server.idempotency`.
+    :mod:`server.api.idempotency`.
     """
 
     __tablename__ = "idempotency_key"

@@ -1,7 +1,7 @@
 """The emulated controller's state, typed: what it remembers between two requests.
 
 A :class:`ControllerState` is loaded from the controller's row and saved back in one
-request, while that request holds the row lock (``server.deps``), so two processes never
+request, while that request holds the row lock (``server.api.deps``), so two processes never
 move the robot from the same stale joints. Its transitions are pure functions: a motion
 (:func:`moved`), a touch-up (:func:`touched_up`) and the light-barrier cycle
 (:func:`after_cycle`). The database and the web stay outside this package.

@@ -8,7 +8,7 @@ class CalibrationError(ValueError):
 
     ``loc`` is the path of the offending field, named like the API fields
     (``("flange_poses", 3)``); ``reason`` says what is wrong in plain words.
-    ``server/errors.py`` turns it into a 422 ``{"detail": [{"loc": [...], "msg": reason}]}``.
+    ``server/api/errors.py`` turns it into a 422 ``{"detail": [{"loc": [...], "msg": reason}]}``.
 
     Examples
     --------

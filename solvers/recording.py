@@ -1,6 +1,6 @@
 """A robot recording (``robot-recording/1``) as the solvers see it: arrays, not JSON.
 
-``server/recording.py`` parses and validates the JSON document and builds a
+``server/formats/recording.py`` parses and validates the JSON document and builds a
 :class:`RecordingData`; the analysis and the simulator work on this dataclass only.
 The format itself is described in ``docs/recording-format.md``.
 
@@ -142,7 +142,7 @@ def _floats(a: object) -> list:
 def recording_document(rec: RecordingData) -> dict[str, Any]:
     """The ``robot-recording/1`` document (JSON-ready dict) of a recording, not validated.
 
-    ``server.recording.to_document`` adds the validation; ``parse_recording`` reads it back.
+    ``server.formats.recording.to_document`` adds the validation; ``parse_recording`` reads it back.
     ``direction`` is written only where it is -1; ``base_pose`` / ``flange_pose`` only when
     not the identity; ``payload`` only with a mass.
 

@@ -557,7 +557,7 @@ def simulate_recording(kind: str, robot: RobotModel | str,
     Returns
     -------
     dict
-        The document; ``server.recording.parse_recording`` accepts it.
+        The document; ``server.formats.recording.parse_recording`` accepts it.
 
     Raises
     ------

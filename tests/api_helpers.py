@@ -8,7 +8,7 @@ from __future__ import annotations
 import numpy as np
 from fastapi.testclient import TestClient
 
-from server.app import create_app
+from server.api.app import create_app
 from emulator import Cell, cell_for
 from server.settings import Settings
 from solvers.frames import Pose
@@ -58,7 +58,7 @@ def restore_slot(client: TestClient, path: str, history_id: int):  # noqa: ANN20
 def finish_job(client: TestClient, r) -> dict:  # noqa: ANN001
     """The 202 answer ``r`` of a route that queued a job: run the queue here (what a
     ``pendant worker`` does, in this process) and return the finished job."""
-    from server.worker import drain
+    from server.jobs.worker import drain
 
     assert r.status_code == 202, f"{r.request.method} {r.request.url.path} -> {r.status_code}: {r.text}"
     job = r.json()

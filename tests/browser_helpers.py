@@ -72,7 +72,7 @@ def serve(db_url: str | None = None, app: object | None = None) -> Iterator[str]
     import uvicorn
     from api_helpers import app_settings
 
-    from server.app import create_app
+    from server.api.app import create_app
 
     port = free_port()
     app = app if app is not None else create_app(app_settings(db_url))

@@ -8,8 +8,8 @@ import json
 import pytest
 from api_helpers import analyze, make_client, ok
 
-from server.analysis_cli import parse_effects
-from server.cli import main
+from server.cli.analysis import parse_effects
+from server.cli.main import main
 from solvers.errors import CalibrationError
 from solvers.physics import Imperfections
 from solvers.simulate import simulate_recording

@@ -7,7 +7,7 @@ import numpy as np
 import pytest
 from scipy.spatial.transform import Rotation
 
-from server.recording import parse_recording
+from server.formats.recording import parse_recording
 from solvers.analysis import analyze, render_text
 from solvers.analysis.baseline import fit_baseline, rms_mm
 from solvers.analysis.kinematics import sensitivities

@@ -8,7 +8,7 @@ import json
 import pytest
 from browser_helpers import free_port, serve
 
-from server.cli import main
+from server.cli.main import main
 from solvers.physics import Imperfections
 from solvers.simulate import simulate_recording
 

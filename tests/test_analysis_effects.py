@@ -21,7 +21,7 @@ from functools import lru_cache
 import numpy as np
 import pytest
 
-from server.recording import parse_recording
+from server.formats.recording import parse_recording
 from solvers.analysis import analyze
 from solvers.analysis.baseline import _beam_constraint, _beam_inputs, fit_baseline, rms_mm
 from solvers.analysis.selection import orth, project_out

@@ -10,7 +10,7 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from server.recording import parse_recording
+from server.formats.recording import parse_recording
 from solvers.analysis import model as mdl
 from solvers.analysis.selection import CV
 from solvers.physics import Imperfections

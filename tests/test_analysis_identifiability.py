@@ -13,7 +13,7 @@ import pytest
 from scipy.optimize import least_squares
 from scipy.spatial.transform import Rotation
 
-from server.recording import parse_recording
+from server.formats.recording import parse_recording
 from solvers.analysis import analyze, render_text
 from solvers.analysis.plan import record_plan
 from solvers.analysis.selection import folds_of
@@ -277,7 +277,7 @@ def test_link_masses_in_the_recording_set_the_compliance_scale() -> None:
 
 
 def test_link_masses_must_match_the_joints() -> None:
-    from server.recording import RecordingError
+    from server.formats.recording import RecordingError
     from solvers.simulate import simulate_recording
     doc = simulate_recording("tracker", "ur10", Imperfections(noise_mm=0.01), 10, seed=3)
     doc["robot"]["link_masses"] = {"mass_kg": [1.0, 2.0]}

@@ -6,7 +6,7 @@ from __future__ import annotations
 
 import pytest
 
-from server.recording import parse_recording
+from server.formats.recording import parse_recording
 from solvers.analysis import analyze
 from solvers.physics import Imperfections
 from solvers.robots import ROBOTS

@@ -9,7 +9,7 @@ import numpy as np
 import pytest
 from api_helpers import analyze, ok
 
-from server.cli import main
+from server.cli.main import main
 from solvers.analysis.plan import (Workspace, _criterion, design_matrices, parse_effects,
                                    plan_poses, tracker_pool)
 from solvers.dh import forward_kinematics

@@ -9,8 +9,8 @@ import numpy as np
 import pytest
 from api_helpers import analyze, ok
 
-from server.cli import main
-from server.recording import parse_recording
+from server.cli.main import main
+from server.formats.recording import parse_recording
 from solvers.analysis.model import predict
 from solvers.errors import CalibrationError
 from solvers.frames import Pose

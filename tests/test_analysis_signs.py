@@ -12,7 +12,7 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from server.recording import parse_recording
+from server.formats.recording import parse_recording
 from solvers.analysis import analyze
 from solvers.dh import forward_kinematics
 from solvers.frames import Pose, apply

@@ -16,7 +16,7 @@ from pathlib import Path
 
 import pytest
 
-from server.recording import parse_recording
+from server.formats.recording import parse_recording
 from solvers.analysis import analyze, render_text
 from solvers.analysis.blind import blind_dh
 

@@ -11,7 +11,7 @@ from functools import lru_cache
 import numpy as np
 import pytest
 
-from server.recording import parse_recording
+from server.formats.recording import parse_recording
 from solvers.analysis import analyze, render_text
 from solvers.analysis.baseline import fit_baseline
 from solvers.physics import Imperfections

@@ -8,7 +8,7 @@ import numpy as np
 import pytest
 
 from api_helpers import C, CELL, make_client, ok, open_session
-from server.schemas import AIM_NOISE_MM
+from server.api.schemas import AIM_NOISE_MM
 from solvers.dh import forward_kinematics
 from solvers.robots import ROBOTS
 

@@ -8,7 +8,7 @@ import numpy as np
 import pytest
 
 from api_helpers import CELL, TRUE_TCP_MM
-from server.cli import main
+from server.cli.main import main
 from emulator import approach, home_joints
 from solvers.dh import forward_kinematics
 from solvers.frames import Pose

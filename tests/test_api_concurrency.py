@@ -146,8 +146,8 @@ def test_healthz(client):  # noqa: ANN001
 
 
 def test_db_upgrade_then_serve_without_migrating(tmp_path, capsys):  # noqa: ANN001
-    from server.app import SchemaOutOfDate, create_app
-    from server.cli import main
+    from server.api.app import SchemaOutOfDate, create_app
+    from server.cli.main import main
     from server.settings import Settings
 
     url = f"sqlite:///{tmp_path / 'fresh.db'}"
@@ -173,7 +173,7 @@ def test_the_cli_edits_a_slot_with_if_match(db_url, capsys, monkeypatch):  # noq
 
     from api_helpers import ADMIN_TOKEN
     from browser_helpers import serve
-    from server.cli import main
+    from server.cli.main import main
 
     monkeypatch.setenv("PENDANT_TOKEN", ADMIN_TOKEN)
     auth = {"Authorization": f"Bearer {ADMIN_TOKEN}"}

@@ -12,7 +12,7 @@ from pathlib import Path
 import pytest
 
 from api_helpers import C, finish_job, make_client, ok
-from server.cli import main
+from server.cli.main import main
 
 DATA = Path(__file__).parent / "data"
 KUKA = (DATA / "kuka_cell7_config.dat").read_bytes().decode()

@@ -230,7 +230,7 @@ def test_sqlite_out_of_memory_in_a_job_is_the_memory_limit():
 
     from sqlalchemy.exc import OperationalError
 
-    from server.worker import _error_of, out_of_memory
+    from server.jobs.worker import _error_of, out_of_memory
 
     wrapped = OperationalError("PRAGMA journal_mode=WAL", {}, sqlite3.OperationalError(
         "out of memory"))

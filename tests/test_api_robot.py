@@ -86,7 +86,7 @@ def test_placeholder_page_without_web_dir(tmp_path):
 
     from api_helpers import app_settings
 
-    from server.app import create_app
+    from server.api.app import create_app
     app = create_app(app_settings(f"sqlite:///{tmp_path / 'p.db'}", web_dir=tmp_path / "no-web"))
     with TestClient(app) as c:
         r = c.get("/")

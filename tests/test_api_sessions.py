@@ -5,7 +5,7 @@ from __future__ import annotations
 import pytest
 
 from api_helpers import C, approach, ok, open_session, walk
-from server.methods import METHODS
+from server.menus import METHODS
 
 
 def test_methods_lists_every_menu_with_its_prompts(client):

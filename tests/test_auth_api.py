@@ -285,7 +285,7 @@ def test_pages_send_csp_frame_and_nosniff_headers(client, path):
 # ------------------------------------------------------------------------ first start
 
 def test_first_start_makes_an_administrator_once(db_url):
-    from server.app import create_app
+    from server.api.app import create_app
     from server.settings import Settings
 
     app = create_app(Settings(db_url=db_url, bootstrap_token=None, allowed_hosts=("testserver",)))

@@ -13,7 +13,7 @@ import httpx
 
 from api_helpers import ADMIN_TOKEN, make_client
 from browser_helpers import free_port
-from server.cli import main
+from server.cli.main import main
 
 ROOT = Path(__file__).resolve().parent.parent
 

@@ -24,7 +24,7 @@ from api_helpers import ADMIN_TOKEN, C
 from browser_helpers import free_port
 from db.auth_models import ApiToken
 from server.auth import tokens
-from server.cli import main
+from server.cli.main import main
 
 ROOT = Path(__file__).resolve().parent.parent
 TRIES = 20

@@ -13,7 +13,7 @@ from hypothesis import HealthCheck, Phase, settings
 from schemathesis.checks import not_a_server_error
 
 from api_helpers import ADMIN_TOKEN, app_settings
-from server.app import create_app
+from server.api.app import create_app
 
 ROLES = ("Operator", "Programmer", "Expert", "Administrator")
 HEADERS: dict[str, dict[str, str]] = {}

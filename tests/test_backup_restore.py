@@ -14,8 +14,8 @@ from sqlalchemy import func, insert, select
 
 from api_helpers import C, edit_slot, finish_job, ok
 from db.models import EntryHistory, utcnow
-from server.cli import main
-from server.limits import IMPORT_LIMIT_BYTES
+from server.cli.main import main
+from server.api.limits import IMPORT_LIMIT_BYTES
 
 ROWS = 20_000
 

@@ -16,7 +16,7 @@ import numpy as np
 import pytest
 
 from emulator import RobotPhysics, build_cell, home_joints, run_beam_cycle
-from server.recording import parse_recording
+from server.formats.recording import parse_recording
 from solvers.beam_cycle import plan_cycle, refine_trigger, trigger_events
 from solvers.dh import forward_kinematics
 from solvers.errors import CalibrationError, KinematicsError

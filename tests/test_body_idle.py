@@ -10,7 +10,7 @@ from urllib.parse import urlsplit
 
 from api_helpers import ADMIN_TOKEN, C
 from browser_helpers import serve
-from server import limits
+from server.api import limits
 
 
 def raw_request(url: str, head: str, body: bytes, wait_s: float) -> bytes:

@@ -17,8 +17,8 @@ from pathlib import Path
 import pytest
 
 from server import __version__
-from server.cli import main
-from server.methods import METHODS
+from server.cli.main import main
+from server.menus import METHODS
 
 ROOT = Path(__file__).resolve().parent.parent
 

@@ -14,7 +14,7 @@ import pytest
 from api_helpers import (C, CELL, TRUE_TCP_MM, analyze, approach, edit_slot, make_client, ok,
                         open_session, pose_array, walk)
 from emulator import THERMAL_WARMUP_S
-from server.recording import parse_recording
+from server.formats.recording import parse_recording
 from solvers.physics import Imperfections, true_tcp_positions
 
 COMPLIANT_A2 = {"compliance_deg_per_Nm": [0.0, 0.002, 0.0, 0.0, 0.0, 0.0]}

@@ -18,7 +18,7 @@ import pytest
 from hypothesis import example, given, settings
 from hypothesis import strategies as st
 
-from server.bounds import unprintable
+from server.service.bounds import unprintable
 from server.formats import FormatError, FrameEntry, export_abb, export_kuka
 from server.formats.external import (
     ExternalKinematic,

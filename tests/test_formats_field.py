@@ -250,7 +250,7 @@ def test_the_backup_keeps_the_files_encoding_and_the_cli_exports_its_bytes(clien
     """The kept Windows-1252 file goes through a JSON backup and restore, and ``pendant
     export`` writes its bytes (not UTF-8)."""
     from api_helpers import finish_job
-    from server.cli import main
+    from server.cli.main import main
 
     raw = (CORPUS / "kuka_krc4_crlf_cp1252.dat").read_bytes()
     ok(imp(client, "kuka", "kuka_krc4_crlf_cp1252.dat"))

@@ -116,7 +116,7 @@ def test_open_sessions_are_listed_and_the_person_picks_one(page, site):
     texts = listed.all_inner_texts()
     mine = [t for t in texts if f"(session {first['id']})" in t]
     assert mine and "TOOL 4: 1 of 4 points taught, open" in mine[0], texts
-    assert any(f"TOOL 5: 0 of 4 points taught, open" in t and f"(session {second['id']})" in t for t in texts)
+    assert any("TOOL 5: 0 of 4 points taught, open" in t and f"(session {second['id']})" in t for t in texts)
     page.get_by_role("button", name=f"Resume session {first['id']}").click()
     idle(page)
     assert re.search(r"→ TOOL 4$", page.locator("#session-title").inner_text())

@@ -40,7 +40,7 @@ def small_recording(seed: int = 5) -> dict:
 def worker_address_space_mb(db_url: str) -> int:
     """The address space (VmSize) of a process that imported what a job worker imports."""
     driver = "import psycopg; " if db_url.startswith("postgresql") else ""
-    code = ("import server.cli, server.worker, server.job_kinds, server.recording, server.backup, "
+    code = ("import server.cli, server.jobs.worker, server.jobs.kinds, server.formats.recording, server.service.backup, "
             f"solvers.analysis; {driver}"
             "print(open('/proc/self/status').read().split('VmSize:')[1].split()[0])")
     env = {**os.environ, "PYTHONPATH": f"{ROOT}{os.pathsep}{os.environ.get('PYTHONPATH', '')}"}

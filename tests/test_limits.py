@@ -12,7 +12,7 @@ import admin_http as httpx  # httpx as the first Administrator
 import pytest
 from browser_helpers import serve
 
-from server.limits import BODY_LIMIT_BYTES, UPLOAD_LIMIT_BYTES
+from server.api.limits import BODY_LIMIT_BYTES, UPLOAD_LIMIT_BYTES
 from solvers.physics import Imperfections
 from solvers.simulate import simulate_recording
 

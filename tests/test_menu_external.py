@@ -51,7 +51,7 @@ def _optional_step(client, url: str, index: int) -> dict:  # noqa: ANN001
     """Optional step ``index``'s prompt and axis values (from the menu's own list)."""
     method = ok(client.get(url))["method"]
     spec = next(m for m in ok(client.get("/methods")) if m["name"] == method)
-    from server.methods import METHODS
+    from server.menus import METHODS
     st = METHODS[method].extra_step(index - len(spec["steps"]))
     return {"index": index, "target": st.target, "tilt_deg": st.tilt_deg,
             "around_deg": st.around_deg, "spin_deg": 0.0, "tool_point_mm": None,
@@ -489,7 +489,7 @@ def test_cli_calibrates_the_root_point_from_a_csv_with_e1(capsys):
     examples.py); the report names the table's seeded tilt."""
     from pathlib import Path
 
-    from server.cli import main
+    from server.cli.main import main
 
     f = Path(__file__).resolve().parent.parent / "docs" / "examples" / "turntable.csv"
     tcp = ",".join(f"{v:.4f}" for v in CELL.T_flange_tool[:3, 3])
@@ -505,7 +505,7 @@ def test_cli_calibrates_the_root_point_from_a_csv_with_e1(capsys):
 
 
 def test_cli_reads_a_point_without_its_axis_value_as_a_named_error(tmp_path, capsys):
-    from server.cli import main
+    from server.cli.main import main
 
     f = tmp_path / "t.json"
     f.write_text(json.dumps({"points": [{"x": 0, "y": 0, "z": 0, "a": 0, "b": 0, "c": 0}] * 3,
@@ -518,7 +518,7 @@ def test_cli_slot_edits_an_external_kinematic_with_if_match(db_url, capsys, monk
     import httpx
 
     from browser_helpers import serve
-    from server.cli import main
+    from server.cli.main import main
 
     monkeypatch.setenv("PENDANT_TOKEN", ADMIN_TOKEN)
     auth = {"Authorization": f"Bearer {ADMIN_TOKEN}"}
@@ -561,7 +561,7 @@ def test_root_point_and_offset_are_exported_for_kuka_and_abb(client, pointer):
     moc = client.get(f"{C}/export", params={"format": "abb_moc"}).text
     units = read_abb_external(moc).kinematics
     assert any(k.root.as_matrix()[:3, 3] == pytest.approx(root[:3, 3], abs=1e-3) for k in units)
-    from server.cli import main  # the CLI exports the same text
+    from server.cli.main import main  # the CLI exports the same text
     assert main(["export", "cell-1", "--format", "kuka_machine", "--db",
                  str(client.app.state.settings.db_url)]) == 0
 
@@ -593,8 +593,9 @@ def test_a_json_backup_keeps_the_external_kinematics_and_restores_them(client, p
 def _menu_solve(method: str, ext: ext_emu.ExternalCell, number: int, touches, values: list[dict]):
     """Solve ``method`` as the session does (the menu's adapter, the slot's nominal machine
     data), from touch-ups made with external_sim's pointer (TCP 150 mm on z)."""
-    from server.methods import METHODS, MethodInputs, TaughtData
-    from server.methods_ext import ExtInputs
+    from server.menus import METHODS
+    from server.menus.methods import MethodInputs, TaughtData
+    from server.menus.external import ExtInputs
 
     nominal = ext_emu.nominal_kinematics(ext)[number]
     inputs = MethodInputs(tcp_mm=touches.tool[:3, 3], external=ExtInputs(
@@ -690,8 +691,9 @@ def test_offset_on_the_demo_turntable_covers_the_truth_in_200_trials():
     """Root point (5 positions) then Offset (the plate on the table at E1 = 30), both through
     the menus' adapters on the emulated table tilted 1 deg and 3 mm off its root: the true
     T_flange_base (in the calibrated root's flange frame) inside both 95 % bounds in >= 93 %."""
-    from server.methods import METHODS, MethodInputs, TaughtData
-    from server.methods_ext import ExtInputs
+    from server.menus import METHODS
+    from server.menus.methods import MethodInputs, TaughtData
+    from server.menus.external import ExtInputs
     from solvers.external.common import rz
     from solvers.external_sim import touch
     from solvers.base import pose_difference

@@ -9,7 +9,7 @@ import numpy as np
 import pytest
 
 from api_helpers import C, CELL, TRUE_TCP_MM, ok, open_session, pose_matrix
-from server.cli import main
+from server.cli.main import main
 from solvers.dh import forward_kinematics
 from solvers.robots import ROBOTS
 

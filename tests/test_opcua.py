@@ -271,7 +271,7 @@ def test_serve_with_an_opcua_port_starts_the_face_beside_the_rest_service(tmp_pa
 
     import httpx
 
-    from server.cli import main
+    from server.cli.main import main
 
     rest_port, ua_port = free_port(), free_port()
     db_url = f"sqlite:///{tmp_path / 'pendant.db'}"
@@ -446,7 +446,7 @@ def test_a_stale_version_is_refused_and_a_bad_frame_is_a_bad_argument(face: dict
 
 def test_a_registered_certificate_logs_in_over_the_encrypted_endpoint(face: dict,
                                                                     tmp_path) -> None:
-    from server.cli import main
+    from server.cli.main import main
 
     user_cert = client_certificate(tmp_path / "user", "mes-cell-3")
     stranger = client_certificate(tmp_path / "other", "stranger")  # valid, but no user's

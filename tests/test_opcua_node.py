@@ -85,7 +85,7 @@ def test_node_opcua_logs_in_and_reads_the_frame_rest_has(cell: dict) -> None:
 def test_node_opcua_with_a_users_public_certificate_is_refused(cell: dict, tmp_path: Path) -> None:
     """The registered certificate (public) in an X509 identity token, signed with another
     key: node-opcua's session is refused, as asyncua's is."""
-    from server.cli import main
+    from server.cli.main import main
 
     victim = client_certificate(tmp_path, "victim-node")
     ok(cell["rest"].post("/users", json={"name": "victim", "role": "Expert"}))

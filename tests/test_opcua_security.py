@@ -63,7 +63,7 @@ def test_a_channel_certificate_on_the_none_endpoint_is_no_login(
     with an Anonymous token: before, the face logged in as that user."""
     from asyncua.common.connection import MessageChunk
 
-    from server.cli import main
+    from server.cli.main import main
 
     victim = client_certificate(tmp_path, "victim-cell")
     ok(cell["rest"].post("/users", json={"name": "victim", "role": "Expert"}))
@@ -96,7 +96,7 @@ def test_a_channel_certificate_on_the_none_endpoint_is_no_login(
 
 def test_an_x509_token_without_a_signature_is_refused(cell: dict, tmp_path: Path) -> None:
     """The certificate in an X509 identity token, without the proof of its private key."""
-    from server.cli import main
+    from server.cli.main import main
 
     victim = client_certificate(tmp_path, "victim-2")
     ok(cell["rest"].post("/users", json={"name": "victim2", "role": "Expert"}))
@@ -313,7 +313,7 @@ def test_the_pki_folder_is_the_instances_own_and_private(cell: dict) -> None:
 
 
 def test_an_untrusted_client_is_refused_until_trusted_once(cell: dict, tmp_path: Path) -> None:
-    from server.cli import main
+    from server.cli.main import main
 
     stranger = client_certificate(tmp_path, "new-cell-pc")
 
@@ -332,7 +332,7 @@ def test_an_untrusted_client_is_refused_until_trusted_once(cell: dict, tmp_path:
 
 def test_expired_and_not_yet_valid_certificates_are_refused(cell: dict, tmp_path: Path,
                                                             capsys: pytest.CaptureFixture) -> None:
-    from server.cli import main
+    from server.cli.main import main
 
     old = client_certificate(tmp_path / "old", "old-pc", valid_from_days=-30, valid_days=10)
     early = client_certificate(tmp_path / "early", "early-pc", valid_from_days=5)

@@ -9,7 +9,7 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from server.recording import (RecordingError, parse_recording, recording_json_schema, schema_text,
+from server.formats.recording import (RecordingError, parse_recording, recording_json_schema, schema_text,
                               to_document)
 from solvers.errors import CalibrationError
 from solvers.recording import last_motion_sign, motion_signs
@@ -143,7 +143,7 @@ def test_refuses_non_json_and_non_objects():
 
 
 def test_committed_schema_file_is_up_to_date():
-    """Regenerate with ``python -m server.recording > docs/robot-recording-1.schema.json``."""
+    """Regenerate with ``python -m server.formats.recording > docs/robot-recording-1.schema.json``."""
     assert SCHEMA_FILE.read_text() == schema_text()
     schema = recording_json_schema()
     assert schema["title"] == "robot-recording/1" and schema["$id"]

@@ -6,7 +6,7 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from server.recording import parse_recording
+from server.formats.recording import parse_recording
 from solvers.dh import forward_kinematics
 from solvers.errors import CalibrationError
 from solvers.frames import Pose, apply

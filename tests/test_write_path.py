@@ -59,14 +59,14 @@ def test_a_touch_up_is_one_transaction_with_its_clock(client):
 
 
 def test_a_service_process_freezes_its_start_out_of_the_garbage_collectors_walks(db_url):
-    """``server.app:app`` (uvicorn's worker) and ``pendant serve`` set ``freeze_gc``: the app's
+    """``server.api.app:app`` (uvicorn's worker) and ``pendant serve`` set ``freeze_gc``: the app's
     start-up objects go to the collector's permanent generation, so a full collection does
     not walk them (80-170 ms per collection otherwise). An app of a test (no ``freeze_gc``)
     freezes nothing: what it leaves must stay collectable."""
     from fastapi.testclient import TestClient
 
     from api_helpers import app_settings
-    from server.app import create_app
+    from server.api.app import create_app
 
     gc.unfreeze()
     with make_client(db_url) as c:

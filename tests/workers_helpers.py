@@ -1,7 +1,7 @@
 """The service as a plant runs it: several uvicorn worker processes on one database, driven by
 many concurrent HTTP clients (httpx), and killed with SIGKILL.
 
-``service(db_url, workers)`` starts ``uvicorn server.app:app --workers N`` in its own process
+``service(db_url, workers)`` starts ``uvicorn server.api.app:app --workers N`` in its own process
 group (so the workers race on a fresh database's schema themselves) and yields a
 :class:`Service`; it is stopped (the group, SIGKILL) on exit.
 """
@@ -73,7 +73,7 @@ def start(db_url: str, workers: int, log: Path, port: int | None = None) -> Serv
     env = {**os.environ, "PENDANT_DB_URL": db_url, "PYTHONPATH": str(ROOT),
            "OPENBLAS_NUM_THREADS": "1", "PENDANT_ADMIN_TOKEN": ADMIN_TOKEN}
     f = log.open("ab")
-    proc = subprocess.Popen([sys.executable, "-m", "uvicorn", "server.app:app", "--host",
+    proc = subprocess.Popen([sys.executable, "-m", "uvicorn", "server.api.app:app", "--host",
                              "127.0.0.1", "--port", str(port), "--workers", str(workers),
                              "--timeout-worker-healthcheck", "60"],
                             cwd=ROOT, env=env, stdout=f, stderr=subprocess.STDOUT,

@@ -35,7 +35,7 @@ const state = {
   targets: {}, // the slot last opened per table: each menu proposes its own (tool, base, extkin)
 };
 
-/** The external kinematics each ext menu calibrates (server.external.METHOD_KINDS). */
+/** The external kinematics each ext menu calibrates (server.service.external.METHOD_KINDS). */
 const EXT_KINDS = { "ext.root_point": ["turntable", "positioner"], "ext.linear_unit": ["linear_unit"],
                     "ext.positioner_2axis": ["positioner"] };
 

@@ -112,7 +112,7 @@ def operation(db: Session, name: str, **kw: Any) -> None:
     row hooks do not record (a touch-up, a jog, a compute, an opened session...): one record
     ``op.<name>`` of the current actor, in the operation's own transaction, unless a hook
     already recorded the change (a frame, a controller, a user...). Called by the request
-    path (``server.deps``) just before the commit, so every write is audited."""
+    path (``server.api.deps``) just before the commit, so every write is audited."""
     db.flush()
     wrote, audited = db.info.pop(WROTE, False), db.info.pop(AUDITED, False)
     if wrote and not audited:

@@ -31,7 +31,7 @@ SECURITY = [{"bearer": []}, {"session": [], "csrf": []}]
 
 
 def install(app: FastAPI) -> None:
-    """Have ``app.openapi()`` (as built so far: ``server.errors`` adds the error answers)
+    """Have ``app.openapi()`` (as built so far: ``server.api.errors`` adds the error answers)
     declare :data:`SCHEMES`: every operation needs one of them, but the public ones, and says
     which permission it needs."""
     built = app.openapi

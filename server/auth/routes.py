@@ -15,7 +15,7 @@ from db.auth_models import AuditRecord
 from db.crud import MAX_ID
 from server.auth import audit, tokens
 from server.auth.guard import CSRF_COOKIE, SESSION_COOKIE, _refuse
-from server.deps import SessionDep
+from server.api.deps import SessionDep
 
 router = APIRouter(tags=["Auth"])
 NOT_FOUND = {404: {"description": "No such user"}}

@@ -42,7 +42,7 @@ import numpy as np
 
 from solvers.frames import Pose, abb_from_matrix, kuka_from_matrix, matrix_from_abb
 
-from server.bounds import check_name, check_value
+from server.service.bounds import check_name, check_value
 from server.formats.model import (
     FormatError,
     FrameEntry,
@@ -612,7 +612,7 @@ def read_abb(text: str) -> ParsedFile:
     ------
     FormatError
         ``("file", "line N", "<data name>.<field>")`` for a value of the wrong shape, a number
-        beyond server/bounds.py, a quaternion far from unit length, two declarations tagged
+        beyond server/service/bounds.py, a quaternion far from unit length, two declarations tagged
         with one slot; a file without ``MODULE`` or cut before ``ENDMODULE``.
     """
     text = text.replace("\r\n", "\n").replace("\r", "\n") if isinstance(text, str) else text

@@ -19,7 +19,7 @@ import numpy as np
 from solvers.errors import CalibrationError
 from solvers.frames import Pose, fanuc_from_matrix, matrix_from_fanuc
 
-from server.bounds import check_value
+from server.service.bounds import check_value
 from server.formats.model import (
     ROBOT_HELD,
     FormatError,
@@ -172,7 +172,7 @@ def read_fanuc(text: str) -> ParsedFile:
     ------
     FormatError
         ``("file", "line N", "UTOOL 3.X")`` for a value that is not a number or beyond
-        server/bounds.py; a listing without its header or cut before its end line.
+        server/service/bounds.py; a listing without its header or cut before its end line.
     """
     if not isinstance(text, str):
         raise FormatError(("file",), f"expected text, got {type(text).__name__}")

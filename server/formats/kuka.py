@@ -41,7 +41,7 @@ from typing import Iterable
 from solvers.errors import CalibrationError
 from solvers.frames import Pose
 
-from server.bounds import NAME_CHARS, check_name, check_value
+from server.service.bounds import NAME_CHARS, check_name, check_value
 from server.formats.model import (
     FormatError,
     FrameEntry,
@@ -288,7 +288,7 @@ def _tokens(text: str, line: int, fld: str) -> list[tuple[str, str, int, int]]:
 
 def parse_aggregate(text: str, line: int, fld: str) -> dict[str, object]:
     """``{X 1.0,Y 2.0,...}`` (nested, any spacing) -> {"X": 1.0, ...} with upper-case keys;
-    every number checked against server/bounds.py."""
+    every number checked against server/service/bounds.py."""
     tokens = _tokens(text, line, fld)
 
     def agg(i: int, path: str) -> tuple[dict[str, object], int]:
@@ -571,7 +571,7 @@ def read_kuka(text: str) -> ParsedFile:
     ------
     FormatError
         ``("file", "line N", "TOOL_DATA[3].X")``: a line that cannot be read, a number
-        beyond server/bounds.py, a name longer than its ``DECL``, an unknown TYPE, a slot
+        beyond server/service/bounds.py, a name longer than its ``DECL``, an unknown TYPE, a slot
         beyond its declared size or assigned twice; a file without ``DEFDAT`` or cut
         before ``ENDDAT``; a family missing an array or a declared slot.
     """

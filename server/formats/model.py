@@ -24,7 +24,7 @@ import math
 from dataclasses import dataclass, field
 from typing import Iterable, Literal, get_args
 
-from server.bounds import MECH_UNIT_CHARS, NAME_CHARS, check_name, check_value, unprintable
+from server.service.bounds import MECH_UNIT_CHARS, NAME_CHARS, check_name, check_value, unprintable
 from solvers.errors import CalibrationError
 from solvers.frames import Pose
 

@@ -18,7 +18,7 @@ from typing import Iterable
 from solvers.errors import CalibrationError
 from solvers.frames import Pose, matrix_from_ur, ur_from_matrix
 
-from server.bounds import check_value
+from server.service.bounds import check_value
 from server.formats.model import (
     FormatError,
     FrameEntry,
@@ -165,7 +165,7 @@ def read_ur(text: str) -> ParsedFile:
     ------
     FormatError
         ``("file", "line N", "tool_3")`` for a pose or payload that cannot be read or is
-        beyond server/bounds.py; a script without its header or cut before its end line.
+        beyond server/service/bounds.py; a script without its header or cut before its end line.
     """
     if not isinstance(text, str):
         raise FormatError(("file",), f"expected text, got {type(text).__name__}")

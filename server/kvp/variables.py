@@ -18,7 +18,7 @@ from pydantic import ValidationError
 from server.formats import kuka
 from server.formats.model import FormatError
 from server.rws import ops
-from server.schemas import EntryIn
+from server.api.schemas import EntryIn
 from solvers.errors import CalibrationError
 from solvers.frames import Pose, kuka_from_matrix
 

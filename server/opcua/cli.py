@@ -74,7 +74,7 @@ def trust_certificate(args: argparse.Namespace) -> int:
 
 
 def run_opcua(args: argparse.Namespace) -> int:
-    from server.app import create_app
+    from server.api.app import create_app
     from server.opcua.service import run
     from server.settings import ENV_NO_AUTH, LOOPBACK_HOSTS, Settings, parent_pid
 

@@ -2,7 +2,7 @@
 
 The same as ``PUT /controllers/{id}/tools|bases/{n}`` with ``If-Match``: the body is checked by
 the API's ``EntryIn`` (one set of bounds), the values come from
-:func:`server.routers.tables.edit_values`, the controller's row is locked (PostgreSQL) in a
+:func:`server.api.routers.tables.edit_values`, the controller's row is locked (PostgreSQL) in a
 writer's transaction (SQLite ``BEGIN IMMEDIATE``), a stale version is refused, and
 :func:`db.crud.change_entry` records history, the audit (source ``opcua``) and the
 ``frame-committed`` event in that transaction.
@@ -19,8 +19,8 @@ from sqlalchemy.orm import Session, sessionmaker
 from db import crud
 from db.session import write_session
 from server.auth import audit
-from server.routers.tables import edit_values
-from server.schemas import EntryIn
+from server.api.routers.tables import edit_values
+from server.api.schemas import EntryIn
 from solvers.errors import CalibrationError
 
 

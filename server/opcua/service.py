@@ -305,7 +305,7 @@ class PendantOpcUa:
             self.rules.method_names[node.nodeid] = method_name
 
     def _export(self, cid: int, fmt: str) -> str:
-        from server.routers.export import export_text
+        from server.api.routers.export import export_text
 
         with self.make_session() as db:
             crud.get_controller(db, cid)

@@ -43,7 +43,7 @@ from starlette.websockets import WebSocket, WebSocketDisconnect
 from db import crud
 from server.formats import abb
 from server.rws import digest, ops, rapid
-from server.schemas import EntryIn
+from server.api.schemas import EntryIn
 from solvers.errors import CalibrationError
 from solvers.frames import abb_from_matrix, invert
 

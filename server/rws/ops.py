@@ -23,12 +23,13 @@ import emulator
 from db import crud
 from db.auth_models import User
 from db.session import write_session
-from server import controller_files, formats
+from server import formats
+from server.service import controller_files
 from server.auth import audit, tokens
 from server.auth.permissions import C, required
-from server.routers.common import active_frames, robot_of
-from server.routers.tables import edit_values
-from server.schemas import EntryIn
+from server.api.routers.common import active_frames, robot_of
+from server.api.routers.tables import edit_values
+from server.api.schemas import EntryIn
 from solvers.dh import forward_kinematics
 from solvers.errors import CalibrationError
 

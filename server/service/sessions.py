@@ -13,10 +13,10 @@ from sqlalchemy.orm import Session
 import emulator
 from db import crud
 from db.models import CalibSession
-from server.preconditions import check
-from server.routers.common import (check_step, flange_pose_of, next_step, session_out, state_of,
+from server.api.preconditions import check
+from server.api.routers.common import (check_step, flange_pose_of, next_step, session_out, state_of,
                                    store_state)
-from server.schemas import TouchUpIn
+from server.api.schemas import TouchUpIn
 from solvers.errors import CalibrationError
 
 

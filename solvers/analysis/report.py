@@ -70,7 +70,7 @@ def _analyze(rec, *, folds: int = 5, seed: int = 0, alpha: float = ALPHA,
     Parameters
     ----------
     rec : RecordingData
-        A parsed ``robot-recording/1`` (``server.recording.parse_recording``).
+        A parsed ``robot-recording/1`` (``server.formats.recording.parse_recording``).
     folds : int
         K of the K-fold cross-validation.
     seed : int

@@ -15,7 +15,7 @@ from typing import Iterable
 
 import numpy as np
 
-from server.bounds import check_value
+from server.service.bounds import check_value
 from server.formats.abb import _quat, export_abb, rapid_name, read_abb
 from server.formats.external.model import (ExternalKinematic, ExternalSetup, _check_setup,
                                            _pose, positioner_2axis, turntable)

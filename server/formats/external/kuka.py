@@ -345,7 +345,7 @@ def read_kuka_external(machine_dat: str, config_dat: str = "") -> ExternalSetup:
     ------
     FormatError
         ``("machine_dat" | "config_dat", "line N", field)``: an unreadable frame or aggregate,
-        a value beyond server/bounds.py, an assignment given twice; ``$EX_KIN`` missing or
+        a value beyond server/service/bounds.py, an assignment given twice; ``$EX_KIN`` missing or
         with an unknown type; a kinematic without its ``$ETn_AX``, ``$ETn_NAME``, frames,
         ``MACHINE_DEF`` or ``$ERSYSROOT``; a linear unit with more than one axis; three axes.
 

@@ -38,7 +38,7 @@ from typing import Iterable, Literal, get_args
 
 import numpy as np
 
-from server.bounds import MECH_UNIT_CHARS, check_name, check_value
+from server.service.bounds import MECH_UNIT_CHARS, check_name, check_value
 from server.formats.model import FormatError, FrameEntry
 from solvers.errors import CalibrationError
 from solvers.external.common import rz

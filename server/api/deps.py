@@ -1,0 +1,166 @@
+"""Request dependencies: one database session and one transaction per request.
+
+A request that writes is one transaction, committed before the answer is sent (a client that
+got a 2xx finds its change in the database), and atomic whichever process or host serves it:
+
+- **SQLite** (WAL): the transaction begins with ``BEGIN IMMEDIATE`` (the database's write
+  lock, across processes) and waits for it in SQLite's busy handler (``db.session``);
+- **PostgreSQL**: the transaction first locks its controller's row (``SELECT ... FOR
+  UPDATE``, :func:`_lock_at_begin`), so every read-modify-write of one controller (jog,
+  touch-up, compute, save, import, restore, slot edits) runs after the previous one committed.
+
+The transaction runs in the route's worker thread, never on the event loop: a sync route
+taking a session (``SessionDep``) is wrapped by :func:`one_thread`, which commits (or rolls
+back) in that thread as the route returns, so the write lock is held only while the route
+works. An async route, or an Idempotency-Key claimed before the route, commits in
+:func:`get_session` (in the threadpool too).
+
+The load this serves: a plant of a few hundred cells, a person touching up every few seconds,
+~100 writes/s at worst plus MES reads (``benchmarks/plant.py``, README "Measured").
+"""
+
+from __future__ import annotations
+
+import functools
+import inspect
+from collections.abc import AsyncIterator, Callable
+from typing import Annotated, Any
+
+from fastapi import Depends, FastAPI, Request
+from fastapi.routing import APIRoute
+from sqlalchemy import event
+from sqlalchemy.orm import Session, sessionmaker
+from starlette.concurrency import run_in_threadpool
+
+from db import crud
+from db.session import write_session
+from server.api import idempotency
+from server.auth import audit
+
+READ_METHODS = ("GET", "HEAD", "OPTIONS")
+LOCK_ON_BEGIN = "pendant_lock_controller"  # Session.info: the controller to lock at BEGIN
+
+
+def _controller_id(request: Request) -> int | None:
+    cid = request.path_params.get("controller_id")
+    try:
+        return None if cid is None else int(cid)
+    except ValueError:
+        return None  # not an int: the route's own validation answers 422
+
+
+def _lock_at_begin(db: Session, _transaction: object, connection: Any) -> None:
+    """``after_begin`` of every request session: a writer locks its controller's row first
+    (PostgreSQL; SQLite's ``BEGIN IMMEDIATE`` has already locked the database)."""
+    cid = db.info.pop(LOCK_ON_BEGIN, None)
+    if cid is not None and connection.dialect.name != "sqlite":
+        crud.lock_controller(connection, cid)
+
+
+def _begin_write(db: Session, request: Request) -> None:
+    """Begin the transaction now (its ``after_begin`` hook locks the controller), and claim the
+    request's Idempotency-Key in it (``server.api.idempotency``)."""
+    db.connection()
+    idempotency.claim(db, request)
+
+
+async def get_session(request: Request) -> AsyncIterator[Session]:
+    """A session of this app's engine: a writer's (``BEGIN IMMEDIATE``, the controller's row
+    lock) for any method but GET/HEAD/OPTIONS; committed after the route (what
+    :func:`one_thread` did not commit already), rolled back on any error.
+
+    Used with ``scope="function"`` so the commit happens before the response is sent."""
+    maker = request.app.state.sessionmaker
+    writes = request.method not in READ_METHODS
+    db = write_session(maker) if writes else maker()
+    try:
+        cid = _controller_id(request) if writes else None
+        if cid is not None:
+            db.info[LOCK_ON_BEGIN] = cid
+        if writes and idempotency.has_key(request):
+            await idempotency.read_body(request)
+            await run_in_threadpool(_begin_write, db, request)
+        yield db
+        if db.in_transaction():
+            if writes:
+                route = request.scope.get("route")
+                await run_in_threadpool(_audited_commit, db, getattr(route, "name", "request"),
+                                        request.path_params)
+            else:
+                await run_in_threadpool(db.commit)
+    except BaseException:
+        if db.in_transaction():
+            await run_in_threadpool(db.rollback)
+        raise
+    finally:
+        db.close()
+
+
+SessionDep = Annotated[Session, Depends(get_session, scope="function")]
+AUDIT_KEYS = ("controller_id", "session_id")  # path parameters an operation's record names
+
+
+def _audited_commit(db: Session, operation: str, params: dict[str, Any]) -> None:
+    """Commit, with the operation's audit record when it changed rows no hook recorded
+    (``server.auth.audit.operation``): every write request leaves one."""
+    ids = {k: int(v) for k in AUDIT_KEYS
+           if (v := params.get(k)) is not None and str(v).isdigit()}
+    audit.operation(db, operation, **ids)
+    db.commit()
+
+
+def one_thread(endpoint: Callable[..., Any]) -> Callable[..., Any]:
+    """``endpoint`` (a sync route) committing the session it was given in its own worker
+    thread as it returns (rolled back if it raises). Async routes are returned unchanged."""
+    if inspect.iscoroutinefunction(endpoint) or getattr(endpoint, "_one_thread", False):
+        return endpoint
+
+    @functools.wraps(endpoint)
+    def run(*args: Any, **kwargs: Any) -> Any:
+        db = next((v for v in kwargs.values() if isinstance(v, Session)), None)
+        if db is None:
+            return endpoint(*args, **kwargs)
+        try:
+            result = endpoint(*args, **kwargs)
+            _audited_commit(db, endpoint.__name__, kwargs)
+        except BaseException:
+            db.rollback()
+            raise
+        return result
+
+    # the endpoint's annotations, evaluated in its own module: FastAPI before 0.123 reads string
+    # annotations (``from __future__ import annotations``) in the wrapper's globals
+    run.__signature__ = inspect.signature(endpoint, eval_str=True)  # type: ignore[attr-defined]
+    run._one_thread = True  # type: ignore[attr-defined]
+    return run
+
+
+def install(app: FastAPI) -> None:
+    """The row lock at BEGIN for every session of ``app`` (see the module's docstring)."""
+    maker: sessionmaker = app.state.sessionmaker
+    if not event.contains(maker, "after_begin", _lock_at_begin):
+        event.listen(maker, "after_begin", _lock_at_begin)
+
+
+ROUTE_FIELDS = ("response_model", "status_code", "tags", "dependencies", "summary", "description",
+                "response_description", "responses", "deprecated", "methods", "operation_id",
+                "response_model_include", "response_model_exclude", "response_model_by_alias",
+                "response_model_exclude_unset", "response_model_exclude_defaults",
+                "response_model_exclude_none", "include_in_schema", "response_class", "name",
+                "callbacks", "openapi_extra", "generate_unique_id_function")
+
+
+def add_routes(app: FastAPI, router: Any) -> None:
+    """Serve the routes of ``router`` as the app's own, each sync route wrapped with
+    :func:`one_thread`.
+
+    Rather than ``app.include_router``: recent FastAPI (0.165 here) keeps an included router
+    whole and matches a request through each included router in turn, a few tenths of a
+    millisecond per request with fourteen routers (older FastAPI copied the routes, as this
+    does). A router added here needs nothing else to get :func:`one_thread`.
+    """
+    for route in router.routes:
+        if not isinstance(route, APIRoute):  # a websocket or a mount would skip the app's auth
+            raise TypeError(f"add_routes serves HTTP routes only, got {route!r}")
+        app.router.add_api_route(route.path, one_thread(route.endpoint),
+                                 **{k: getattr(route, k) for k in ROUTE_FIELDS})

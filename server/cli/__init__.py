@@ -1,0 +1,2 @@
+"""The command line: ``pendant`` (``main``), its slot editor (``slot``) and the analysis
+commands (``analysis``)."""

@@ -1,5 +1,0 @@
-"""Base menu: the 32 base slots (bases and fixed tools)."""
-
-from server.routers.tables import table_router
-
-router = table_router("base", "bases", "Base")

@@ -1,5 +1,0 @@
-"""Tool menu: the 16 tool slots (robot-held tools and robot-held workpieces)."""
-
-from server.routers.tables import table_router
-
-router = table_router("tool", "tools", "Tool")
