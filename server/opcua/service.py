@@ -28,7 +28,7 @@ from sqlalchemy.orm import Session, sessionmaker
 
 from db import crud
 from server.opcua import access, commit, pki, space
-from server.opcua.state import ControllerState, events_after, latest_event_id, read_cells
+from server.opcua.state import CellReader, ControllerState, events_after, latest_event_id
 from server.settings import LOOPBACK_HOSTS
 
 log = logging.getLogger("pendant.opcua")
@@ -147,6 +147,7 @@ class PendantOpcUa:
     last_event_id: int = field(default=0, init=False)
     _events: object = field(default=None, init=False)  # the PendantEventType generator
     _templates: dict = field(default_factory=dict, init=False)  # space.CellTemplate by shape
+    _reader: CellReader = field(default_factory=CellReader, init=False)
     rules: access.PendantRules = field(init=False)
     _task: asyncio.Task | None = field(default=None, init=False)
 
@@ -223,7 +224,7 @@ class PendantOpcUa:
     async def sync(self) -> int:
         """Read every controller from the database and update the address space; returns writes."""
         await self.end_revoked_sessions()
-        new = await asyncio.to_thread(read_cells, self.make_session)
+        new = await asyncio.to_thread(self._reader.read, self.make_session)
         writes = 0
         gone = {cid for cid in self.states
                 if cid not in new or new[cid].node_key != self.states[cid].node_key}
@@ -244,7 +245,7 @@ class PendantOpcUa:
                 # full collections (every few cells, ever longer) block the loop for seconds
                 gc.freeze()
                 await asyncio.sleep(0)  # clients are served between two new cells
-            else:
+            elif st is not self.states[cid]:  # the same object: nothing changed
                 writes += await space.update_cell(self.cells[cid], self.states[cid], st)
             self.states[cid] = st
         for ev in await asyncio.to_thread(events_after, self.make_session, self.last_event_id):
