@@ -11,12 +11,13 @@ variable). docs/opcua.md has the tree and an example client session.
 from __future__ import annotations
 
 import asyncio
+import gc
 import logging
 from dataclasses import dataclass, field
 from pathlib import Path
 from urllib.parse import urlparse
 
-from asyncua import Node, Server, ua
+from asyncua import Server, ua
 from asyncua.common.utils import ServiceError
 from asyncua.crypto import security_policies
 from asyncua.server.binary_server_asyncio import BinaryServer, OPCUAProtocol
@@ -27,7 +28,7 @@ from sqlalchemy.orm import Session, sessionmaker
 
 from db import crud
 from server.opcua import access, commit, pki, space
-from server.opcua.state import ControllerState, events_after, latest_event_id, read_cells
+from server.opcua.state import CellReader, ControllerState, events_after, latest_event_id
 from server.settings import LOOPBACK_HOSTS
 
 log = logging.getLogger("pendant.opcua")
@@ -145,6 +146,8 @@ class PendantOpcUa:
     ns_ids: tuple[int, int, int] = field(default=(0, 0, 0), init=False)
     last_event_id: int = field(default=0, init=False)
     _events: object = field(default=None, init=False)  # the PendantEventType generator
+    _templates: dict = field(default_factory=dict, init=False)  # space.CellTemplate by shape
+    _reader: CellReader = field(default_factory=CellReader, init=False)
     rules: access.PendantRules = field(init=False)
     _task: asyncio.Task | None = field(default=None, init=False)
 
@@ -179,6 +182,7 @@ class PendantOpcUa:
         self.server.set_server_name("pendant")
         await self.server.set_application_uri(space.PENDANT_URI)
         self.ns_ids = await space.load_nodesets(self.server)
+        gc.freeze()  # the nodesets' nodes live as long as the face (see sync)
         self._events = await space.event_generator(self.server, self.ns_ids[2])
         self.last_event_id = await asyncio.to_thread(latest_event_id, self.make_session)
         await self.sync()
@@ -220,7 +224,7 @@ class PendantOpcUa:
     async def sync(self) -> int:
         """Read every controller from the database and update the address space; returns writes."""
         await self.end_revoked_sessions()
-        new = await asyncio.to_thread(read_cells, self.make_session)
+        new = await asyncio.to_thread(self._reader.read, self.make_session)
         writes = 0
         gone = {cid for cid in self.states
                 if cid not in new or new[cid].node_key != self.states[cid].node_key}
@@ -229,14 +233,19 @@ class PendantOpcUa:
             for method_id in [m for m in self.rules.method_names
                               if str(m.Identifier).startswith(f"{nodes.pendant.nodeid.Identifier}.")]:
                 del self.rules.method_names[method_id]
-            await space.remove(nodes.system)
-            await space.remove(nodes.pendant)
+            space.remove_ids(self.server, nodes.system.nodeid)
+            space.remove_ids(self.server, nodes.pendant.nodeid)
             self.states.pop(cid)
         for cid, st in new.items():
             if cid not in self.cells:
-                self.cells[cid] = await space.add_cell(self.server, self.ns_ids, st)
-                await self._add_methods(cid, st.name, self.cells[cid])
-            else:
+                self.cells[cid] = await space.add_cell(self.server, self.ns_ids, st,
+                                                       self._templates, METHODS)
+                self._link_methods(cid, self.cells[cid])
+                # a cell is ~20 000 long-lived objects: out of the cyclic GC's reach, else its
+                # full collections (every few cells, ever longer) block the loop for seconds
+                gc.freeze()
+                await asyncio.sleep(0)  # clients are served between two new cells
+            elif st is not self.states[cid]:  # the same object: nothing changed
                 writes += await space.update_cell(self.cells[cid], self.states[cid], st)
             self.states[cid] = st
         for ev in await asyncio.to_thread(events_after, self.make_session, self.last_event_id):
@@ -244,16 +253,10 @@ class PendantOpcUa:
             self.last_event_id = ev.id
         return writes
 
-    async def _add_methods(self, cid: int, name: str, nodes: space.CellNodes) -> None:
-        ns = self.ns_ids[2]
-        S, I32, D = ua.VariantType.String, ua.VariantType.Int32, ua.VariantType.Double
-
-        def arg(name: str, variant: ua.VariantType, rank: int = -1, doc: str = "") -> ua.Argument:
-            a = ua.Argument(Name=name, DataType=ua.NodeId(variant.value), ValueRank=rank,
-                            Description=ua.LocalizedText(doc))
-            if rank == 1:
-                a.ArrayDimensions = [0]
-            return a
+    def _link_methods(self, cid: int, nodes: space.CellNodes) -> None:
+        """The callbacks of the cell's method nodes (:data:`METHODS`), each checking its
+        caller's permission and its arguments (:func:`_method`)."""
+        S, D = ua.VariantType.String, ua.VariantType.Double
 
         async def read_frame(table: str, number: int) -> list[ua.Variant] | ua.StatusCode:
             key = _slot_key(table, number)
@@ -284,24 +287,11 @@ class PendantOpcUa:
             await self.sync()  # the client reads its own write at once
             return [ua.Variant(outcome, ua.VariantType.UInt64)]
 
-        methods = (
-            ("ReadFrame", read_frame,
-             [arg("Table", S, doc="tool or base"), arg("Number", I32, doc="1..16 tools, 1..32 bases")],
-             [arg("Name", S), arg("Kind", S), arg("Frame", D, 1, "KUKA X, Y, Z (mm), A, B, C (deg)"),
-              arg("Version", ua.VariantType.UInt64)]),
-            ("ExportFile", export_file, [arg("Format", S, doc="kuka, abb, fanuc, ur or json")],
-             [arg("Text", S)]),
-            ("CommitFrame", commit_frame,
-             [arg("Table", S, doc="tool or base"), arg("Number", I32, doc="1..16 tools, 1..32 bases"),
-              arg("Frame", D, 1, "KUKA X, Y, Z (mm), A, B, C (deg)"),
-              arg("Name", S, doc="the slot's name; empty keeps it"),
-              arg("ExpectedVersion", ua.VariantType.UInt64,
-                  doc="the Version read before; a slot changed since is refused")],
-             [arg("NewVersion", ua.VariantType.UInt64)]),
-        )
-        for method_name, func, inputs, outputs in methods:
-            node = await _add_method(self.server, nodes.pendant, method_name, ns,
-                                     _method(method_name, func, inputs), inputs, outputs)
+        funcs = {"ReadFrame": read_frame, "ExportFile": export_file, "CommitFrame": commit_frame}
+        for method_name, inputs, _outputs in METHODS:
+            node = self.server.get_node(ua.NodeId(f"{nodes.pendant.nodeid.Identifier}.{method_name}",
+                                                  self.ns_ids[2]))
+            self.server.link_method(node, _method(method_name, funcs[method_name], inputs))
             self.rules.method_names[node.nodeid] = method_name
 
     def _export(self, cid: int, fmt: str) -> str:
@@ -312,28 +302,30 @@ class PendantOpcUa:
             return export_text(db, cid, fmt)
 
 
-async def _add_method(server: Server, parent: Node, name: str, ns: int, callback,
-                      inputs: list[ua.Argument], outputs: list[ua.Argument]) -> Node:
-    """A method of ``parent`` and its argument properties, every NodeId derived from the
-    parent's (asyncua's ``add_method`` numbers the properties: another id after a restart)."""
-    from asyncua.common.manage_nodes import create_property
+def _arg(name: str, variant: ua.VariantType, rank: int = -1, doc: str = "") -> ua.Argument:
+    a = ua.Argument(Name=name, DataType=ua.NodeId(variant.value), ValueRank=rank,
+                    Description=ua.LocalizedText(doc))
+    if rank == 1:
+        a.ArrayDimensions = [0]
+    return a
 
-    method_id = ua.NodeId(f"{parent.nodeid.Identifier}.{name}", ns)
-    attrs = ua.MethodAttributes(DisplayName=ua.LocalizedText(name), Executable=True,
-                                UserExecutable=True)
-    (res,) = await server.iserver.isession.add_nodes([ua.AddNodesItem(
-        ParentNodeId=parent.nodeid, ReferenceTypeId=ua.NodeId(ua.ObjectIds.HasComponent),
-        RequestedNewNodeId=method_id, BrowseName=ua.QualifiedName(name, ns),
-        NodeClass=ua.NodeClass.Method, NodeAttributes=attrs)])
-    res.StatusCode.check()
-    method = server.get_node(method_id)
-    for prop, args in (("InputArguments", inputs), ("OutputArguments", outputs)):
-        await create_property(method, ua.NodeId(f"{method_id.Identifier}.{prop}", ns),
-                              ua.QualifiedName(prop, 0), args,
-                              varianttype=ua.VariantType.ExtensionObject,
-                              datatype=ua.ObjectIds.Argument)
-    server.link_method(method, callback)
-    return method
+
+_S, _I32, _D, _U64 = (ua.VariantType.String, ua.VariantType.Int32, ua.VariantType.Double,
+                      ua.VariantType.UInt64)
+METHODS: tuple[tuple[str, list[ua.Argument], list[ua.Argument]], ...] = (
+    # each controller's pendant object's methods: name, input and output arguments
+    ("ReadFrame",
+     [_arg("Table", _S, doc="tool or base"), _arg("Number", _I32, doc="1..16 tools, 1..32 bases")],
+     [_arg("Name", _S), _arg("Kind", _S), _arg("Frame", _D, 1, "KUKA X, Y, Z (mm), A, B, C (deg)"),
+      _arg("Version", _U64)]),
+    ("ExportFile", [_arg("Format", _S, doc="kuka, abb, fanuc, ur or json")], [_arg("Text", _S)]),
+    ("CommitFrame",
+     [_arg("Table", _S, doc="tool or base"), _arg("Number", _I32, doc="1..16 tools, 1..32 bases"),
+      _arg("Frame", _D, 1, "KUKA X, Y, Z (mm), A, B, C (deg)"),
+      _arg("Name", _S, doc="the slot's name; empty keeps it"),
+      _arg("ExpectedVersion", _U64, doc="the Version read before; a slot changed since is refused")],
+     [_arg("NewVersion", _U64)]),
+)
 
 
 INTEGERS = {ua.VariantType.SByte, ua.VariantType.Byte, ua.VariantType.Int16,

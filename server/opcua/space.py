@@ -15,12 +15,13 @@ rotation, see :func:`opc_orientation`). docs/opcua.md has the tree.
 from __future__ import annotations
 
 import json
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, fields
 from datetime import UTC, datetime
 from pathlib import Path
 
 from asyncua import Node, Server, ua
 from asyncua.common.instantiate_util import instantiate
+from asyncua.server.address_space import AttributeValue, NodeData
 
 from server.opcua.state import ControllerState, EventState, SlotState
 
@@ -133,8 +134,188 @@ async def _set(node: Node, value: object, variant: ua.VariantType) -> None:
                                         SourceTimestamp=datetime.now(UTC)))
 
 
-async def add_cell(server: Server, ns_ids: tuple[int, int, int], st: ControllerState) -> CellNodes:
-    """Instantiate the controller's MotionDeviceSystem and its pendant frames object."""
+async def add_cell(server: Server, ns_ids: tuple[int, int, int], st: ControllerState,
+                   templates: dict | None = None,
+                   methods: tuple[tuple[str, list[ua.Argument], list[ua.Argument]], ...] = ()
+                   ) -> CellNodes:
+    """The controller's MotionDeviceSystem, its pendant frames object (and ``methods``' nodes,
+    linked by the caller), filled with ``st``'s values.
+
+    asyncua's ``instantiate`` browses the nodeset's types for every node it makes (about a
+    second a cell). The first cell of a shape (its axis count, its slots) is built that way
+    once, as a :class:`CellTemplate` under placeholder names, and taken out of the address
+    space; every cell is then a copy of it with its own NodeIds and names (a few ms, no
+    browse), in ``templates`` (a dict the caller keeps) for the next one."""
+    templates = {} if templates is None else templates
+    shape = (len(st.joints_deg), tuple((s.table, s.number) for s in st.slots),
+             tuple(m[0] for m in methods))
+    tpl = templates.get(shape)
+    if tpl is None:
+        tpl = templates[shape] = await CellTemplate.build(server, ns_ids, st, methods)
+    return await tpl.copy(server, st)
+
+
+# placeholders of a template's names, in Unicode's private use area (no controller has them)
+P_NAME, P_ROBOT, P_CREATED = "\ue000controller\ue000", "\ue000robot\ue000", "\ue000created\ue000"
+
+
+@dataclass
+class Subtree:
+    """A snapshot of a node and everything below it (asyncua's NodeData), out of the space."""
+
+    root: ua.NodeId
+    parent: ua.NodeId
+    parent_ref: ua.ReferenceDescription  # the parent's forward reference to the root
+    nodes: list[NodeData]
+
+    @classmethod
+    def take(cls, aspace, root: ua.NodeId) -> Subtree:
+        """Take ``root`` and every node below it whose string NodeId starts with ``root``'s
+        and a dot (the face's NodeIds are paths: a type's nodes are not taken) out of
+        ``aspace``."""
+        prefix = f"{root.Identifier}."
+        ids, seen = [root], {root}
+        for nid in ids:  # grows as it goes: breadth first over forward references
+            for r in aspace[nid].references:
+                t = r.NodeId
+                if r.IsForward and t not in seen and t.NamespaceIndex == root.NamespaceIndex \
+                        and isinstance(t.Identifier, str) and t.Identifier.startswith(prefix):
+                    seen.add(t)
+                    ids.append(t)
+        nodes = [aspace[n] for n in ids]
+        (up,) = [r for r in nodes[0].references
+                 if not r.IsForward and r.ReferenceTypeId != ua.NodeId(ua.ObjectIds.HasTypeDefinition)]
+        parent = aspace[up.NodeId]
+        (down,) = [r for r in parent.references if r.IsForward and r.NodeId == root]
+        parent.references.remove(down)
+        for n in ids:
+            del aspace[n]
+        return cls(root, up.NodeId, down, nodes)
+
+    def copy(self, aspace, rename) -> ua.NodeId:
+        """Add a copy: every NodeId, BrowseName and DisplayName through ``rename`` (a str
+        function, applied where a placeholder is); its root's NodeId."""
+        ns = self.root.NamespaceIndex
+        ids = {nd.nodeid: ua.NodeId(rename(nd.nodeid.Identifier), ns) for nd in self.nodes}
+        for nid in ids.values():
+            if nid in aspace:
+                raise RuntimeError(f"OPC UA node {nid} not added: BadNodeIdExists")
+        made = []
+        for nd in self.nodes:
+            new = NodeData(ids[nd.nodeid])
+            for attr, av in nd.attributes.items():
+                dv = av.value
+                if attr == ua.AttributeIds.NodeId:
+                    dv = ua.DataValue(ua.Variant(new.nodeid, ua.VariantType.NodeId))
+                elif attr == ua.AttributeIds.BrowseName and "\ue000" in dv.Value.Value.Name:
+                    q = dv.Value.Value
+                    dv = ua.DataValue(ua.Variant(ua.QualifiedName(rename(q.Name), q.NamespaceIndex),
+                                                 ua.VariantType.QualifiedName))
+                elif attr == ua.AttributeIds.DisplayName and "\ue000" in (dv.Value.Value.Text or ""):
+                    dv = ua.DataValue(ua.Variant(ua.LocalizedText(rename(dv.Value.Value.Text)),
+                                                 ua.VariantType.LocalizedText))
+                new.attributes[attr] = AttributeValue(dv)
+            new.references = [_renamed_ref(r, ids.get(r.NodeId, r.NodeId), rename)
+                              for r in nd.references]
+            made.append(new)
+        for new in made:
+            aspace[new.nodeid] = new
+        root = ids[self.root]
+        aspace[self.parent].references.append(_renamed_ref(self.parent_ref, root, rename))
+        return root
+
+
+def _renamed_ref(r: ua.ReferenceDescription, target: ua.NodeId, rename) -> ua.ReferenceDescription:
+    bname, dname = r.BrowseName, r.DisplayName
+    if "\ue000" in bname.Name:
+        bname = ua.QualifiedName(rename(bname.Name), bname.NamespaceIndex)
+    if "\ue000" in (dname.Text or ""):
+        dname = ua.LocalizedText(rename(dname.Text))
+    return ua.ReferenceDescription(ReferenceTypeId=r.ReferenceTypeId, IsForward=r.IsForward,
+                                   NodeId=target, BrowseName=bname, DisplayName=dname,
+                                   NodeClass=r.NodeClass, TypeDefinition=r.TypeDefinition)
+
+
+def remove_ids(server: Server, root: ua.NodeId) -> int:
+    """Delete ``root`` and every node whose NodeId is ``root``'s and a dot (a cell's subtree),
+    without asyncua's per-node browse; a subscriber of one of them hears BadNodeIdUnknown.
+    Returns how many nodes went."""
+    aspace = server.iserver.aspace
+    if root not in aspace:
+        return 0
+    sub = Subtree.take(aspace, root)
+    for nd in sub.nodes:  # the subscriptions' callbacks, as asyncua's delete calls them
+        aspace[nd.nodeid] = nd
+    server.iserver.node_mgt_service.delete_nodes(ua.DeleteNodesParameters(NodesToDelete=[
+        ua.DeleteNodesItem(NodeId=nd.nodeid, DeleteTargetReferences=False) for nd in sub.nodes]))
+    return len(sub.nodes)
+
+
+@dataclass
+class CellTemplate:
+    """A cell built once under placeholder names (:data:`P_NAME`, :data:`P_ROBOT`), out of
+    the address space: its two subtrees and its handles; :meth:`copy` makes a cell of it."""
+
+    key: str  # the template's node_key
+    system: Subtree
+    pendant: Subtree
+    nodes: CellNodes  # the handles, on the template's NodeIds
+    identity: dict[str, Node]  # the variables :func:`_identity_values` fills
+
+    @classmethod
+    async def build(cls, server: Server, ns_ids: tuple[int, int, int], like: ControllerState,
+                    methods) -> CellTemplate:
+        from dataclasses import replace
+
+        st = replace(like, name=P_NAME, robot_name=P_ROBOT, created_at=P_CREATED)
+        nodes, identity = await _build_cell(server, ns_ids, st)
+        for name, inputs, outputs in methods:
+            await add_method_node(server, nodes.pendant, name, ns_ids[2], inputs, outputs)
+        aspace = server.iserver.aspace
+        return cls(st.node_key, Subtree.take(aspace, nodes.system.nodeid),
+                   Subtree.take(aspace, nodes.pendant.nodeid), nodes, identity)
+
+    async def copy(self, server: Server, st: ControllerState) -> CellNodes:
+        key = self.key
+
+        def rename(s: str) -> str:
+            return s.replace(key, st.node_key).replace(P_NAME, st.name).replace(P_ROBOT, st.robot_name)
+
+        aspace = server.iserver.aspace
+        self.system.copy(aspace, rename)
+        try:
+            self.pendant.copy(aspace, rename)
+        except Exception:
+            remove_ids(server, ua.NodeId(rename(self.system.root.Identifier), self.system.root.NamespaceIndex))
+            raise
+
+        def moved(n: Node) -> Node:
+            return server.get_node(ua.NodeId(rename(n.nodeid.Identifier), n.nodeid.NamespaceIndex))
+
+        nodes = _map_nodes(self.nodes, moved)
+        values = _identity_values(st)
+        await write_many([(moved(self.identity[k]), v, t) for k, (v, t) in values.items()])
+        await update_cell(nodes, None, st)
+        return nodes
+
+
+def _map_nodes(obj, moved):
+    """``obj`` (CellNodes, SlotNodes, a tuple, list or dict of them) with every Node moved."""
+    if isinstance(obj, Node):
+        return moved(obj)
+    if isinstance(obj, tuple):
+        return tuple(_map_nodes(o, moved) for o in obj)
+    if isinstance(obj, list):
+        return [_map_nodes(o, moved) for o in obj]
+    if isinstance(obj, dict):
+        return {k: _map_nodes(v, moved) for k, v in obj.items()}
+    return type(obj)(**{f.name: _map_nodes(getattr(obj, f.name), moved) for f in fields(obj)})
+
+
+async def _build_cell(server: Server, ns_ids: tuple[int, int, int], st: ControllerState
+                      ) -> tuple[CellNodes, dict[str, Node]]:
+    """Instantiate the controller's MotionDeviceSystem and its pendant frames object the slow
+    way (asyncua's ``instantiate``); its handles and identity variables."""
     di, rob, ns = ns_ids
     device_set = await server.nodes.objects.get_child([f"{di}:DeviceSet"])
     dof = len(st.joints_deg)
@@ -153,9 +334,6 @@ async def add_cell(server: Server, ns_ids: tuple[int, int, int], st: ControllerS
     device = await _child(system, f"{rob}:MotionDevices", f"{rob}:{st.robot_name}")
     await _set(await _child(device, f"{rob}:MotionDeviceCategory"),
                MOTION_DEVICE_CATEGORY_ARTICULATED_ROBOT, ua.VariantType.Int32)
-    for var, text in (("Manufacturer", st.robot_name.split()[0]), ("Model", st.robot_name)):
-        await _set(await _child(device, f"{di}:{var}"), ua.LocalizedText(text),
-                   ua.VariantType.LocalizedText)
     axes = []
     for i in range(dof):
         axis = await _child(device, f"{rob}:Axes", f"{rob}:A{i + 1}")
@@ -176,7 +354,10 @@ async def add_cell(server: Server, ns_ids: tuple[int, int, int], st: ControllerS
 
     ctrl = await _child(system, f"{rob}:Controllers", f"{rob}:{st.name}")
     user = await _child(ctrl, f"{rob}:CurrentUser", f"{rob}:Level")
-    await _identify(system, device, ctrl, load, st, ns_ids)
+    identity = await _identity_nodes(system, device, ctrl, load, dof, ns_ids)
+    values = _identity_values(st)
+    await write_many([(identity[k], v, t) for k, (v, t) in values.items()])
+    await _no_good_nulls(system)
 
     pendant, slot_ids = await _pendant_object(server, ns, st)
     nodes = CellNodes(
@@ -192,7 +373,22 @@ async def add_cell(server: Server, ns_ids: tuple[int, int, int], st: ControllerS
         sessions=await _child(pendant, f"{ns}:Sessions"))
     nodes.slots = {key: _slot_nodes(server, ids) for key, ids in slot_ids.items()}
     await update_cell(nodes, None, st)
-    return nodes
+    return nodes, identity
+
+
+async def write_many(writes: list[tuple[Node, object, ua.VariantType]]) -> None:
+    """Write values with their SourceTimestamp (when the face saw them in the database) in
+    one Write call of the server's own session (the nodes')."""
+    if not writes:
+        return
+    now = datetime.now(UTC)
+    params = ua.WriteParameters(NodesToWrite=[
+        ua.WriteValue(NodeId=node.nodeid, AttributeId=ua.AttributeIds.Value,
+                      Value=ua.DataValue(ua.Variant(value, variant), SourceTimestamp=now))
+        for node, value, variant in writes])
+    for (node, _v, _t), status in zip(writes, await writes[0][0].session.write(params)):
+        if not status.is_good():
+            raise RuntimeError(f"OPC UA write of {node.nodeid} refused: {status}")
 
 
 UNECE = "http://www.opcfoundation.org/UA/units/un/cefact"
@@ -212,62 +408,89 @@ ORIENTATION_ORDER = ("A about X (roll), B about Y (pitch), C about Z (yaw), degr
 OPERATIONAL_MODE_T1 = 1  # OperationalModeEnumeration MANUAL_REDUCED_SPEED: a teach pendant's T1
 
 
-async def _identify(system: Node, device: Node, ctrl: Node, load: Node, st: ControllerState,
-                    ns_ids: tuple[int, int, int]) -> None:
+async def _identity_nodes(system: Node, device: Node, ctrl: Node, load: Node, dof: int,
+                          ns_ids: tuple[int, int, int]) -> dict[str, Node]:
+    """The variables of :func:`_identity_values`, by its keys."""
+    di, rob, _ns = ns_ids
+    software = await _child(ctrl, f"{rob}:Software", f"{rob}:pendant")
+    task = await _child(ctrl, f"{rob}:TaskControls", f"{rob}:Calibration")
+    safety = await _child(system, f"{rob}:SafetyStates", f"{rob}:SafetyState", f"{di}:ParameterSet")
+    orient = await _child(load, f"{rob}:CenterOfMass", "0:Orientation")
+    paths: dict[str, tuple[Node, tuple[str, ...]]] = {
+        "device.Manufacturer": (device, (f"{di}:Manufacturer",)),
+        "device.Model": (device, (f"{di}:Model",)),
+        "device.ProductCode": (device, (f"{di}:ProductCode",)),
+        "device.SerialNumber": (device, (f"{di}:SerialNumber",)),
+        "device.SpeedOverride": (device, (f"{di}:ParameterSet", f"{rob}:SpeedOverride")),
+        "ctrl.Manufacturer": (ctrl, (f"{di}:Manufacturer",)),
+        "ctrl.Model": (ctrl, (f"{di}:Model",)),
+        "ctrl.ProductCode": (ctrl, (f"{di}:ProductCode",)),
+        "ctrl.SerialNumber": (ctrl, (f"{di}:SerialNumber",)),
+        "software.Manufacturer": (software, (f"{di}:Manufacturer",)),
+        "software.Model": (software, (f"{di}:Model",)),
+        "software.SoftwareRevision": (software, (f"{di}:SoftwareRevision",)),
+        "task.ComponentName": (task, (f"{di}:ComponentName",)),
+        "task.TaskProgramName": (task, (f"{di}:ParameterSet", f"{rob}:TaskProgramName")),
+        "task.TaskProgramLoaded": (task, (f"{di}:ParameterSet", f"{rob}:TaskProgramLoaded")),
+        "safety.EmergencyStop": (safety, (f"{rob}:EmergencyStop",)),
+        "safety.ProtectiveStop": (safety, (f"{rob}:ProtectiveStop",)),
+        "safety.OperationalMode": (safety, (f"{rob}:OperationalMode",)),
+        "load.MassUnits": (load, (f"{rob}:Mass", "0:EngineeringUnits")),
+        "load.Orientation": (orient, ()),
+        **{f"load.Orientation.{k}": (orient, (f"0:{k}",)) for k in "ABC"},
+    }
+    for i in range(dof):
+        motor = await _child(device, f"{rob}:PowerTrains", f"{rob}:PT{i + 1}", f"{rob}:Motor")
+        paths[f"motor{i}.Manufacturer"] = (motor, (f"{di}:Manufacturer",))
+        paths[f"motor{i}.Model"] = (motor, (f"{di}:Model",))
+        paths[f"motor{i}.TemperatureUnits"] = (motor, (f"{di}:ParameterSet",
+                                                       f"{rob}:MotorTemperature",
+                                                       "0:EngineeringUnits"))
+    return {k: (await _child(node, *path) if path else node) for k, (node, path) in paths.items()}
+
+
+def _identity_values(st: ControllerState) -> dict[str, tuple[object, ua.VariantType]]:
     """The mandatory values an emulated cell knows (the robot catalogue: maker and model;
-    pendant: the software; the emulator: T1, no stop, full speed), and ``BadNotReadable`` for
-    the rest (a motor's serial number, its temperature): never a Good Null."""
+    pendant: the software; the emulator: T1, no stop, full speed). What it does not know (a
+    motor's serial number, its temperature) reads ``BadNotReadable``: never a Good Null."""
     from importlib.metadata import PackageNotFoundError, version
 
-    di, rob, _ns = ns_ids
     try:
         revision = version("pendant")
     except PackageNotFoundError:
         revision = "unknown"
     maker = st.robot_name.split()[0]
-    lt, s_ = ua.VariantType.LocalizedText, ua.VariantType.String
-    values: list[tuple[Node, object, ua.VariantType]] = [
-        (await _child(device, f"{di}:ProductCode"), st.robot_key, s_),
-        (await _child(device, f"{di}:SerialNumber"), f"emulated:{st.node_key}", s_),
-        (await _child(device, f"{di}:ParameterSet", f"{rob}:SpeedOverride"), 100.0,
-         ua.VariantType.Double),
-        (await _child(ctrl, f"{di}:Manufacturer"), ua.LocalizedText("pendant"), lt),
-        (await _child(ctrl, f"{di}:Model"), ua.LocalizedText(f"emulated {maker} controller"), lt),
-        (await _child(ctrl, f"{di}:ProductCode"), "pendant-emulator", s_),
-        (await _child(ctrl, f"{di}:SerialNumber"), f"emulated:{st.node_key}", s_),
-    ]
-    software = await _child(ctrl, f"{rob}:Software", f"{rob}:pendant")
-    values += [(await _child(software, f"{di}:Manufacturer"), ua.LocalizedText("pendant"), lt),
-               (await _child(software, f"{di}:Model"), ua.LocalizedText("pendant"), lt),
-               (await _child(software, f"{di}:SoftwareRevision"), revision, s_)]
-    task = await _child(ctrl, f"{rob}:TaskControls", f"{rob}:Calibration")
-    values += [(await _child(task, f"{di}:ComponentName"), ua.LocalizedText("Calibration"), lt),
-               (await _child(task, f"{di}:ParameterSet", f"{rob}:TaskProgramName"),
-                "calibration menus", s_),
-               (await _child(task, f"{di}:ParameterSet", f"{rob}:TaskProgramLoaded"), True,
-                ua.VariantType.Boolean)]
-    safety = await _child(system, f"{rob}:SafetyStates", f"{rob}:SafetyState", f"{di}:ParameterSet")
-    values += [(await _child(safety, f"{rob}:EmergencyStop"), False, ua.VariantType.Boolean),
-               (await _child(safety, f"{rob}:ProtectiveStop"), False, ua.VariantType.Boolean),
-               (await _child(safety, f"{rob}:OperationalMode"), OPERATIONAL_MODE_T1,
-                ua.VariantType.Int32),
-               (await _child(load, f"{rob}:Mass", "0:EngineeringUnits"), UNITS["kg"],
-                ua.VariantType.ExtensionObject)]
-    # the centre of mass frame's orientation: the flange's (the inertia is about its axes)
-    orient = await _child(load, f"{rob}:CenterOfMass", "0:Orientation")
-    values += [(orient, ua.ThreeDOrientation(), ua.VariantType.ExtensionObject)]
-    values += [(await _child(orient, f"0:{k}"), 0.0, ua.VariantType.Double) for k in "ABC"]
+    lt, s_, d = ua.VariantType.LocalizedText, ua.VariantType.String, ua.VariantType.Double
+    b, ext = ua.VariantType.Boolean, ua.VariantType.ExtensionObject
+    values: dict[str, tuple[object, ua.VariantType]] = {
+        "device.Manufacturer": (ua.LocalizedText(maker), lt),
+        "device.Model": (ua.LocalizedText(st.robot_name), lt),
+        "device.ProductCode": (st.robot_key, s_),
+        "device.SerialNumber": (f"emulated:{st.node_key}", s_),
+        "device.SpeedOverride": (100.0, d),
+        "ctrl.Manufacturer": (ua.LocalizedText("pendant"), lt),
+        "ctrl.Model": (ua.LocalizedText(f"emulated {maker} controller"), lt),
+        "ctrl.ProductCode": ("pendant-emulator", s_),
+        "ctrl.SerialNumber": (f"emulated:{st.node_key}", s_),
+        "software.Manufacturer": (ua.LocalizedText("pendant"), lt),
+        "software.Model": (ua.LocalizedText("pendant"), lt),
+        "software.SoftwareRevision": (revision, s_),
+        "task.ComponentName": (ua.LocalizedText("Calibration"), lt),
+        "task.TaskProgramName": ("calibration menus", s_),
+        "task.TaskProgramLoaded": (True, b),
+        "safety.EmergencyStop": (False, b),
+        "safety.ProtectiveStop": (False, b),
+        "safety.OperationalMode": (OPERATIONAL_MODE_T1, ua.VariantType.Int32),
+        "load.MassUnits": (UNITS["kg"], ext),
+        # the centre of mass frame's orientation: the flange's (the inertia is about its axes)
+        "load.Orientation": (ua.ThreeDOrientation(), ext),
+        **{f"load.Orientation.{k}": (0.0, d) for k in "ABC"},
+    }
     for i in range(len(st.joints_deg)):
-        motor = await _child(device, f"{rob}:PowerTrains", f"{rob}:PT{i + 1}", f"{rob}:Motor")
-        values += [(await _child(motor, f"{di}:Manufacturer"), ua.LocalizedText(maker), lt),
-                   (await _child(motor, f"{di}:Model"),
-                    ua.LocalizedText(f"{st.robot_name} A{i + 1} motor"), lt),
-                   (await _child(motor, f"{di}:ParameterSet", f"{rob}:MotorTemperature",
-                                 "0:EngineeringUnits"), UNITS["degC"],
-                    ua.VariantType.ExtensionObject)]
-    for node, value, variant in values:
-        await _set(node, value, variant)
-    await _no_good_nulls(system)
+        values[f"motor{i}.Manufacturer"] = (ua.LocalizedText(maker), lt)
+        values[f"motor{i}.Model"] = (ua.LocalizedText(f"{st.robot_name} A{i + 1} motor"), lt)
+        values[f"motor{i}.TemperatureUnits"] = (UNITS["degC"], ext)
+    return values
 
 
 async def _no_good_nulls(node: Node) -> None:
@@ -465,8 +688,7 @@ async def update_cell(nodes: CellNodes, old: ControllerState | None, new: Contro
                    (sn.updated_at, s.updated_at, s_)]
         writes += [(n, v, dbl) for n, v in zip(sn.xyz, s.pose[:3])]
         writes += [(n, v, dbl) for n, v in zip(sn.abc, (o.A, o.B, o.C))]
-    for node, value, variant in writes:
-        await _set(node, value, variant)
+    await write_many(writes)
     return len(writes)
 
 
@@ -488,3 +710,27 @@ async def raise_event(gen, ev: EventState) -> None:
     gen.event.Message = ua.LocalizedText(f"{ev.kind} on {ev.controller or 'the service'}")
     gen.event.Severity = 300
     await gen.trigger()
+
+
+async def add_method_node(server: Server, parent: Node, name: str, ns: int,
+                          inputs: list[ua.Argument], outputs: list[ua.Argument]) -> Node:
+    """A method of ``parent`` and its argument properties, every NodeId derived from the
+    parent's (asyncua's ``add_method`` numbers the properties: another id after a restart);
+    the caller links its callback."""
+    from asyncua.common.manage_nodes import create_property
+
+    method_id = ua.NodeId(f"{parent.nodeid.Identifier}.{name}", ns)
+    attrs = ua.MethodAttributes(DisplayName=ua.LocalizedText(name), Executable=True,
+                                UserExecutable=True)
+    (res,) = await server.iserver.isession.add_nodes([ua.AddNodesItem(
+        ParentNodeId=parent.nodeid, ReferenceTypeId=ua.NodeId(ua.ObjectIds.HasComponent),
+        RequestedNewNodeId=method_id, BrowseName=ua.QualifiedName(name, ns),
+        NodeClass=ua.NodeClass.Method, NodeAttributes=attrs)])
+    res.StatusCode.check()
+    method = server.get_node(method_id)
+    for prop, args in (("InputArguments", inputs), ("OutputArguments", outputs)):
+        await create_property(method, ua.NodeId(f"{method_id.Identifier}.{prop}", ns),
+                              ua.QualifiedName(prop, 0), args,
+                              varianttype=ua.VariantType.ExtensionObject,
+                              datatype=ua.ObjectIds.Argument)
+    return method
