@@ -19,7 +19,11 @@ from db.models import (BASE_SLOTS, TOOL_SLOTS, CalibSession, Controller, Control
                        utcnow)
 from db.outbox import emit
 
-SLOTS = {"tool": TOOL_SLOTS, "base": BASE_SLOTS}
+SLOTS = {"tool": TOOL_SLOTS, "base": BASE_SLOTS}  # the tables of a new controller (KUKA's)
+# An ABB controller has no tool or work-object table: it holds as many tooldata and wobjdata
+# as its modules declare. An ABB-kind controller's tables grow to what an imported module
+# declares, up to this many slots each (a bound on the database, not RAPID's).
+ABB_SLOTS = 999
 SESSION_WITH_POINTS = [joinedload(CalibSession.points)]
 ENTRY = select(FrameEntry).where(  # one slot (built once: every slot read and write uses it)
     FrameEntry.controller_id == bindparam("controller_id"),
@@ -124,12 +128,53 @@ def delete_controller(db: Session, controller: Controller) -> None:
 
 # -------------------------------------------------------------------------------- entries
 
+def is_abb(c: Controller) -> bool:
+    """An ABB-kind controller (an ABB arm of the library): its tables hold what its RAPID
+    modules declare (:data:`ABB_SLOTS`); any other holds KUKA's 16 tools and 32 bases."""
+    return (c.robot_key or "").startswith("abb_")
+
+
+def slot_limit(c: Controller, table: str) -> int:
+    """The highest slot number ``table`` of controller ``c`` may have."""
+    return ABB_SLOTS if is_abb(c) else SLOTS[table]
+
+
+def find_entry(db: Session, controller_id: int, table: str, number: int) -> FrameEntry | None:
+    """Slot ``number`` of the controller's ``table``, or None where the table has no such row."""
+    return db.scalar(ENTRY, {"controller_id": controller_id, "table": table, "number": number})
+
+
+def empty_entry(table: str, number: int) -> FrameEntry:
+    """An unused slot, not in the database (what a table would grow with)."""
+    e = FrameEntry(entry_table=table, number=number, name="", kind=DEFAULT_KIND[table])
+    e.set_pose_values((0.0,) * 6)
+    return e
+
+
+def ensure_entry(db: Session, c: Controller, table: str, number: int) -> FrameEntry:
+    """Slot ``number`` of ``c``, made (unused) when an ABB-kind controller's table grows to
+    it; NotFound past :func:`slot_limit`."""
+    limit = slot_limit(c, table)
+    if not 1 <= number <= limit:
+        raise NotFound(("number",), f"{table} slots of controller {c.name!r} are numbered "
+                       f"1..{limit}, got {number}")
+    e = find_entry(db, c.id, table, number)
+    if e is None:
+        e = empty_entry(table, number)
+        e.controller_id = c.id
+        db.add(e)
+        db.flush()
+    return e
+
+
 def check_slot_address(db: Session | Connection, controller_id: int, table: str,
                        number: int) -> None:
-    """404 naming the path parameter for a slot number out of the table's range, or a
-    controller id no row of this backend can have."""
-    if not 1 <= number <= SLOTS[table]:
-        raise NotFound(("number",), f"{table} slots are numbered 1..{SLOTS[table]}, got {number}")
+    """404 naming the path parameter for a slot number out of every table's range (an
+    existing number is checked by the read), or a controller id no row of this backend can
+    have."""
+    if not 1 <= number <= ABB_SLOTS:
+        raise NotFound(("number",), f"{table} slots are numbered 1..{ABB_SLOTS} at most, "
+                       f"got {number}")
     if _row_id(controller_id, db) is None:
         raise NotFound(("controller_id",), f"no controller {controller_id}")
 
@@ -460,7 +505,7 @@ def restore_backup(db: Session, c: Controller, doc: dict[str, Any]) -> tuple[int
         session_ids[int(sd["id"])] = s.id
     n_entries = 0
     for ed in doc["entries"]:
-        e = get_entry(db, c.id, ed["table"], int(ed["number"]))
+        e = ensure_entry(db, c, ed["table"], int(ed["number"]))
         snap = dict(ed)
         snap["session_id"] = session_ids.get(ed.get("session_id")) if ed.get("session_id") else None
         apply_snapshot(e, snap)

@@ -16,8 +16,7 @@ from server import formats
 
 CORPUS = Path(__file__).parent / "data" / "controller-files"
 FILES = sorted(p for p in CORPUS.iterdir() if p.suffix in (".dat", ".mod", ".sys"))
-#: beyond the 16 tool slots of a controller (docs/formats.md, "Limits"): read at format level
-FORMAT_ONLY = {"abb_backup_36_tools.sys"}
+ABB_ARM = "abb_irb120"  # an ABB-kind controller: its tables hold what its modules declare
 NUM = re.compile(r"[+-]?(?:\d+\.?\d*|\.\d+)(?:[eE][+-]?\d+)?")
 
 
@@ -63,10 +62,19 @@ def pick(entries: list[formats.FrameEntry]) -> tuple[formats.FrameEntry, formats
     return tools[0], bases[0]
 
 
-@pytest.mark.parametrize("path", [p for p in FILES if p.name not in FORMAT_ONLY], ids=lambda p: p.name)
+def controller_for(client, fmt: str) -> str:  # noqa: ANN001
+    """The demo KUKA cell for a KUKA file; a new ABB cell for a RAPID module."""
+    if fmt == "kuka":
+        return C
+    cid = ok(client.post("/controllers", json={"name": "abb-cell", "robot": ABB_ARM}))["id"]
+    return f"/controllers/{cid}"
+
+
+@pytest.mark.parametrize("path", FILES, ids=lambda p: p.name)
 def test_corpus_file_comes_back_whole_with_only_the_change_asked_for(client, path):
     raw = path.read_bytes()
     fmt = fmt_of(path)
+    C = controller_for(client, fmt)  # noqa: N806  (the controller's path, as elsewhere)
     text, encoding = formats.decode_file(raw)
     ok(client.post(f"{C}/import", json={"format": fmt, "text": text, "encoding": encoding}))
     r = client.get(f"{C}/export", params={"format": fmt})
@@ -109,3 +117,20 @@ def test_corpus_file_comes_back_whole_with_only_the_change_asked_for(client, pat
             assert got.pose.a == pytest.approx(e.pose.a + 1, abs=1e-6)
         else:
             assert got == e
+
+
+def test_a_kuka_kind_controller_keeps_16_tools_and_names_the_line_of_the_17th(client):
+    """The 36-tool RobotWare backup imports whole into an ABB-kind controller (above); a
+    KUKA-kind controller has 16 tool slots: refused, naming tool 17's line, nothing changed."""
+    path = CORPUS / "abb_backup_36_tools.sys"
+    text, encoding = formats.decode_file(path.read_bytes())
+    before = client.get(f"{C}/export", params={"format": "json"}).json()["entries"]
+    r = client.post(f"{C}/import", json={"format": "abb", "text": text, "encoding": encoding})
+    assert r.status_code == 422, r.text
+    (err,) = r.json()["detail"]
+    tool17 = next(e for e in formats.READERS["abb"](text).entries
+                  if e.kind == "tool" and e.number == 17)
+    assert "tool 17" in err["msg"] and "16 tools" in err["msg"], err
+    assert str(formats.READERS["abb"](text).slot_lines[("robot_held", 17)]) in str(err["loc"]), err
+    assert tool17.number == 17
+    assert client.get(f"{C}/export", params={"format": "json"}).json()["entries"] == before

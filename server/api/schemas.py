@@ -424,7 +424,7 @@ class SessionParamsIn(In):
 
 class SessionIn(In):
     method: MethodName
-    target_no: int = Field(ge=1, le=32, strict=True,
+    target_no: int = Field(ge=1, le=999, strict=True,
                            description="tool (1-16) or base (1-32) slot to calibrate")
     params: SessionParamsIn = SessionParamsIn()
 

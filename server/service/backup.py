@@ -17,7 +17,7 @@ from typing import Annotated, Any, Literal
 
 from pydantic import BaseModel, ConfigDict, Field, ValidationError, field_validator, model_validator
 
-from db.crud import MAX_ID, SLOTS, KINDS_OF_TABLE
+from db.crud import ABB_SLOTS, KINDS_OF_TABLE, MAX_ID
 from db.models import EXT_KIN_SLOTS
 from server.menus import METHODS
 from server.service.bounds import MAX_T_S, MECH_UNIT_CHARS, Deg, Kg, Kgm2, Mm
@@ -118,7 +118,7 @@ def _kind_fits(table: str, kind: str) -> None:
 
 
 def _number_fits(table: str, number: int) -> None:
-    slots = EXT_KIN_SLOTS if table == "extkin" else SLOTS[table]
+    slots = EXT_KIN_SLOTS if table == "extkin" else ABB_SLOTS  # a KUKA-kind: 16 / 32
     if not 1 <= number <= slots:
         raise ValueError(f"{table} slots are numbered 1..{slots}, got {number}")
 
@@ -226,8 +226,8 @@ class ControllerIn(_Doc):
     custom_robot: dict[str, Any] | None = None
     cell_seed: int | None = None
     joints_deg: list[Deg] | None = Field(None, min_length=1, max_length=7)
-    active_tool_no: int = Field(0, ge=0, le=SLOTS["tool"])
-    active_base_no: int = Field(0, ge=0, le=SLOTS["base"])
+    active_tool_no: int = Field(0, ge=0, le=ABB_SLOTS)
+    active_base_no: int = Field(0, ge=0, le=ABB_SLOTS)
     external_axes: dict[Literal["E1", "E2", "E3", "E4", "E5", "E6"],
                         Annotated[float, Field(ge=-1e4, le=1e4)]] | None = None
     external_errors: dict[str, dict[str, float]] | None = None

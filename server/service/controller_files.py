@@ -228,14 +228,22 @@ def apply_import(db: Session, controller: Controller, fmt: str, text: str,
     for family, number, fe in sorted(named, key=lambda x: (x[0] != "robot_held", x[1])):
         table = TABLE_OF_FAMILY[family]
         line = parsed.slot_lines.get((family, number))
-        if not 1 <= number <= crud.SLOTS[table]:
+        limit = crud.slot_limit(controller, table)
+        if not 1 <= number <= limit:
             if fe is None:
                 continue  # an unused slot beyond the tables: nothing to empty
             where = f"line {line}" if line else "file"
             raise CalibrationError(("text", where, f"{fe.kind} {number}"),
-                                   f"{table} slots are numbered 1..{crud.SLOTS[table]}; "
-                                   f"this controller has no {table} {number}")
-        row = crud.get_entry(db, controller.id, table, number)
+                                   f"{table} slots are numbered 1..{limit}; this controller "
+                                   f"has no {table} {number}" + (
+                                       "" if crud.is_abb(controller) else
+                                       " (a KUKA-kind controller keeps 16 tools and 32 bases)"))
+        row = crud.find_entry(db, controller.id, table, number)
+        if row is None:  # beyond an ABB-kind controller's table so far
+            if fe is None:
+                continue  # an unused slot of a table that never grew to it
+            row = (crud.empty_entry(table, number) if dry_run
+                   else crud.ensure_entry(db, controller, table, number))
         before = {f: getattr(row, f) for f in slot_values(None, table)}
         after = slot_values(fe, table)
         changed = (any(before[k] != v for k, v in after.items())

@@ -66,9 +66,11 @@ def open_session(controller_id: int, body: SessionIn, db: SessionDep,
     for p in spec.required:
         if p not in params:
             raise CalibrationError(("params", p), f"required by {spec.name}: {PARAM_HELP[p]}")
-    if spec.table == "tool" and body.target_no > crud.SLOTS["tool"]:
-        raise CalibrationError(("target_no",),
-                               f"{spec.name} writes a tool slot (1..16), got {body.target_no}")
+    if spec.table in crud.SLOTS and body.target_no > crud.slot_limit(c, spec.table):
+        raise CalibrationError(("target_no",), f"{spec.name} writes a {spec.table} slot "
+                               f"(1..{crud.slot_limit(c, spec.table)}), got {body.target_no}")
+    if spec.table in crud.SLOTS:
+        crud.ensure_entry(db, c, spec.table, body.target_no)  # an ABB-kind table grows to it
     if spec.table == "extkin" and body.target_no > EXT_KIN_SLOTS:
         raise CalibrationError(("target_no",), f"{spec.name} writes an external kinematic "
                                f"(EX_KIN 1..{EXT_KIN_SLOTS}), got {body.target_no}")
