@@ -197,8 +197,19 @@ class Http:
         self.idle: list[tuple[asyncio.StreamReader, asyncio.StreamWriter]] = []
 
     async def request(self, method: str, path: str, body: bytes | None = None) -> tuple[int, bytes]:
-        conn = self.idle.pop() if self.idle else await asyncio.open_connection(self.host, self.port)
-        reader, writer = conn
+        """One request; on a kept connection the service closed meanwhile (its keep-alive
+        timeout), once more on a new connection."""
+        reused = bool(self.idle)
+        try:
+            return await self._send(self.idle.pop() if reused else None, method, path, body)
+        except (asyncio.IncompleteReadError, ConnectionError):
+            if not reused:
+                raise
+            return await self._send(None, method, path, body)
+
+    async def _send(self, conn: tuple | None, method: str, path: str,
+                    body: bytes | None) -> tuple[int, bytes]:
+        reader, writer = conn or await asyncio.open_connection(self.host, self.port)
         extra = (f"Content-Type: application/json\r\nContent-Length: {len(body)}\r\n"
                  if body is not None else "")
         writer.write(f"{method} {path} HTTP/1.1\r\nHost: {self.host}\r\n{self.head}{extra}\r\n"
@@ -211,7 +222,7 @@ class Http:
         status = int(head[9:12])
         m = re.search(rb"(?i)\r\ncontent-length: *(\d+)", head)
         data = await reader.readexactly(int(m.group(1))) if m else b""
-        self.idle.append(conn)
+        self.idle.append((reader, writer))
         return status, data
 
     def close(self) -> None:
@@ -331,6 +342,8 @@ def run_backend(name: str, db_url: str, args: argparse.Namespace) -> dict:
                   f"{r['touch'][1]:.1f} ms, errors {len(r['errors'])}", flush=True)
             if r["touch"][1] <= P99_TARGET_MS and not r["errors"]:
                 max_rate = rate
+            for e in r["errors"][:2]:
+                print(f"{name}:     error: {e}", file=sys.stderr)
         beside = asyncio.run(plant_load(base, touch_urls, cells, args.rate, args.seconds, 2,
                                         read_rate=args.read_rate))
         errors += beside["errors"]
