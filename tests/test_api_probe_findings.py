@@ -239,3 +239,10 @@ def test_sqlite_out_of_memory_in_a_job_is_the_memory_limit():
     assert _error_of(wrapped)["detail"][0]["type"] == "memory_limit"
     locked = OperationalError("BEGIN", {}, sqlite3.OperationalError("database is locked"))
     assert not out_of_memory(locked) and _error_of(locked)["status"] == 500
+
+
+def test_an_unknown_slot_kind_filter_is_422_naming_it(client):
+    """Item 9: ``?kind=nonsense`` answered ``[]``; a filter no slot can match is a mistake."""
+    r = client.get(f"{C}/tools", params={"kind": "nonsense"})
+    assert r.status_code == 422 and r.json()["detail"][0]["loc"][-1] == "kind", r.text
+    assert client.get(f"{C}/tools", params={"kind": "tool"}).status_code == 200

@@ -80,3 +80,14 @@ def test_a_typed_in_tool_counts_as_exact_and_the_report_says_so(client):
     rep = ok(client.post(f"{url}/compute"))
     term = rep["extras"]["bound_terms"]["tool 1 TCP"]
     assert term["position_bound95_mm"] is None and "counts as exact" in term["source"]
+
+
+def test_the_welch_satterthwaite_widening_stays_finite_on_every_scipy():
+    """A chained bound's F widening with an enormous or round-off Welch-Satterthwaite dof is
+    the chi-square bound's (scipy 1.14's fdtri gave nan at dof 4.3e41, a 500 on compute)."""
+    from solvers.external import chain
+
+    assert chain._f_over_chi(4.3e41, 3) == 1.0 and chain._f_over_chi(None, 3) == 1.0
+    assert 1.0 < chain._f_over_chi(5.0, 3) < 2.0
+    assert chain._welch_dof(-1e-30, 4.0, [0.0], [None]) is None  # round-off, no variance
+    assert chain._welch_dof(0.01, 4.0, [0.01], [8.0]) >= 4.0  # never below the smallest

@@ -107,8 +107,9 @@ def propagate(solve: Callable[[FloatArray], FloatArray], x0: object, covariance:
 def _f_over_chi(dof: float | None, f: int = 3) -> float:
     """``sqrt(f F(f, dof; 0.95) / χ²(f; 0.95))``: how much wider an F bound is than the
     chi-square bound of the same covariance (1 for dof None or infinite)."""
-    if dof is None or not np.isfinite(dof):
-        return 1.0
+    if dof is None or not np.isfinite(dof) or dof > 1e6:
+        return 1.0  # F(f, dof) -> chi2(f)/f; scipy 1.14's fdtri gives nan for dof near 1e41
+    dof = max(float(dof), 1.0)
     return float(np.sqrt(f * special.fdtri(f, dof, 0.95) / special.chdtri(f, 0.05)))
 
 
@@ -147,10 +148,12 @@ def _welch_dof(own: float, dof: float | None, others: list[float],
     .. [1] F. E. Satterthwaite, "An approximate distribution of estimates of variance
        components", Biometrics Bulletin 2(6), 110-114, 1946.
     """
-    v = [own, *others]
+    v = [max(float(x), 0.0) for x in (own, *others)]  # a variance's round-off below 0 is 0
     nus = [dof, *other_dofs]
     den = sum(x * x / n for x, n in zip(v, nus) if n)
-    return None if den <= 0 else sum(v) ** 2 / den
+    if den <= 0 or sum(v) <= 0:
+        return None  # every term with sigma known, or no variance at all: chi-square
+    return sum(v) ** 2 / den  # >= the smallest nu_i of a term that counts
 
 
 def welch_dof(variances: list[float], dofs: list[float | None]) -> float | None:

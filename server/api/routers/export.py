@@ -103,22 +103,11 @@ def import_tables(controller_id: int, body: ImportIn, db: SessionDep, request: R
     if body.format == "json":
         require(request, "backup:restore")
         mark_operation("backup.restore")
-        from server.service.backup import parse_backup
         from server.api.routers.common import robot_of
-        from solvers.dh import check_joint_limits
+        from server.service.backup import check_controller_joints, parse_backup
 
         doc = parse_backup(body.text)  # checked: nothing a later read cannot handle is stored
-        joints = (doc.get("controller") or {}).get("joints_deg")
-        if joints is not None:
-            robot = robot_of(c)
-            loc = ("text", "controller", "joints_deg")
-            if len(joints) != robot.dof:
-                raise CalibrationError(loc, f"has {len(joints)} values; this controller's robot "
-                                       f"has {robot.dof} joints")
-            try:
-                check_joint_limits(robot, joints)
-            except CalibrationError as err:
-                raise CalibrationError(loc + tuple(err.loc[1:]), err.reason) from None
+        check_controller_joints(robot_of(c), doc)  # the same check as pendant restore
         if body.dry_run:
             return ImportOut(format="json", entries=len(doc["entries"]), dry_run=True)
         response.status_code = 202  # the restore itself is a job (server.jobs.kinds)

@@ -11,7 +11,7 @@ from db.models import EntryHistory, FrameEntry
 from server.api.deps import SessionDep
 from server.api.preconditions import IfMatch, check, etag, set_etag
 from server.api.routers.common import entry_out, load_values
-from server.api.schemas import EntryIn, EntryOut, HistoryOut, LoadPatchIn
+from server.api.schemas import EntryIn, EntryKind, EntryOut, HistoryOut, LoadPatchIn
 from solvers.errors import CalibrationError
 
 
@@ -89,7 +89,7 @@ def table_router(table: str, path: str, tag: str) -> APIRouter:
     label = "tool (TOOL_DATA)" if table == "tool" else "base (BASE_DATA)"
 
     @router.get("", name=f"list_{path}", summary=f"All {label} slots")
-    def list_slots(controller_id: int, db: SessionDep, kind: str | None = None) -> list[EntryOut]:
+    def list_slots(controller_id: int, db: SessionDep, kind: EntryKind | None = None) -> list[EntryOut]:
         crud.get_controller(db, controller_id)
         return [entry_out(e) for e in crud.list_entries(db, controller_id, table, kind)]
 
