@@ -42,6 +42,18 @@ GEAR_MIN_PERIODS = 1.0       # a harmonic is a candidate only where the joint's 
 TAU_GRID = (1 / 16, 1 / 8, 1 / 4, 1 / 2, 1.0, 2.0, None)   # warm-up tau / recording span
 
 
+def effect_key(effect: str, joint: int | None, dh_parameter: str | None,
+               periods: int | None, tau_s: float | None) -> str:
+    """An effect's name in reports and saved models:
+    ``<effect>[_j<joint>][_<DH parameter>][_k<periods>][_tau<s>s]``, e.g.
+    ``gear_transmission_error_j2_k12`` (the thermal drift's tau only for that effect)."""
+    j = "" if joint is None else f"_j{joint}"
+    dp = "" if dh_parameter is None else f"_{dh_parameter}"
+    k = "" if periods is None else f"_k{periods}"
+    tau = "" if effect != "thermal_drift" or tau_s is None else f"_tau{tau_s:.0f}s"
+    return f"{effect}{j}{dp}{k}{tau}"
+
+
 @dataclass(eq=False)
 class Candidate:
     """One effect on one joint (or none): its residual-space columns and report mapping."""
@@ -76,11 +88,7 @@ class Candidate:
 
     @property
     def key(self) -> str:
-        j = "" if self.joint is None else f"_j{self.joint}"
-        dp = "" if self.dh_parameter is None else f"_{self.dh_parameter}"
-        k = "" if self.periods is None else f"_k{self.periods}"
-        tau = "" if self.effect != "thermal_drift" or self.tau_s is None else f"_tau{self.tau_s:.0f}s"
-        return f"{self.effect}{j}{dp}{k}{tau}"
+        return effect_key(self.effect, self.joint, self.dh_parameter, self.periods, self.tau_s)
 
     @property
     def family(self) -> str:

@@ -30,6 +30,7 @@ from solvers.analysis.baseline import (
     fit_baseline,
     per_sample_rms,
 )
+from solvers.analysis.effects import effect_key
 from solvers.analysis.kinematics import State, flange_of, state_frames, state_sensitivities
 from solvers.analysis.selection import CV, fit_linear
 from solvers.dh import dh_angles_rad
@@ -67,11 +68,7 @@ class Effect:
 
     @property
     def key(self) -> str:
-        j = "" if self.joint is None else f"_j{self.joint}"
-        dp = "" if self.dh_parameter is None else f"_{self.dh_parameter}"
-        k = "" if self.periods is None else f"_k{self.periods}"
-        tau = "" if self.effect != "thermal_drift" or self.tau_s is None else f"_tau{self.tau_s:.0f}s"
-        return f"{self.effect}{j}{dp}{k}{tau}"
+        return effect_key(self.effect, self.joint, self.dh_parameter, self.periods, self.tau_s)
 
     def document(self) -> dict:
         return {"effect": self.effect, "joint": self.joint, "dh_parameter": self.dh_parameter,
