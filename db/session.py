@@ -35,7 +35,8 @@ MIGRATION_LOCK_ID = 0x70656E64  # "pend": the pg_advisory_lock key of the schema
 def make_engine(url: str) -> Engine:
     """An engine for ``url``; SQLite gets WAL, foreign keys and a busy timeout per connection."""
     is_sqlite = url.startswith("sqlite")
-    connect_args = {"check_same_thread": False, "timeout": 30} if is_sqlite else {}
+    connect_args = ({"check_same_thread": False, "timeout": BUSY_TIMEOUT_MS / 1000}
+                    if is_sqlite else {})
     engine = create_engine(url, connect_args=connect_args, pool_size=30 if is_sqlite else 5,
                            max_overflow=10, pool_pre_ping=not is_sqlite)
     if is_sqlite:

@@ -12,7 +12,12 @@ got a 2xx finds its change in the database), and atomic whichever process or hos
 The transaction runs in the route's worker thread, never on the event loop: a sync route
 taking a session (``SessionDep``) is wrapped by :func:`one_thread`, which commits (or rolls
 back) in that thread as the route returns, so the write lock is held only while the route
-works. An async route, or an Idempotency-Key claimed before the route, commits in
+works. On SQLite a process's writing routes also take turns on one ``threading.Lock``
+(:func:`sqlite_turn`): SQLite has one writer at a time anyway, and a thread that loses
+``BEGIN IMMEDIATE`` to a thread of its own process would otherwise wait in SQLite's busy
+handler, which sleeps 1, 2, 5, 10 ... up to 100 ms between tries (a touch-up's p99 of
+hundreds of ms at a few hundred writes/s); on the lock it runs as soon as the other commits.
+Writers of other processes (a second worker, the CLI, a job) still meet in the busy handler. An async route, or an Idempotency-Key claimed before the route, commits in
 :func:`get_session` (in the threadpool too).
 
 The load this serves: a plant of a few hundred cells, a person touching up every few seconds,
@@ -21,9 +26,11 @@ The load this serves: a plant of a few hundred cells, a person touching up every
 
 from __future__ import annotations
 
+import contextlib
 import functools
 import inspect
-from collections.abc import AsyncIterator, Callable
+import threading
+from collections.abc import AsyncIterator, Callable, Iterator
 from typing import Annotated, Any
 
 from fastapi import Depends, FastAPI, Request
@@ -39,6 +46,7 @@ from server.auth import audit
 
 READ_METHODS = ("GET", "HEAD", "OPTIONS")
 LOCK_ON_BEGIN = "pendant_lock_controller"  # Session.info: the controller to lock at BEGIN
+WRITER = "pendant_writer"  # Session.info: a writing request's session (BEGIN IMMEDIATE)
 
 
 def _controller_id(request: Request) -> int | None:
@@ -73,6 +81,7 @@ async def get_session(request: Request) -> AsyncIterator[Session]:
     maker = request.app.state.sessionmaker
     writes = request.method not in READ_METHODS
     db = write_session(maker) if writes else maker()
+    db.info[WRITER] = writes
     try:
         cid = _controller_id(request) if writes else None
         if cid is not None:
@@ -109,9 +118,32 @@ def _audited_commit(db: Session, operation: str, params: dict[str, Any]) -> None
     db.commit()
 
 
+_SQLITE_TURNS: dict[str, threading.Lock] = {}  # database URL -> its writers' turn, per process
+_TURNS_LOCK = threading.Lock()
+
+
+@contextlib.contextmanager
+def sqlite_turn(db: Session) -> Iterator[None]:
+    """This process's turn to write ``db``'s SQLite database, held until the block ends (the
+    transaction committed or rolled back). Nothing on PostgreSQL (row locks), nor when the
+    session's transaction has begun already (an Idempotency-Key claimed in
+    :func:`get_session`): it holds SQLite's write lock, and waiting for a turn while holding it
+    would deadlock with the thread whose turn it is."""
+    bind = db.get_bind()
+    if bind.dialect.name != "sqlite" or db.in_transaction():
+        yield
+        return
+    key = str(bind.url)
+    with _TURNS_LOCK:
+        turn = _SQLITE_TURNS.setdefault(key, threading.Lock())
+    with turn:
+        yield
+
+
 def one_thread(endpoint: Callable[..., Any]) -> Callable[..., Any]:
     """``endpoint`` (a sync route) committing the session it was given in its own worker
-    thread as it returns (rolled back if it raises). Async routes are returned unchanged."""
+    thread as it returns (rolled back if it raises). Async routes are returned unchanged.
+    A writing route on SQLite runs in its process's turn (:func:`sqlite_turn`)."""
     if inspect.iscoroutinefunction(endpoint) or getattr(endpoint, "_one_thread", False):
         return endpoint
 
@@ -120,12 +152,13 @@ def one_thread(endpoint: Callable[..., Any]) -> Callable[..., Any]:
         db = next((v for v in kwargs.values() if isinstance(v, Session)), None)
         if db is None:
             return endpoint(*args, **kwargs)
-        try:
-            result = endpoint(*args, **kwargs)
-            _audited_commit(db, endpoint.__name__, kwargs)
-        except BaseException:
-            db.rollback()
-            raise
+        with sqlite_turn(db) if db.info.get(WRITER) else contextlib.nullcontext():
+            try:
+                result = endpoint(*args, **kwargs)
+                _audited_commit(db, endpoint.__name__, kwargs)
+            except BaseException:
+                db.rollback()
+                raise
         return result
 
     # the endpoint's annotations, evaluated in its own module: FastAPI before 0.123 reads string
