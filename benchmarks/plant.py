@@ -298,6 +298,50 @@ async def plant_load(base: str, touch_urls: list[str], cells: int, rate: float,
             * 1e3 / max(n, 1)}
 
 
+def process_cpu() -> dict[int, tuple[str, float]]:
+    """CPU seconds (user + system) so far of the processes that share the machine, by role:
+    the service's API workers, its OPC UA face, its job workers, PostgreSQL's server processes,
+    the OPC UA client and this generator (from /proc: a saturated machine shows which of them
+    takes the cores)."""
+    tck = os.sysconf("SC_CLK_TCK")
+    out: dict[int, tuple[str, float]] = {}
+    for d in Path("/proc").iterdir():
+        if not d.name.isdigit():
+            continue
+        try:
+            cmd = (d / "cmdline").read_bytes().replace(b"\0", b" ").decode(errors="replace")
+            fields = (d / "stat").read_text().rsplit(")", 1)[1].split()
+        except OSError:
+            continue
+        if int(d.name) == os.getpid():
+            role = "generator"
+        elif "postgres" in cmd.split(" ")[0] or cmd.startswith("postgres:"):
+            role = "postgresql"
+        elif "opcua" in cmd and "server.cli" in cmd:
+            role = "opcua face"
+        elif "asyncua" in cmd or "OPCUA" in cmd or "subscribed" in cmd:
+            role = "opcua client"
+        elif "server.cli" in cmd and " worker" in cmd:
+            role = "job workers"
+        elif "multiprocessing" in cmd or ("server.cli" in cmd and " serve" in cmd):
+            role = "api"
+        else:
+            continue
+        out[int(d.name)] = role, (int(fields[11]) + int(fields[12])) / tck
+    return out
+
+
+def cpu_share(before: dict[int, tuple[str, float]], after: dict[int, tuple[str, float]],
+              seconds: float) -> str:
+    """Each role's share of a core over ``seconds``, as 'api 0.83, postgresql 0.31, ...' (a
+    process that ended between the two samples is not counted: PostgreSQL's connections
+    outlive a phase)."""
+    used: dict[str, float] = {}
+    for pid, (role, cpu) in after.items():
+        used[role] = used.get(role, 0.0) + (cpu - before.get(pid, (role, 0.0))[1]) / seconds
+    return ", ".join(f"{k} {v:.2f}" for k, v in sorted(used.items(), key=lambda kv: -kv[1]))
+
+
 def read_capacity(base: str, cells: int, seconds: float, tmp: Path) -> dict:
     script = tmp / "read.lua"
     script.write_text(READ_LUA % {"auth": HEADERS["Authorization"], "cells": cells})
@@ -327,11 +371,14 @@ def run_backend(name: str, db_url: str, args: argparse.Namespace) -> dict:
             raise RuntimeError(f"the OPC UA client did not subscribe: {line} "
                                f"{watcher.stderr.read()[-400:]}")  # type: ignore[union-attr]
         print(f"{name}: {args.controllers} cells, OPC UA client {line}", flush=True)
+        cpu0, t0 = process_cpu(), time.perf_counter()
         at = asyncio.run(plant_load(base, touch_urls, cells, args.rate, args.seconds, 1))
+        shares = cpu_share(cpu0, process_cpu(), time.perf_counter() - t0)
         print(f"{name}: touch-ups at {args.rate:g}/s: p50 {at['touch'][0]:.1f} ms, p99 "
               f"{at['touch'][1]:.1f} ms; MES reads {cells}/s: p50 {at['read'][0]:.1f} ms, p99 "
               f"{at['read'][1]:.1f} ms; errors {len(at['errors'])}; generator CPU "
               f"{at['generator_cpu_ms']:.2f} ms/request", flush=True)
+        print(f"{name}:   cores used: {shares}", flush=True)
         errors = list(at["errors"])
         max_rate, rate = (args.rate if at["touch"][1] <= P99_TARGET_MS and not at["errors"]
                           else 0.0), args.rate
