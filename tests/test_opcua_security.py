@@ -350,10 +350,15 @@ def test_expired_and_not_yet_valid_certificates_are_refused(cell: dict, tmp_path
         with pytest.raises((ua.UaError, OSError, asyncio.TimeoutError)):
             asyncio.run(read())
 
-    # an expired certificate registered for a user does not log in either
+    # registering an expired certificate for a user is refused, naming why
     ok(cell["rest"].post("/users", json={"name": "oldie", "role": "Expert"}))
-    main(["users", "cert", "oldie", old.cert, "--db", cell["db_url"]])
-    capsys.readouterr()
+    assert main(["users", "cert", "oldie", old.cert, "--db", cell["db_url"]]) == 2
+    assert "expired on" in capsys.readouterr().err
+    # and one registered while it was valid does not log in once it has expired
+    with cell["rest"].app.state.sessionmaker() as db:
+        tokens.create_token(db, tokens.get_user(db, "oldie"), 30, "opcua certificate",
+                            secret=tokens.certificate_secret(old.der()))
+        db.commit()
 
     async def as_oldie() -> str:
         client = await secure_client(cell["face"].endpoint, cell["face"].client, identity=old)

@@ -28,6 +28,7 @@ from sqlalchemy.orm import Session
 
 from db.crud import StateConflict
 from server.auth import audit, tokens
+from server.auth.certificates import certificate_der
 from server.auth.permissions import PERMISSIONS
 
 
@@ -111,21 +112,6 @@ def _new_password() -> str:
     if len(first) < 8:
         raise ValueError("password: at least 8 characters")
     return first
-
-
-def certificate_der(path: Path) -> bytes:
-    """The DER bytes of an X.509 certificate file (PEM or DER); ValueError naming the file."""
-    from cryptography import x509
-
-    data = path.read_bytes()
-    try:
-        cert = (x509.load_pem_x509_certificate(data) if b"-----BEGIN" in data
-                else x509.load_der_x509_certificate(data))
-    except ValueError:
-        raise ValueError(f"{path}: not an X.509 certificate (PEM or DER)") from None
-    from cryptography.hazmat.primitives.serialization import Encoding
-
-    return cert.public_bytes(Encoding.DER)
 
 
 def run_tokens(args: Any) -> int:

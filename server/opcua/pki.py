@@ -22,13 +22,14 @@ import logging
 import os
 import re
 import stat
-from datetime import UTC, datetime
 from pathlib import Path
 
 from asyncua import ua
 from asyncua.common.utils import ServiceError
 from cryptography import x509
 from cryptography.hazmat.primitives.serialization import Encoding
+
+from server.auth.certificates import check_time
 
 log = logging.getLogger("pendant.opcua")
 KEY_NAME, CERT_NAME = "pendant-server-key.pem", "pendant-server-cert.der"
@@ -98,16 +99,6 @@ async def server_certificate(pki: Path, app_uri: str) -> tuple[Path, Path]:
 
 def fingerprint(der: bytes) -> str:
     return hashlib.sha256(der).hexdigest()
-
-
-def check_time(cert: x509.Certificate) -> str | None:
-    """Why ``cert`` is not valid now, or None."""
-    now = datetime.now(UTC)
-    if cert.not_valid_after_utc < now:
-        return f"expired on {cert.not_valid_after_utc:%Y-%m-%d %H:%M} UTC"
-    if cert.not_valid_before_utc > now:
-        return f"not valid before {cert.not_valid_before_utc:%Y-%m-%d %H:%M} UTC"
-    return None
 
 
 def load_certificate(data: bytes) -> x509.Certificate:
