@@ -265,7 +265,8 @@ def test_instances_have_every_mandatory_child_of_their_types(face: dict) -> None
 
 
 def test_serve_with_an_opcua_port_starts_the_face_beside_the_rest_service(tmp_path) -> None:
-    """``pendant serve --opcua-port``: both faces as processes on one SQLite file."""
+    """``pendant serve --opcua-port --opcua-pki DIR``: both faces as processes on one SQLite
+    file, the OPC UA face with the PKI folder it was given (one per instance on a host)."""
     import subprocess
     import sys
 
@@ -277,11 +278,13 @@ def test_serve_with_an_opcua_port_starts_the_face_beside_the_rest_service(tmp_pa
     db_url = f"sqlite:///{tmp_path / 'pendant.db'}"
     env = {**os.environ, "PENDANT_ADMIN_TOKEN": ADMIN_TOKEN}
     mes = client_certificate(tmp_path / "mes")
-    assert main(["opcua", "trust", mes.cert, "--db", db_url]) == 0  # the face's own PKI folder
-    assert default_pki_dir(db_url) == tmp_path / "pendant.db-opcua-pki"
+    own_pki = tmp_path / "cell-7-pki"
+    assert main(["opcua", "trust", mes.cert, "--pki", str(own_pki)]) == 0
+    assert default_pki_dir(db_url) == tmp_path / "pendant.db-opcua-pki"  # when none is given
     log = tmp_path / "serve.log"
     proc = subprocess.Popen([sys.executable, "-m", "server.cli", "serve", "--port", str(rest_port),
-                             "--opcua-port", str(ua_port), "--db", db_url, "--job-workers", "0"],
+                             "--opcua-port", str(ua_port), "--opcua-pki", str(own_pki),
+                             "--db", db_url, "--job-workers", "0"],
                             stdout=subprocess.DEVNULL, stderr=log.open("w"), env=env)
 
     async def a1() -> float:
@@ -310,8 +313,8 @@ def test_serve_with_an_opcua_port_starts_the_face_beside_the_rest_service(tmp_pa
         assert value == pytest.approx(joints[1])
         assert f"pendant OPC UA server ready at opc.tcp://127.0.0.1:{ua_port}/pendant/" in \
             log.read_text()  # the OPC UA port opens after REST's: the log says when
-        pki = tmp_path / "pendant.db-opcua-pki"
-        assert oct(pki.stat().st_mode & 0o777) == "0o700"
+        assert oct(own_pki.stat().st_mode & 0o777) == "0o700"
+        assert not default_pki_dir(db_url).exists()
     finally:
         proc.terminate()
         proc.wait(timeout=20)

@@ -2,7 +2,7 @@
 
     pendant serve [--host 127.0.0.1] [--port 8000] [--db URL] [--workers N] [--no-migrate]
                   [--job-workers 2] [--allow-host NAME] [--cors-origin URL] [--no-auth]
-                  [--opcua-port 4840] [--rws-port 8610 [--rws-controller NAME]]
+                  [--opcua-port 4840 [--opcua-pki DIR]] [--rws-port 8610 [--rws-controller NAME]]
                   [--kvp-port 7000 --kvp-user NAME [--kvp-controller NAME] [--kvp-host ADDR]
                    [--kvp-allow ADDR]]
     pendant db upgrade [--db URL]
@@ -257,6 +257,10 @@ def build_parser() -> argparse.ArgumentParser:
     s.add_argument("--opcua-port", type=int, metavar="PORT",
                    help="also serve the OPC UA face on this port (a process of its own on the "
                         "same database; docs/opcua.md)")
+    s.add_argument("--opcua-pki", type=Path, metavar="DIR",
+                   help="the OPC UA face's PKI folder (its certificate and key, trusted/ and "
+                        "rejected/ client certificates; default: <db file>-opcua-pki beside a "
+                        "SQLite file, else one per database in the user data dir)")
     add_face_arguments(s)
 
     c = sub.add_parser("calibrate",
@@ -600,6 +604,9 @@ def serve(args: argparse.Namespace) -> int:
         raise CalibrationError(("--workers",), f"must be >= 1, got {args.workers}")
     _positive(args.job_time_s, "--job-time-s")
     _positive(args.job_memory_mb, "--job-memory-mb")
+    if args.opcua_pki is not None and not args.opcua_port:
+        raise CalibrationError(("--opcua-pki",), "goes with --opcua-port (the OPC UA face's PKI "
+                                                 "folder)")
     _check_port_free(args.host, args.port)
     loopback = args.host in LOOPBACK_HOSTS
     if args.no_auth and not loopback:
@@ -636,8 +643,8 @@ def serve(args: argparse.Namespace) -> int:
         print(f"pendant: serving {base}; a login link for the Administrator: "
               f"pendant tokens create admin --db '{shown_db}'", file=sys.stderr)
     workers = start_job_workers(settings.db_url, args)  # the schema is current by now
-    face = (start_beside(args.host, args.opcua_port, settings.db_url, auth=settings.auth)
-            if args.opcua_port else None)
+    face = (start_beside(args.host, args.opcua_port, settings.db_url, auth=settings.auth,
+                         pki=args.opcua_pki) if args.opcua_port else None)
     try:
         controller_faces = start_faces(args, application.state.sessionmaker, settings.auth)
     except BaseException:

@@ -94,9 +94,10 @@ def run_opcua(args: argparse.Namespace) -> int:
     return 0
 
 
-def start_beside(host: str, port: int, db_url: str | None, auth: bool = True) -> subprocess.Popen:
-    """``pendant serve --opcua-port``: the OPC UA face as a child process on the same DB (and,
-    with ``serve --no-auth``, as open as the REST service)."""
+def start_beside(host: str, port: int, db_url: str | None, auth: bool = True,
+                 pki: Path | None = None) -> subprocess.Popen:
+    """``pendant serve --opcua-port [--opcua-pki DIR]``: the OPC UA face as a child process on
+    the same DB (and, with ``serve --no-auth``, as open as the REST service)."""
 
     from server.settings import ENV_NO_AUTH, ENV_PARENT_PID
 
@@ -104,6 +105,8 @@ def start_beside(host: str, port: int, db_url: str | None, auth: bool = True) ->
            "--exit-with-parent"]
     if db_url:
         cmd += ["--db", db_url]
+    if pki is not None:
+        cmd += ["--pki", str(pki)]
     # a session of its own: a terminal's Ctrl-C reaches serve alone, which stops its children
     return subprocess.Popen(cmd, env={**os.environ, ENV_NO_AUTH: "0" if auth else "1",
                                       ENV_PARENT_PID: str(os.getpid())},
