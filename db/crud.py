@@ -10,7 +10,7 @@ from collections.abc import Sequence
 from datetime import datetime
 from typing import Any
 
-from sqlalchemy import Connection, bindparam, select
+from sqlalchemy import Connection, bindparam, func, select
 from sqlalchemy.exc import IntegrityError
 from sqlalchemy.orm import Session, joinedload
 
@@ -183,8 +183,21 @@ def get_entry(db: Session, controller_id: int, table: str, number: int) -> Frame
     check_slot_address(db, controller_id, table, number)
     e = db.scalar(ENTRY, {"controller_id": controller_id, "table": table, "number": number})
     if e is None:
-        raise NotFound(("number",), f"no {table} {number} on controller {controller_id}")
+        raise NotFound(("number",), _missing_slot(db, controller_id, table, number))
     return e
+
+
+def _missing_slot(db: Session, controller_id: int, table: str, number: int) -> str:
+    """Why slot ``number`` is not there: past the controller kind's numbering (KUKA's 16
+    tools and 32 bases), or past what an ABB-kind controller's table has grown to."""
+    c = get_controller(db, controller_id)
+    limit = slot_limit(c, table)
+    if number > limit:
+        return f"{table} slots of controller {c.name!r} are numbered 1..{limit}, got {number}"
+    count = db.scalar(select(func.count()).select_from(FrameEntry).where(
+        FrameEntry.controller_id == controller_id, FrameEntry.entry_table == table))
+    return (f"no {table} {number} on controller {c.name!r}: its {table} table has {count} "
+            f"slots (an import of its controller's module grows it, up to {limit})")
 
 
 def list_entries(db: Session, controller_id: int, table: str | None = None,

@@ -102,7 +102,12 @@ def test_state_errors_are_409_and_404(client):
     r = client.get(f"{C}/sessions/999")
     assert r.status_code == 404 and r.json()["detail"][0]["loc"] == ["path", "session_id"]
     assert client.get("/controllers/42/tools/1").status_code == 404
-    assert client.get(f"{C}/tools/17").status_code == 404
+    r = client.get(f"{C}/tools/17")  # a KUKA-kind controller has 16 tools: the answer says so
+    assert r.status_code == 404 and r.json()["detail"][0]["loc"] == ["path", "number"]
+    assert "numbered 1..16, got 17" in r.json()["detail"][0]["msg"]
+    abb = ok(client.post("/controllers", json={"name": "irb", "robot": "abb_irb120"}))
+    r = client.get(f"/controllers/{abb['id']}/tools/40")  # an ABB table grows with an import
+    assert r.status_code == 404 and "an import" in r.json()["detail"][0]["msg"]
 
 
 def test_flange_pose_touch_up_and_both_inputs_refused(client):
