@@ -704,7 +704,7 @@ def main(argv: Sequence[str] | None = None) -> int:
             return 0
         if args.command == "export":
             from db import crud
-            from server.api.routers.export import export_text
+            from server.service.export import export_text
 
             app = _open_app(args.db)
             with app.state.sessionmaker() as db:

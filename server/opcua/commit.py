@@ -1,11 +1,10 @@
-"""CommitFrame: an OPC UA client writes a slot through the REST edit's own code and transaction.
+"""CommitFrame: an OPC UA client writes a slot through the service's hand edit.
 
 The same as ``PUT /controllers/{id}/tools|bases/{n}`` with ``If-Match``: the body is checked by
-the API's ``EntryIn`` (one set of bounds), the values come from
-:func:`server.api.routers.tables.edit_values`, the controller's row is locked (PostgreSQL) in a
-writer's transaction (SQLite ``BEGIN IMMEDIATE``), a stale version is refused, and
-:func:`db.crud.change_entry` records history, the audit (source ``opcua``) and the
-``frame-committed`` event in that transaction.
+the API's ``EntryIn`` (one set of bounds), :func:`server.service.slots.edit_slot` writes it in
+a writer's transaction (SQLite ``BEGIN IMMEDIATE``; the controller's row locked on
+PostgreSQL), a stale version is refused, and :func:`db.crud.change_entry` records history, the
+audit (source ``opcua``) and the ``frame-committed`` event in that transaction.
 """
 
 from __future__ import annotations
@@ -19,8 +18,9 @@ from sqlalchemy.orm import Session, sessionmaker
 from db import crud
 from db.session import write_session
 from server.auth import audit
-from server.api.routers.tables import edit_values
 from server.api.schemas import EntryIn
+from server.service import slots
+from server.service.preconditions import PreconditionFailed, etag
 from solvers.errors import CalibrationError
 
 
@@ -43,14 +43,13 @@ def commit_frame(make_session: sessionmaker[Session], controller_id: int, table:
     with audit.acting_as(who), write_session(make_session) as db:
         try:
             crud.lock_controller(db, controller_id)
-            e = crud.get_entry(db, controller_id, table, number)
-            values = edit_values(e, body)
+            e = slots.edit_slot(db, controller_id, table, number, body,
+                                etag(int(expected_version)))
         except crud.NotFound:
             return ua.StatusCode(ua.StatusCodes.BadNodeIdUnknown)
         except CalibrationError:
             return ua.StatusCode(ua.StatusCodes.BadInvalidArgument)
-        if e.version != int(expected_version):
+        except PreconditionFailed:
             return ua.StatusCode(ua.StatusCodes.BadInvalidState)
-        crud.change_entry(db, e, values, reason="edit")
         db.commit()
         return int(e.version)

@@ -29,6 +29,7 @@ from sqlalchemy.orm import Session, sessionmaker
 from db import crud
 from server.opcua import access, commit, pki, space
 from server.opcua.state import CellReader, ControllerState, events_after, latest_event_id
+from server.service.export import export_text
 from server.settings import LOOPBACK_HOSTS
 
 log = logging.getLogger("pendant.opcua")
@@ -295,8 +296,6 @@ class PendantOpcUa:
             self.rules.method_names[node.nodeid] = method_name
 
     def _export(self, cid: int, fmt: str) -> str:
-        from server.api.routers.export import export_text
-
         with self.make_session() as db:
             crud.get_controller(db, cid)
             return export_text(db, cid, fmt)

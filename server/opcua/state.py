@@ -17,7 +17,7 @@ from sqlalchemy.orm import Session, sessionmaker
 from db import crud
 from db.auth_models import AuditRecord
 from db.models import CalibSession, Controller, Event, FrameEntry
-from server.api.routers.common import robot_of
+from server.service.robot import robot_of
 
 
 @dataclass(frozen=True)

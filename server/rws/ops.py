@@ -27,9 +27,11 @@ from server import formats
 from server.service import controller_files
 from server.auth import audit, tokens
 from server.auth.permissions import C, required
-from server.api.routers.common import active_frames, robot_of
-from server.api.routers.tables import edit_values
 from server.api.schemas import EntryIn
+from server.service import robot as robot_service
+from server.service import slots as slot_service
+from server.service.preconditions import PreconditionFailed, etag
+from server.service.robot import active_frames, robot_of
 from solvers.dh import forward_kinematics
 from solvers.errors import CalibrationError
 
@@ -209,13 +211,13 @@ def commit_slot(maker: Maker, caller_: Caller, cid: int, table: str, number: int
     caller_.require(EDIT_SLOT.get(table))
     with audit.acting_as(caller_.who()), write_session(maker) as db:
         crud.lock_controller(db, cid)
-        e = crud.get_entry(db, cid, table, number)
-        values = edit_values(e, body)
-        if clear_load:
-            values.update(dict.fromkeys(controller_files.LOAD_FIELDS))
-        if expected_version is not None and e.version != expected_version:
-            raise Stale(f"{table} {number} is at version {e.version}, not {expected_version}")
-        crud.change_entry(db, e, values, reason="edit")
+        if_match = "*" if expected_version is None else etag(expected_version)
+        try:
+            e = slot_service.edit_slot(db, cid, table, number, body, if_match,
+                                       clear_load=clear_load)
+        except PreconditionFailed as err:
+            raise Stale(f"{table} {number} is at version {err.version}, "
+                        f"not {expected_version}") from None
         db.commit()
         used = controller_files.is_used(e)
         return Slot(table, number, e.version, used,
@@ -231,11 +233,7 @@ def set_active(maker: Maker, caller_: Caller, cid: int, tool_no: int | None = No
             raise CalibrationError((loc,), f"must be 0..{crud.SLOTS[table]}, got {n}")
     with audit.acting_as(caller_.who()), write_session(maker) as db:
         crud.lock_controller(db, cid)
-        c = crud.get_controller(db, cid)
-        if tool_no is not None:
-            c.active_tool_no = tool_no
-        if base_no is not None:
-            c.active_base_no = base_no
+        robot_service.set_active(db, cid, tool_no, base_no)
         db.commit()
     return robot(maker, caller_, cid)
 

@@ -21,6 +21,8 @@ from db.crud import ABB_SLOTS, KINDS_OF_TABLE, MAX_ID
 from db.models import EXT_KIN_SLOTS
 from server.menus import METHODS
 from server.service.bounds import MAX_T_S, MECH_UNIT_CHARS, Deg, Kg, Kgm2, Mm
+from server.service.export import export_text
+from server.service.robot import robot_of
 from server.api.schemas import (EntryKind, MethodName, ReportOut, SessionParamsIn, SlotName,
                             TableName)
 from solvers.errors import CalibrationError
@@ -345,7 +347,6 @@ def run_backup(args: Any) -> int:
 
     from db import crud
     from server.auth.cli import cli_session
-    from server.api.routers.export import export_text
 
     with cli_session(args.db, write=False) as db:
         c = crud.find_controller(db, args.controller)
@@ -370,7 +371,6 @@ def run_restore_file(args: Any) -> int:
     from server.auth import audit
     from server.auth.cli import cli_session
     from server.jobs.kinds import run_restore
-    from server.api.routers.common import robot_of
 
     text = args.file.read_text(encoding="utf-8")
     with cli_session(args.db, write=not args.dry_run) as db:

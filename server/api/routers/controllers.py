@@ -6,18 +6,15 @@ from fastapi import APIRouter, Response
 
 from db import crud
 from db.models import Controller
-from server.service import external
-from server.auth import audit
+from emulator import THERMAL_WARMUP_S, imperfections_document, imperfections_from_document
 from server.api.deps import SessionDep
-from server.api.preconditions import IfMatch, check, etag, set_etag
-from emulator import (THERMAL_WARMUP_S, home_joints, imperfections_document,
-                             imperfections_from_document, robot_from_custom)
-from server.api.routers.common import cell_of, robot_of
+from server.api.preconditions import IfMatch, etag, set_etag
 from server.api.schemas import (CellOut, ClockIn, ClockOut, ControllerIn, ControllerOut, PhysicsIn,
-                            PhysicsOut)
-from solvers.errors import CalibrationError
+                                PhysicsOut)
+from server.service import controllers as service
+from server.service import external
+from server.service.robot import cell_of, robot_of
 from solvers.physics import Imperfections
-from solvers.robots import ROBOTS
 
 router = APIRouter(prefix="/controllers", tags=["Controllers"])
 
@@ -39,25 +36,9 @@ def list_controllers(db: SessionDep) -> list[ControllerOut]:
 def create_controller(body: ControllerIn, db: SessionDep) -> ControllerOut:
     """A new controller with a library arm (``robot``) or a custom DH table (``custom_robot``)."""
     custom = body.custom_robot.model_dump() if body.custom_robot else None
-    key = None if custom else body.robot
-    if custom is None and key is None:
-        raise CalibrationError(("robot",), "give robot (a library key) or custom_robot (a DH "
-                               "table); both are null")
-    if key is not None and key not in ROBOTS:
-        library = ", ".join(sorted(ROBOTS))
-        raise CalibrationError(("robot",), f"unknown robot {key!r}; the library has {library}")
-    robot = robot_from_custom(custom) if custom else ROBOTS[key]  # type: ignore[index]
-    c = crud.create_controller(db, body.name, key, custom, body.cell_seed, home_joints(robot))
-    if body.external_axes:
-        external.enable(db, c, robot.reach_mm)
+    c = service.create_controller(db, body.name, body.robot, custom, body.cell_seed,
+                                  body.external_axes)
     return controller_out(c)
-
-
-def changing(db: SessionDep, controller_id: int, if_match: str | None) -> Controller:
-    """The controller a write changes; 412 (with the controller) when ``If-Match`` is stale."""
-    c = crud.get_controller(db, controller_id)
-    check(if_match, c.version, lambda: controller_out(c), f"controller {c.id}")
-    return c
 
 
 @router.get("/{controller_id}")
@@ -72,7 +53,7 @@ def get_controller(controller_id: int, db: SessionDep, response: Response) -> Co
 @router.delete("/{controller_id}", status_code=204)
 def delete_controller(controller_id: int, db: SessionDep, if_match: IfMatch = None) -> Response:
     """Remove a controller with its tables, history and sessions."""
-    crud.delete_controller(db, changing(db, controller_id, if_match))
+    service.delete_controller(db, controller_id, if_match, controller_out)
     return Response(status_code=204)
 
 
@@ -107,9 +88,7 @@ def put_physics(controller_id: int, body: PhysicsIn, db: SessionDep, response: R
     """Give the emulated arm imperfections (``{}`` = the rigid arm again). Checked against the
     arm: per-joint lists need one value per joint; backlash, compliance, latency, bending and
     noise must be >= 0; DH deltas name a_mm, d_mm or alpha_deg of a joint 1..n."""
-    c = changing(db, controller_id, if_match)
-    imp = imperfections_from_document(body.model_dump(), robot_of(c).dof)
-    c.physics = None if imp == Imperfections() else imperfections_document(imp)
+    c = service.set_physics(db, controller_id, body.model_dump(), if_match, controller_out)
     set_etag(response, db, c)
     return physics_out(c)
 
@@ -125,10 +104,6 @@ def get_clock(controller_id: int, db: SessionDep) -> ClockOut:
 def put_clock(controller_id: int, body: ClockIn, db: SessionDep, response: Response,
               if_match: IfMatch = None) -> ClockOut:
     """Set the clock: 0 = just powered (cold), ``thermal_warmup_s`` or more = warm."""
-    c = changing(db, controller_id, if_match)
-    before = float(c.clock_s or 0.0)
-    c.clock_s = float(body.clock_s)
-    audit.record(db, "emulator.clock", controller_id=c.id, before={"clock_s": before},
-                 after={"clock_s": c.clock_s})
+    c = service.set_clock(db, controller_id, body.clock_s, if_match, controller_out)
     set_etag(response, db, c)
     return ClockOut(clock_s=c.clock_s, thermal_warmup_s=THERMAL_WARMUP_S)

@@ -6,23 +6,23 @@ The file formats live in server/formats; here only the slots are turned into
 
 from __future__ import annotations
 
-import json
-
 from fastapi import APIRouter, Request, Response
 
 from db import crud, jobs
-from server.service import external
 from server.auth.audit import actor, mark_operation
 from server.auth.guard import require
 from server.service.controller_files import (
     ImportResult,
     apply_import,
-    export_file,
     export_file_bytes,
     parse_file,
 )
+from server.service.backup import check_controller_joints, parse_backup
+from server.service.export import export_text
+from server.service.robot import controller, robot_of
 from server.api.deps import SessionDep
 from server.api.preconditions import IfMatch
+from server.api.routers.controllers import controller_out
 from server.api.routers.jobs import JobOut, accepted
 from server.api.schemas import ExportFormat, ImportIn, ImportOut, SkippedOut, SlotChangeOut
 from solvers.errors import CalibrationError
@@ -34,17 +34,6 @@ MEDIA = {"kuka": ("text/plain", "$config.dat"), "abb": ("text/plain", "CalibData
          "json": ("application/json", "backup.json"),
          "kuka_machine": ("text/plain", "external-kinematics.dat"),
          "abb_moc": ("text/plain", "MOC-external.cfg")}
-
-
-def export_text(db: SessionDep, controller_id: int, fmt: str) -> str:
-    """The controller's tables in ``fmt`` (also used by ``pendant export``): a controller
-    file patched into the one last imported in that format, if any (docs/formats.md)."""
-    c = crud.get_controller(db, controller_id)
-    if fmt == "json":
-        return json.dumps(crud.backup(db, c), indent=1)
-    if fmt in external.EXPORT_FORMATS:  # the external kinematics (docs/formats.md)
-        return external.export_external(db, controller_id, fmt)
-    return export_file(db, controller_id, fmt)
 
 
 def import_out(result: ImportResult) -> ImportOut:
@@ -94,18 +83,13 @@ def import_tables(controller_id: int, body: ImportIn, db: SessionDep, request: R
     at once (422 naming the field), then restored by a job (202,
     ``Location: /jobs/{id}``; the job's result is ``{"format", "entries", "history"}``).
     ``If-Match`` (the controller's ETag) is honoured: 412 when the controller changed since."""
-    from server.api.routers.controllers import changing
-
-    c = changing(db, controller_id, if_match)
+    c = controller(db, controller_id, if_match, controller_out)
     if body.format == "json" and body.slots is not None:
         raise CalibrationError(("slots",), "a JSON backup restores the whole controller; "
                                "slots choose among a controller file's slots")
     if body.format == "json":
         require(request, "backup:restore")
         mark_operation("backup.restore")
-        from server.api.routers.common import robot_of
-        from server.service.backup import check_controller_joints, parse_backup
-
         doc = parse_backup(body.text)  # checked: nothing a later read cannot handle is stored
         check_controller_joints(robot_of(c), doc)  # the same check as pendant restore
         if body.dry_run:

@@ -7,17 +7,16 @@ other menu; a save writes the slot here with provenance and history (docs/method
 
 from __future__ import annotations
 
-from typing import Any
-
 from fastapi import APIRouter, Response
 
 from db import crud
 from db.models import EntryHistory, ExternalKinematic
 from emulator import external as ext_emu
+from server.service import controllers
 from server.service import external as ext
-from server.auth import audit
+from server.service import slots
 from server.api.deps import SessionDep
-from server.api.preconditions import IfMatch, check, set_etag
+from server.api.preconditions import IfMatch, set_etag
 from server.api.schemas import (ExternalErrorsIn, ExtHistoryOut, ExtSlotIn, ExtSlotOut,
                             ProvenanceOut, PoseOut)
 
@@ -41,12 +40,6 @@ def _history_out(h: EntryHistory) -> ExtHistoryOut:
                          after=h.after, changed_by=h.changed_by)
 
 
-def _precondition(e: ExternalKinematic, if_match: str | None) -> None:
-    """A slot write needs If-Match (428 without, 412 with the current slot when stale)."""
-    check(if_match, e.version, lambda: ext_slot_out(e),
-          f"external kinematic {e.number} of controller {e.controller_id}", required=True)
-
-
 @router.get(SLOTS, summary="All external kinematics (EX_KIN 1..6)")
 def list_slots(controller_id: int, db: SessionDep) -> list[ExtSlotOut]:
     return [ext_slot_out(e) for e in ext.list_slots(db, controller_id)]
@@ -64,27 +57,7 @@ def get_slot(controller_id: int, number: int, db: SessionDep, response: Response
 def edit_slot(controller_id: int, number: int, body: ExtSlotIn, db: SessionDep,
               response: Response, if_match: IfMatch = None) -> ExtSlotOut:
     """``If-Match`` is required: 428 without it, 412 (with the current slot) if stale."""
-    e = ext.get_slot(db, controller_id, number)
-    values: dict[str, Any] = {}
-    if body.name is not None:
-        values["name"] = body.name
-    if body.kind is not None:
-        values["kind"] = body.kind
-    if body.axes is not None:
-        values["axes"] = ",".join(body.axes)
-    if body.root is not None:
-        values.update(zip(ext.POSE_KEYS, body.root.to_pose().as_array().tolist()))
-    if body.flange is not None:
-        values.update(zip(ext.FLANGE_KEYS, body.flange.to_pose().as_array().tolist()))
-    if body.scale is not None:
-        values["scale"] = body.scale
-    if body.kind is not None or body.axes is not None:
-        ext.check_axes(db, e, values.get("kind", e.kind),
-                       values.get("axes", e.axes).split(",") if values.get("axes", e.axes) else [])
-    if body.root is not None or body.flange is not None:
-        values.update(method="numeric", session_id=None, error_max_mm=None, error_rms_mm=None)
-    _precondition(e, if_match)
-    ext.change_slot(db, e, values, reason="edit")
+    e = slots.edit_external(db, controller_id, number, body, if_match, ext_slot_out)
     set_etag(response, db, e)
     return ext_slot_out(e)
 
@@ -100,10 +73,7 @@ def slot_history(controller_id: int, number: int, db: SessionDep) -> list[ExtHis
 def restore(controller_id: int, number: int, history_id: int, db: SessionDep,
             response: Response, if_match: IfMatch = None) -> ExtSlotOut:
     """``If-Match`` is required, as for an edit."""
-    e = ext.get_slot(db, controller_id, number)
-    ext.get_history(db, e, history_id)  # 404 first: an unknown change is not a race
-    _precondition(e, if_match)
-    ext.restore_slot(db, e, history_id)
+    e = slots.restore_external(db, controller_id, number, history_id, if_match, ext_slot_out)
     set_etag(response, db, e)
     return ext_slot_out(e)
 
@@ -125,10 +95,4 @@ def put_external_errors(controller_id: int, body: ExternalErrorsIn,
     machine data, a root offset, a reversed sign, a scale (gear or encoder) error, the turn
     axis missing the tilt axis. Refused naming the field for an unknown one or a value no
     cell has."""
-    c = crud.get_controller(db, controller_id)
-    ext.values_of(c, "controller_id")
-    doc = ext_emu.check_errors(body.model_dump())
-    audit.record(db, "emulator.external", controller_id=c.id,
-                 before={"external_errors": c.external_errors}, after={"external_errors": doc})
-    c.external_errors = doc
-    return doc
+    return controllers.set_external_errors(db, controller_id, body.model_dump())
