@@ -203,7 +203,8 @@ def check_joint_limits(robot: RobotModel, q_deg: object) -> None:
     for i, v in enumerate(np.atleast_2d(q)[0] if q.ndim == 1 else q[0]):
         if not lim[i, 0] <= v <= lim[i, 1]:
             raise KinematicsError(("joints_deg", i),
-                                  f"joint {i + 1} at {v:.3f} deg is outside its software limit "
+                                  f"A{i + 1} (joint {i + 1}) at {v:.3f} deg is outside its "
+                                  f"software limit "
                                   f"[{lim[i, 0]:g}, {lim[i, 1]:g}] deg")
 
 

@@ -21,7 +21,7 @@ def test_nan_joints_are_named(client):
                             headers={"content-type": "application/json"}))
     assert d["loc"][:2] == ["body", "joints_deg"]
     d = _detail(client.post(f"{url}/touch-up", json={"joints_deg": [0, -90, 90, 0, 125, 0]}))
-    assert d["loc"] == ["body", "joints_deg", 4] and "joint 5" in d["msg"]
+    assert d["loc"] == ["body", "joints_deg", 4] and "A5 (joint 5)" in d["msg"]  # as the page names it
     assert ok(client.get(url))["steps"][0]["filled"] is False
 
 
@@ -52,7 +52,7 @@ def test_joint_limit_names_joint_value_and_limit(client):
 def test_cartesian_jog_names_the_joint_at_its_limit(client):
     ok(client.put(f"{C}/robot/joints", json={"joints_deg": [0, -90, 90, 0, 119.5, 0]}))
     d = _detail(client.post(f"{C}/robot/jog", json={"mode": "world", "axis": "Z", "increment": 20}))
-    assert d["loc"] == ["body", "joints_deg", 4] and "joint 5" in d["msg"] and "120" in d["msg"]
+    assert d["loc"] == ["body", "joints_deg", 4] and "A5 (joint 5)" in d["msg"]  # as the page names it and "120" in d["msg"]
     ok(client.put(f"{C}/robot/joints", json={"joints_deg": [0, -90, 90, 0, 90, 0]}))
     for _ in range(4):  # out to the edge of the workspace
         r = client.post(f"{C}/robot/jog", json={"mode": "world", "axis": "X", "increment": 100})

@@ -113,7 +113,7 @@ def test_refused_inputs_show_the_reason_beside_the_field(page, site):
     jog.get_by_role("button", name="Jog A5 plus").click()
     idle(page)
     a5 = jog.locator(".jog-row[data-loc='joints_deg.4']")
-    assert re.search(r"joint 5 at 190(\.0+)? deg is outside its software limit \[-120, 120\] deg",
+    assert re.search(r"A5 \(joint 5\) at 190(\.0+)? deg is outside its software limit \[-120, 120\] deg",
                      a5.locator(".err").inner_text())
     assert a5.get_by_label("A5 (deg)").get_attribute("aria-invalid") == "true"
     assert jog.locator(".jog-row[data-loc='joints_deg.1'] .err").inner_text() == ""

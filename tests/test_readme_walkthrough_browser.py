@@ -91,7 +91,7 @@ def test_readme_walk_through(page, site, tmp_path):
     # 1. Jog: Joint, an increment, + ; past a software limit: refused naming joint, value, limit
     jog.get_by_label("Increment").fill("100")
     click(page, jog, "Jog A5 plus")
-    assert re.search(r"joint 5 at 190(\.0+)? deg is outside its software limit \[-120, 120\] deg",
+    assert re.search(r"A5 \(joint 5\) at 190(\.0+)? deg is outside its software limit \[-120, 120\] deg",
                      jog.locator(".jog-row[data-loc='joints_deg.4'] .err").inner_text())
     jog.get_by_label("Increment").fill("1")
     click(page, jog, "Jog A1 plus")
