@@ -373,7 +373,7 @@ def run_restore_file(args: Any) -> int:
     from server.jobs.kinds import run_restore
 
     text = args.file.read_text(encoding="utf-8")
-    with cli_session(args.db, write=not args.dry_run) as db:
+    with cli_session(args.db, write=not args.dry_run, operation="restore") as db:
         c = crud.find_controller(db, args.controller)
         doc = parse_backup(text)
         check_controller_joints(robot_of(c), doc)
