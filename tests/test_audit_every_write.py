@@ -87,3 +87,21 @@ def test_a_refused_operation_records_nothing(client, trail):  # noqa: ANN001
     trail.added()
     assert client.post(f"{url}/compute").status_code in (409, 422)  # no touch-up yet
     assert trail.added() == []
+
+
+def test_every_recording_job_and_webhook_write_is_audited(client, trail):  # noqa: ANN001
+    poses = [[0, -90, 90, 0, 90, 0], [30, -80, 80, 10, 80, 20], [-30, -100, 100, -10, 100, -20],
+             [60, -70, 60, 20, 70, 40]]
+    rec = ok(client.post("/plan/recording", json={"robot": "ur10", "joints_deg": poses}))
+    _one(trail, "op.record_from_plan")  # computed outside the request, stored in its own write
+    r = client.post(f"/recordings/{rec['id']}/analyze")
+    assert r.status_code == 202, r.text
+    _one(trail, "op.analyze_recording")
+    ok(client.post(f"/jobs/{r.json()['id']}/cancel"))
+    _one(trail, "op.cancel_job")
+    hook = ok(client.post("/webhooks", json={"url": "http://127.0.0.1:9/pendant"}))
+    _one(trail, "webhook.create")
+    ok(client.post(f"/webhooks/{hook['id']}/test"))
+    _one(trail, "op.test_webhook")
+    assert client.delete(f"/webhooks/{hook['id']}").status_code == 204
+    _one(trail, "webhook.delete")

@@ -112,6 +112,10 @@ def test_rest_edit_tool_and_load_read_through_kvp(cell: dict) -> None:
         assert ok(rest.get(f"{C}/tools/2"))["load"]["mass_kg"] == 4.0
         assert c.write("$ACT_BASE", "4", debug=False) == b"4"
         assert ok(rest.get(f"{C}/robot"))["active_base_no"] == 4
+        # audited as REST's PUT .../robot/active is: one op.set_active, the face its source
+        last = ok(rest.get("/audit", params={"controller_id": 1}))[-1]
+        assert (last["action"], last["source"], last["user"]) == \
+            ("op.set_active", "kvp", "cellpc")
     finally:
         c.close()
 

@@ -1,24 +1,16 @@
 """Request dependencies: one database session and one transaction per request.
 
 A request that writes is one transaction, committed before the answer is sent (a client that
-got a 2xx finds its change in the database), and atomic whichever process or host serves it:
-
-- **SQLite** (WAL): the transaction begins with ``BEGIN IMMEDIATE`` (the database's write
-  lock, across processes) and waits for it in SQLite's busy handler (``db.session``);
-- **PostgreSQL**: the transaction first locks its controller's row (``SELECT ... FOR
-  UPDATE``, :func:`_lock_at_begin`), so every read-modify-write of one controller (jog,
-  touch-up, compute, save, import, restore, slot edits) runs after the previous one committed.
+got a 2xx finds its change in the database), and atomic whichever process or host serves it.
+It is a write as every face runs one (:mod:`server.service.transaction`): a writer's session
+(SQLite ``BEGIN IMMEDIATE``; on PostgreSQL the controller of the path locked at ``BEGIN``), this
+process's turn on SQLite, and the operation's audit record (the route's name) at the commit.
 
 The transaction runs in the route's worker thread, never on the event loop: a sync route
-taking a session (``SessionDep``) is wrapped by :func:`one_thread`, which commits (or rolls
-back) in that thread as the route returns, so the write lock is held only while the route
-works. On SQLite a process's writing routes also take turns on one ``threading.Lock``
-(:func:`sqlite_turn`): SQLite has one writer at a time anyway, and a thread that loses
-``BEGIN IMMEDIATE`` to a thread of its own process would otherwise wait in SQLite's busy
-handler, which sleeps 1, 2, 5, 10 ... up to 100 ms between tries (a touch-up's p99 of
-hundreds of ms at a few hundred writes/s); on the lock it runs as soon as the other commits.
-Writers of other processes (a second worker, the CLI, a job) still meet in the busy handler. An async route, or an Idempotency-Key claimed before the route, commits in
-:func:`get_session` (in the threadpool too).
+taking a session (``SessionDep``) is wrapped by :func:`one_thread`, which takes the turn and
+commits (or rolls back) in that thread as the route returns, so the write lock is held only
+while the route works. An async route, or an Idempotency-Key claimed before the route, commits
+in :func:`get_session` (in the threadpool too).
 
 The load this serves: a plant of a few hundred cells, a person touching up every few seconds,
 ~100 writes/s at worst plus MES reads (``benchmarks/plant.py``, README "Measured").
@@ -26,27 +18,20 @@ The load this serves: a plant of a few hundred cells, a person touching up every
 
 from __future__ import annotations
 
-import contextlib
 import functools
 import inspect
-import threading
-from collections.abc import AsyncIterator, Callable, Iterator
+from collections.abc import AsyncIterator, Callable
 from typing import Annotated, Any
 
 from fastapi import Depends, FastAPI, Request
 from fastapi.routing import APIRoute
-from sqlalchemy import event
-from sqlalchemy.orm import Session, sessionmaker
+from sqlalchemy.orm import Session
 from starlette.concurrency import run_in_threadpool
 
-from db import crud
-from db.session import write_session
 from server.api import idempotency
-from server.auth import audit
+from server.service import transaction
 
 READ_METHODS = ("GET", "HEAD", "OPTIONS")
-LOCK_ON_BEGIN = "pendant_lock_controller"  # Session.info: the controller to lock at BEGIN
-WRITER = "pendant_writer"  # Session.info: a writing request's session (BEGIN IMMEDIATE)
 
 
 def _controller_id(request: Request) -> int | None:
@@ -55,14 +40,6 @@ def _controller_id(request: Request) -> int | None:
         return None if cid is None else int(cid)
     except ValueError:
         return None  # not an int: the route's own validation answers 422
-
-
-def _lock_at_begin(db: Session, _transaction: object, connection: Any) -> None:
-    """``after_begin`` of every request session: a writer locks its controller's row first
-    (PostgreSQL; SQLite's ``BEGIN IMMEDIATE`` has already locked the database)."""
-    cid = db.info.pop(LOCK_ON_BEGIN, None)
-    if cid is not None and connection.dialect.name != "sqlite":
-        crud.lock_controller(connection, cid)
 
 
 def _begin_write(db: Session, request: Request) -> None:
@@ -80,12 +57,8 @@ async def get_session(request: Request) -> AsyncIterator[Session]:
     Used with ``scope="function"`` so the commit happens before the response is sent."""
     maker = request.app.state.sessionmaker
     writes = request.method not in READ_METHODS
-    db = write_session(maker) if writes else maker()
-    db.info[WRITER] = writes
+    db = transaction.writer(maker, _controller_id(request)) if writes else maker()
     try:
-        cid = _controller_id(request) if writes else None
-        if cid is not None:
-            db.info[LOCK_ON_BEGIN] = cid
         if writes and idempotency.has_key(request):
             await idempotency.read_body(request)
             await run_in_threadpool(_begin_write, db, request)
@@ -110,40 +83,18 @@ AUDIT_KEYS = ("controller_id", "session_id")  # path parameters an operation's r
 
 
 def _audited_commit(db: Session, operation: str, params: dict[str, Any]) -> None:
-    """Commit, with the operation's audit record when it changed rows no hook recorded
-    (``server.auth.audit.operation``): every write request leaves one."""
+    """The write's commit (:func:`server.service.transaction.commit`), its audit record naming
+    the path's controller and session."""
     ids = {k: int(v) for k in AUDIT_KEYS
            if (v := params.get(k)) is not None and str(v).isdigit()}
-    audit.operation(db, operation, **ids)
-    db.commit()
-
-
-_SQLITE_TURNS: dict[str, threading.Lock] = {}  # database URL -> its writers' turn, per process
-_TURNS_LOCK = threading.Lock()
-
-
-@contextlib.contextmanager
-def sqlite_turn(db: Session) -> Iterator[None]:
-    """This process's turn to write ``db``'s SQLite database, held until the block ends (the
-    transaction committed or rolled back). Nothing on PostgreSQL (row locks), nor when the
-    session's transaction has begun already (an Idempotency-Key claimed in
-    :func:`get_session`): it holds SQLite's write lock, and waiting for a turn while holding it
-    would deadlock with the thread whose turn it is."""
-    bind = db.get_bind()
-    if bind.dialect.name != "sqlite" or db.in_transaction():
-        yield
-        return
-    key = str(bind.url)
-    with _TURNS_LOCK:
-        turn = _SQLITE_TURNS.setdefault(key, threading.Lock())
-    with turn:
-        yield
+    transaction.commit(db, operation, **ids)
 
 
 def one_thread(endpoint: Callable[..., Any]) -> Callable[..., Any]:
     """``endpoint`` (a sync route) committing the session it was given in its own worker
     thread as it returns (rolled back if it raises). Async routes are returned unchanged.
-    A writing route on SQLite runs in its process's turn (:func:`sqlite_turn`)."""
+    A writing route on SQLite runs in its process's turn
+    (:func:`server.service.transaction.sqlite_turn`)."""
     if inspect.iscoroutinefunction(endpoint) or getattr(endpoint, "_one_thread", False):
         return endpoint
 
@@ -152,7 +103,7 @@ def one_thread(endpoint: Callable[..., Any]) -> Callable[..., Any]:
         db = next((v for v in kwargs.values() if isinstance(v, Session)), None)
         if db is None:
             return endpoint(*args, **kwargs)
-        with sqlite_turn(db) if db.info.get(WRITER) else contextlib.nullcontext():
+        with transaction.sqlite_turn(db):
             try:
                 result = endpoint(*args, **kwargs)
                 _audited_commit(db, endpoint.__name__, kwargs)
@@ -169,10 +120,9 @@ def one_thread(endpoint: Callable[..., Any]) -> Callable[..., Any]:
 
 
 def install(app: FastAPI) -> None:
-    """The row lock at BEGIN for every session of ``app`` (see the module's docstring)."""
-    maker: sessionmaker = app.state.sessionmaker
-    if not event.contains(maker, "after_begin", _lock_at_begin):
-        event.listen(maker, "after_begin", _lock_at_begin)
+    """The row lock at BEGIN for the writers' sessions of ``app``
+    (:func:`server.service.transaction.install`)."""
+    transaction.install(app.state.sessionmaker)
 
 
 ROUTE_FIELDS = ("response_model", "status_code", "tags", "dependencies", "summary", "description",

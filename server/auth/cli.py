@@ -33,17 +33,21 @@ from server.auth.permissions import PERMISSIONS
 
 
 @contextmanager
-def cli_session(db_url: str | None, write: bool = True) -> Iterator[Session]:
+def cli_session(db_url: str | None, write: bool = True,
+                operation: str = "cli") -> Iterator[Session]:
     """A migrated DB session committed at the end, audited as ``cli:<os user>``.
 
-    A ``write`` session is a writer's from its first statement (SQLite: ``BEGIN IMMEDIATE``,
-    waiting up to the busy timeout for the service's writers; PostgreSQL: row locks): a
+    A ``write`` session is the write every face runs (:func:`server.service.transaction.writing`,
+    ``operation`` naming its audit record when no row hook recorded the change): a writer's
+    from its first statement (SQLite: ``BEGIN IMMEDIATE``, waiting up to the busy timeout for
+    the service's writers; PostgreSQL: row locks): a
     transaction that read first and then upgraded to a write would lose to the service's
     writers ("database is locked", at once, in WAL mode) or queue behind them for seconds,
     and a revocation is an emergency action (issue 21). The schema step runs only when the
     schema is not the code's (under the migration lock), so a command on a current database
     takes no other lock."""
-    from db.session import make_engine, make_sessionmaker, upgrade, write_session
+    from db.session import make_engine, make_sessionmaker, upgrade
+    from server.service import transaction
     from server.settings import Settings
 
     settings = Settings(db_url=db_url) if db_url else Settings()
@@ -53,10 +57,11 @@ def cli_session(db_url: str | None, write: bool = True) -> Iterator[Session]:
         upgrade(engine)
         audit.install()
         maker = make_sessionmaker(engine)
-        with (write_session(maker) if write else maker()) as db:
+        with (transaction.writing(maker, operation=operation) if write else maker()) as db:
             tokens.ensure_default_roles(db)
             yield db
-            db.commit()
+            if not write:
+                db.commit()  # the default roles, on a database that had none
     finally:
         audit.CONTEXT.reset(token)
         engine.dispose()
@@ -68,7 +73,7 @@ def _fail(err: Exception) -> int:
 
 
 def run_users(args: Any) -> int:
-    with cli_session(args.db, write=args.action != "list") as db:
+    with cli_session(args.db, write=args.action != "list", operation="users") as db:
         try:
             if args.action == "add":
                 u = tokens.add_user(db, args.name, args.role)
@@ -117,7 +122,7 @@ def _new_password() -> str:
 def run_tokens(args: Any) -> int:
     if args.action in ("list", "revoke"):
         return run_token_admin(args)
-    with cli_session(args.db) as db:
+    with cli_session(args.db, operation="tokens") as db:
         try:
             days = None if args.no_expiry else args.days
             secret = tokens.create_token(db, tokens.get_user(db, args.name), days, args.label)
@@ -130,7 +135,7 @@ def run_tokens(args: Any) -> int:
 
 
 def run_token_admin(args: Any) -> int:
-    with cli_session(args.db, write=args.action == "revoke") as db:
+    with cli_session(args.db, write=args.action == "revoke", operation="tokens") as db:
         if args.action == "revoke":
             t = tokens.revoke_token(db, args.token_id)
             print(f"token {t.id} revoked")
@@ -146,7 +151,7 @@ def run_token_admin(args: Any) -> int:
 
 
 def run_roles(args: Any) -> int:
-    with cli_session(args.db, write=args.action == "add") as db:
+    with cli_session(args.db, write=args.action == "add", operation="roles") as db:
         try:
             if args.action == "add":
                 r = tokens.add_role(db, args.name, args.permissions, args.description)

@@ -335,6 +335,7 @@ def import_file(args: argparse.Namespace) -> int:
     """``pendant import``: the same checks and write path as POST .../import."""
     from db import crud
     from server.api.app import create_app
+    from server.service import transaction
     from server.service.controller_files import apply_import, parse_file
 
     fmt = args.format or IMPORT_SUFFIXES.get(args.file.suffix.lower())
@@ -353,12 +354,14 @@ def import_file(args: argparse.Namespace) -> int:
     if args.slots:
         slots = [_slot_ref(ref) for ref in args.slots.split(",")]
     app = create_app(_settings(args.db))
-    with app.state.sessionmaker() as db:
-        controller = crud.find_controller(db, args.controller)
-        result = apply_import(db, controller, fmt, text, parse_file(fmt, text), args.dry_run,
-                              encoding, slots)
-        if not args.dry_run:
-            db.commit()
+    maker = app.state.sessionmaker
+    with maker() as db:
+        cid = crud.find_controller(db, args.controller).id
+    # a dry run writes nothing: a reader's session; else the write every face runs
+    with (maker() if args.dry_run
+          else transaction.writing(maker, cid, operation="import_tables")) as db:
+        result = apply_import(db, crud.get_controller(db, cid), fmt, text,
+                              parse_file(fmt, text), args.dry_run, encoding, slots)
     for c in result.slots:
         if not c.changed:
             continue

@@ -2,8 +2,8 @@
 
 The same as ``PUT /controllers/{id}/tools|bases/{n}`` with ``If-Match``: the body is checked by
 the API's ``EntryIn`` (one set of bounds), :func:`server.service.slots.edit_slot` writes it in
-a writer's transaction (SQLite ``BEGIN IMMEDIATE``; the controller's row locked on
-PostgreSQL), a stale version is refused, and :func:`db.crud.change_entry` records history, the
+a write as every face runs one (:func:`server.service.transaction.writing`: SQLite ``BEGIN
+IMMEDIATE``; the controller's row locked on PostgreSQL), a stale version is refused, and :func:`db.crud.change_entry` records history, the
 audit (source ``opcua``) and the ``frame-committed`` event in that transaction.
 """
 
@@ -16,10 +16,8 @@ from pydantic import ValidationError
 from sqlalchemy.orm import Session, sessionmaker
 
 from db import crud
-from db.session import write_session
-from server.auth import audit
 from server.api.schemas import EntryIn
-from server.service import slots
+from server.service import slots, transaction
 from server.service.preconditions import PreconditionFailed, etag
 from solvers.errors import CalibrationError
 
@@ -40,16 +38,15 @@ def commit_frame(make_session: sessionmaker[Session], controller_id: int, table:
         body = EntryIn(name=name or None, pose=dict(zip("xyzabc", values6)))
     except (TypeError, ValueError, ValidationError):
         return ua.StatusCode(ua.StatusCodes.BadInvalidArgument)
-    with audit.acting_as(who), write_session(make_session) as db:
-        try:
-            crud.lock_controller(db, controller_id)
+    try:
+        with transaction.writing(make_session, controller_id, operation="commit_frame",
+                                 who=who) as db:
             e = slots.edit_slot(db, controller_id, table, number, body,
                                 etag(int(expected_version)))
-        except crud.NotFound:
-            return ua.StatusCode(ua.StatusCodes.BadNodeIdUnknown)
-        except CalibrationError:
-            return ua.StatusCode(ua.StatusCodes.BadInvalidArgument)
-        except PreconditionFailed:
-            return ua.StatusCode(ua.StatusCodes.BadInvalidState)
-        db.commit()
-        return int(e.version)
+    except crud.NotFound:
+        return ua.StatusCode(ua.StatusCodes.BadNodeIdUnknown)
+    except CalibrationError:
+        return ua.StatusCode(ua.StatusCodes.BadInvalidArgument)
+    except PreconditionFailed:
+        return ua.StatusCode(ua.StatusCodes.BadInvalidState)
+    return int(e.version)

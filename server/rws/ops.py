@@ -3,10 +3,10 @@
 Both faces translate a protocol into these calls and never open the database themselves.
 Each function takes the service's sessionmaker, the :class:`Caller` (who, through which
 face) and typed input, checks the permission REST's route needs (the one table,
-:mod:`server.auth.permissions`), runs the REST route's own code in a writer's transaction
-(controller row locked, version bumped, history, audit with the face as its source, the
-``frame-committed`` event), and returns plain values. When the write path moves to one
-service layer, this module is re-pointed at it and the faces stay as they are.
+:mod:`server.auth.permissions`), runs the REST route's own operation (``server.service``) in
+a write as every face runs one (:func:`server.service.transaction.writing`: the controller's
+row locked, version bumped, history, audit with the face as its source, the
+``frame-committed`` event), and returns plain values.
 """
 
 from __future__ import annotations
@@ -22,9 +22,8 @@ from sqlalchemy.orm import Session, sessionmaker
 import emulator
 from db import crud
 from db.auth_models import User
-from db.session import write_session
 from server import formats
-from server.service import controller_files
+from server.service import controller_files, transaction
 from server.auth import audit, tokens
 from server.auth.permissions import C, required
 from server.api.schemas import EntryIn
@@ -209,19 +208,17 @@ def commit_slot(maker: Maker, caller_: Caller, cid: int, table: str, number: int
     literal with ABB's "nothing known" load, KUKA's ``M -1``). Raises :class:`Refused`,
     :class:`Stale`, ``crud.NotFound`` and CalibrationError naming the field."""
     caller_.require(EDIT_SLOT.get(table))
-    with audit.acting_as(caller_.who()), write_session(maker) as db:
-        crud.lock_controller(db, cid)
-        if_match = "*" if expected_version is None else etag(expected_version)
-        try:
+    if_match = "*" if expected_version is None else etag(expected_version)
+    try:
+        with transaction.writing(maker, cid, operation="edit_slot", who=caller_.who()) as db:
             e = slot_service.edit_slot(db, cid, table, number, body, if_match,
                                        clear_load=clear_load)
-        except PreconditionFailed as err:
-            raise Stale(f"{table} {number} is at version {err.version}, "
-                        f"not {expected_version}") from None
-        db.commit()
-        used = controller_files.is_used(e)
-        return Slot(table, number, e.version, used,
-                    controller_files.to_frame_entry(e) if used else None)
+    except PreconditionFailed as err:
+        raise Stale(f"{table} {number} is at version {err.version}, "
+                    f"not {expected_version}") from None
+    used = controller_files.is_used(e)
+    return Slot(table, number, e.version, used,
+                controller_files.to_frame_entry(e) if used else None)
 
 
 def set_active(maker: Maker, caller_: Caller, cid: int, tool_no: int | None = None,
@@ -231,10 +228,8 @@ def set_active(maker: Maker, caller_: Caller, cid: int, tool_no: int | None = No
     for n, table, loc in ((tool_no, "tool", "tool_no"), (base_no, "base", "base_no")):
         if n is not None and not 0 <= n <= crud.SLOTS[table]:
             raise CalibrationError((loc,), f"must be 0..{crud.SLOTS[table]}, got {n}")
-    with audit.acting_as(caller_.who()), write_session(maker) as db:
-        crud.lock_controller(db, cid)
+    with transaction.writing(maker, cid, operation="set_active", who=caller_.who()) as db:
         robot_service.set_active(db, cid, tool_no, base_no)
-        db.commit()
     return robot(maker, caller_, cid)
 
 
@@ -244,12 +239,10 @@ def import_file(maker: Maker, caller_: Caller, cid: int, fmt: str, text: str) ->
     replaced. Returns how many slots it wrote."""
     caller_.require(IMPORT)
     parsed = controller_files.parse_file(fmt, text)
-    with audit.acting_as(caller_.who()), write_session(maker) as db:
-        crud.lock_controller(db, cid)
+    with transaction.writing(maker, cid, operation="import_tables", who=caller_.who()) as db:
         c = crud.get_controller(db, cid)
         result = controller_files.apply_import(db, c, fmt, text, parsed)
-        db.commit()
-        return result.entries
+    return result.entries
 
 
 def entry_body(fe: formats.FrameEntry, name: str | None = None) -> tuple[EntryIn, bool]:

@@ -17,8 +17,12 @@ from typing import Annotated, Any, Literal
 
 from pydantic import BaseModel, ConfigDict, Field, ValidationError, field_validator, model_validator
 
+from sqlalchemy.orm import Session
+
+from db import jobs
 from db.crud import ABB_SLOTS, KINDS_OF_TABLE, MAX_ID
-from db.models import EXT_KIN_SLOTS
+from db.models import EXT_KIN_SLOTS, Controller, Job
+from server.auth.audit import actor, mark_operation
 from server.menus import METHODS
 from server.service.bounds import MAX_T_S, MECH_UNIT_CHARS, Deg, Kg, Kgm2, Mm
 from server.service.export import export_text
@@ -339,6 +343,21 @@ def check_controller_joints(robot: Any, doc: dict[str, Any]) -> None:
         raise CalibrationError(loc + tuple(err.loc[1:]), err.reason) from None
 
 
+def restore_later(db: Session, c: Controller, text: str,
+                  dry_run: bool = False) -> tuple[int, Job | None]:
+    """``POST .../import`` of a JSON backup: the document checked now (CalibrationError naming
+    the field; nothing a later read cannot handle is stored), then restored by a job
+    (``server.jobs.kinds.run_restore``, audited as the current actor, ``backup.restore``).
+    The backup's slot count and the queued job (None for a ``dry_run``: nothing queued)."""
+    mark_operation("backup.restore")
+    doc = parse_backup(text)
+    check_controller_joints(robot_of(c), doc)  # the same check as pendant restore
+    if dry_run:
+        return len(doc["entries"]), None
+    return len(doc["entries"]), jobs.enqueue(db, "restore", {"controller_id": c.id, "doc": doc,
+                                                             "actor": actor()})
+
+
 def run_backup(args: Any) -> int:
     """``pendant backup CONTROLLER [-o FILE]``: the controller's ``pendant-backup/1`` (what
     ``GET .../export?format=json`` answers), written whole or not at all."""
@@ -373,7 +392,7 @@ def run_restore_file(args: Any) -> int:
     from server.jobs.kinds import run_restore
 
     text = args.file.read_text(encoding="utf-8")
-    with cli_session(args.db, write=not args.dry_run) as db:
+    with cli_session(args.db, write=not args.dry_run, operation="restore") as db:
         c = crud.find_controller(db, args.controller)
         doc = parse_backup(text)
         check_controller_joints(robot_of(c), doc)

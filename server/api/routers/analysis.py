@@ -10,10 +10,11 @@
 - ``POST /predict``: ``{"model", "recording", "refit_setup"}`` -> ``prediction/1``
   (:func:`solvers.analysis.model.predict`; ``pendant predict``).
 
-Documents live in the database (``stored_document``, :func:`db.crud.store_document` /
-:func:`db.crud.load_document`), so they survive a restart. The analysis runs off the request path
-(``server.jobs.kinds.run_analysis`` in a ``pendant worker`` process, bounded in time and
-memory): a flood of analyses queues up and never stalls jogging, touch-ups or reads.
+Documents live in the database (``stored_document``: :mod:`server.service.recordings` stores
+them, :func:`db.crud.load_document` reads them), so they survive a restart. The analysis runs
+off the request path (``server.jobs.kinds.run_analysis`` in a ``pendant worker`` process,
+bounded in time and memory): a flood of analyses queues up and never stalls jogging, touch-ups
+or reads.
 """
 
 from __future__ import annotations
@@ -24,11 +25,11 @@ from fastapi import APIRouter, Body, Query, Response
 from fastapi.responses import JSONResponse
 from pydantic import BaseModel, ConfigDict
 
-from db import jobs
-from db.crud import NotFound, exists_document, load_document, store_document
+from db.crud import NotFound, load_document
 from server.api.deps import SessionDep
 from server.formats.recording import parse_recording
 from server.api.routers.jobs import JobOut, accepted
+from server.service.recordings import add_recording, queue_analysis
 
 router = APIRouter(tags=["Analysis"])
 
@@ -36,8 +37,7 @@ router = APIRouter(tags=["Analysis"])
 @router.post("/recordings", status_code=201)
 def create_recording(db: SessionDep, doc: dict[str, Any] = Body(...)) -> dict[str, Any]:
     """Store a recording (``robot-recording/1``); 422 naming the field if it is not one."""
-    rec = parse_recording(doc)
-    rid = store_document(db, "recordings", doc)
+    rid, rec = add_recording(db, doc)
     return {"id": rid, "kind": rec.kind, "n_samples": rec.n_samples, "robot": rec.robot.name}
 
 
@@ -62,13 +62,7 @@ def analyze_recording(response: Response, db: SessionDep, recording_id: int,
     The job's result is ``{"analysis_id": N}`` and ``links.result`` is ``/analysis/N``, the
     ``analysis-report/1``. A recording the analysis cannot use fails the job with the 422 the
     analysis gives (``error.status``, ``error.detail``)."""
-    if not exists_document(db, "recordings", recording_id):
-        raise NotFound(("recording_id",), f"no recording {recording_id}")
-    params: dict[str, Any] = {"recording_id": recording_id, "folds": folds, "seed": seed}
-    if split is not None:
-        params["split"] = split
-    job = jobs.enqueue(db, "analysis", params)
-    return accepted(response, job)
+    return accepted(response, queue_analysis(db, recording_id, folds, seed, split))
 
 
 @router.get("/analysis/{analysis_id}")

@@ -8,8 +8,7 @@ from __future__ import annotations
 
 from fastapi import APIRouter, Request, Response
 
-from db import crud, jobs
-from server.auth.audit import actor, mark_operation
+from db import crud
 from server.auth.guard import require
 from server.service.controller_files import (
     ImportResult,
@@ -17,9 +16,9 @@ from server.service.controller_files import (
     export_file_bytes,
     parse_file,
 )
-from server.service.backup import check_controller_joints, parse_backup
+from server.service.backup import restore_later
 from server.service.export import export_text
-from server.service.robot import controller, robot_of
+from server.service.robot import controller
 from server.api.deps import SessionDep
 from server.api.preconditions import IfMatch
 from server.api.routers.controllers import controller_out
@@ -89,14 +88,11 @@ def import_tables(controller_id: int, body: ImportIn, db: SessionDep, request: R
                                "slots choose among a controller file's slots")
     if body.format == "json":
         require(request, "backup:restore")
-        mark_operation("backup.restore")
-        doc = parse_backup(body.text)  # checked: nothing a later read cannot handle is stored
-        check_controller_joints(robot_of(c), doc)  # the same check as pendant restore
-        if body.dry_run:
-            return ImportOut(format="json", entries=len(doc["entries"]), dry_run=True)
+        entries, job = restore_later(db, c, body.text, body.dry_run)
+        if job is None:
+            return ImportOut(format="json", entries=entries, dry_run=True)
         response.status_code = 202  # the restore itself is a job (server.jobs.kinds)
-        return accepted(response, jobs.enqueue(db, "restore", {"controller_id": c.id,
-                                                               "doc": doc, "actor": actor()}))
+        return accepted(response, job)
     slots = None if body.slots is None else [(s.table, s.number) for s in body.slots]
     result = apply_import(db, c, body.format, body.text, parse_file(body.format, body.text),
                           body.dry_run, body.encoding, slots)

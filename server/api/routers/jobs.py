@@ -20,6 +20,7 @@ from pydantic import BaseModel, ConfigDict
 from db import jobs
 from db.models import Job
 from server.api.deps import SessionDep
+from server.service import jobs as job_service
 
 router = APIRouter(prefix="/jobs", tags=["Jobs"])
 
@@ -81,4 +82,4 @@ def get_job(job_id: int, db: SessionDep) -> JobOut:
 @router.post("/{job_id}/cancel")
 def cancel_job(job_id: int, db: SessionDep) -> JobOut:
     """Cancel a job: at once if queued, within a second if running; a finished job stays."""
-    return JobOut.of(jobs.cancel(db, job_id))
+    return JobOut.of(job_service.cancel_job(db, job_id))

@@ -7,7 +7,8 @@
   with the given hidden physics (the body of ``GET /controllers/{id}/cell/physics``), stored
   as a recording (``POST /recordings/{id}/analyze`` then analyses it).
 
-Both compute outside the app's write lock (a plan takes a few seconds); a bad field is a 422
+Both compute outside the app's write lock (a plan takes a few seconds; the recording is then
+stored in a write of its own, :func:`server.service.transaction.writing`); a bad field is a 422
 naming it.
 """
 
@@ -19,9 +20,9 @@ from fastapi import APIRouter, Request
 from pydantic import BaseModel, Field
 from starlette.concurrency import run_in_threadpool
 
-from db.crud import store_document
+from server.service import transaction
 from server.service.bounds import Deg, Mm
-from db.session import write_session
+from server.service.recordings import store_recording
 from solvers.analysis.plan import Workspace, parse_effects, plan_poses, record_plan
 from solvers.dh import check_joint_limits
 from solvers.errors import CalibrationError
@@ -56,16 +57,9 @@ class PlanRecordingIn(BaseModel):
 
 
 def _store(request: Request, doc: dict[str, Any]) -> int:
-    db = write_session(request.app.state.sessionmaker)  # BEGIN IMMEDIATE on SQLite
-    try:
-        new_id = store_document(db, "recordings", doc)
-        db.commit()
-        return new_id
-    except BaseException:
-        db.rollback()
-        raise
-    finally:
-        db.close()
+    with transaction.writing(request.app.state.sessionmaker,
+                             operation="record_from_plan") as db:
+        return store_recording(db, doc)
 
 
 def _robot(key: str):

@@ -7,7 +7,6 @@ docs/events.md has the receiver's side.
 
 from __future__ import annotations
 
-import secrets
 from datetime import datetime
 from typing import Literal
 from urllib.parse import urlsplit
@@ -16,12 +15,11 @@ from fastapi import APIRouter, Response
 from pydantic import Field, field_validator
 from sqlalchemy import select
 
-from db import crud
 from db.models import Delivery, Event, Webhook
 from db.outbox import KINDS
-from server.auth import audit
 from server.api.deps import SessionDep
 from server.api.schemas import In, Out
+from server.service import webhooks as subscriptions
 
 router = APIRouter(prefix="/webhooks", tags=["Events"])
 
@@ -78,23 +76,10 @@ def _out(h: Webhook, secret: str | None = None) -> WebhookOut:
                       active=h.active, created_at=h.created_at, secret=secret)
 
 
-def _get(db: SessionDep, webhook_id: int) -> Webhook:
-    hook = crud._get(db, Webhook, webhook_id)  # an id beyond the backend's range: not found
-    if hook is None:
-        raise crud.NotFound(("path", "webhook_id"), f"no webhook {webhook_id}")
-    return hook
-
-
 @router.post("", status_code=201)
 def create_webhook(body: WebhookIn, db: SessionDep) -> WebhookOut:
     """Subscribe ``url``; the answer carries the signing secret (keep it: it is not shown again)."""
-    secret = body.secret or secrets.token_urlsafe(32)
-    hook = Webhook(url=body.url, secret=secret,
-                   kinds=None if body.kinds is None else {"kinds": list(body.kinds)})
-    db.add(hook)
-    db.flush()
-    audit.record(db, "webhook.create", after={"webhook_id": hook.id, "url": hook.url,
-                                              "kinds": body.kinds})  # never the secret
+    hook, secret = subscriptions.create_webhook(db, body.url, body.secret, body.kinds)
     return _out(hook, secret)
 
 
@@ -106,29 +91,21 @@ def list_webhooks(db: SessionDep) -> list[WebhookOut]:
 @router.delete("/{webhook_id}", status_code=204)
 def delete_webhook(webhook_id: int, db: SessionDep) -> Response:
     """Unsubscribe; pending deliveries to it are dropped with it."""
-    hook = _get(db, webhook_id)
-    audit.record(db, "webhook.delete", before={"webhook_id": hook.id, "url": hook.url})
-    db.delete(hook)
+    subscriptions.delete_webhook(db, webhook_id)
     return Response(status_code=204)
 
 
 @router.post("/{webhook_id}/test", status_code=202)
 def test_webhook(webhook_id: int, db: SessionDep) -> TestOut:
     """Queue a ``ping`` event to this webhook alone, through the normal signed delivery."""
-    hook = _get(db, webhook_id)
-    ev = Event(kind="ping", payload={"webhook_id": hook.id, "url": hook.url})
-    db.add(ev)
-    db.flush()
-    d = Delivery(event_id=ev.id, sink="webhook", webhook_id=hook.id)
-    db.add(d)
-    db.flush()
-    return TestOut(event_id=ev.id, delivery_id=d.id)
+    d = subscriptions.ping_webhook(db, webhook_id)
+    return TestOut(event_id=d.event_id, delivery_id=d.id)
 
 
 @router.get("/{webhook_id}/deliveries")
 def list_deliveries(webhook_id: int, db: SessionDep) -> list[DeliveryOut]:
     """The delivery log, newest first: state, attempts, last HTTP status and error."""
-    _get(db, webhook_id)
+    subscriptions.get_webhook(db, webhook_id)
     rows = db.execute(select(Delivery, Event.kind).join(Event, Event.id == Delivery.event_id)
                       .where(Delivery.webhook_id == webhook_id).order_by(Delivery.id.desc())
                       .limit(500)).all()

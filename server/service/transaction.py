@@ -1,0 +1,120 @@
+"""How a write runs, whichever face: one writer's transaction, the controller locked, audited.
+
+Every operation that changes rows runs in one transaction that
+
+- is a **writer's** from its first statement (:func:`writer`): SQLite ``BEGIN IMMEDIATE``
+  (the database's write lock, across processes, waited for in SQLite's busy handler,
+  ``db.session``); on PostgreSQL its ``BEGIN`` is followed at once by ``SELECT ... FOR
+  UPDATE`` of the controller's row (:func:`_lock_at_begin`), so every read-modify-write of one
+  controller runs after the previous one committed;
+- on SQLite, takes this process's **turn** (:func:`sqlite_turn`): SQLite has one writer at a
+  time anyway, and a thread that loses ``BEGIN IMMEDIATE`` to a thread of its own process
+  would otherwise wait in SQLite's busy handler, which sleeps 1, 2, 5, 10 ... up to 100 ms
+  between tries; on the turn it runs as soon as the other commits. Writers of other processes
+  (a second worker, the CLI, a job) still meet in the busy handler;
+- ends with :func:`commit`: the operation's ``op.<name>`` audit record when it changed rows no
+  row hook recorded (``server.auth.audit.operation``), then the commit; rolled back on any
+  error.
+
+:func:`writing` is all three for a face that opens its own transaction (OPC UA, RWS, KVP, the
+CLI, a route computing outside the request's transaction). The REST request path
+(``server.api.deps``) keeps its request-scoped session and its Idempotency-Key claim, and
+uses the same pieces: :func:`writer`, :func:`sqlite_turn`, :func:`commit`.
+"""
+
+from __future__ import annotations
+
+import contextlib
+import threading
+from collections.abc import Iterator
+from typing import Any
+
+from sqlalchemy import event
+from sqlalchemy.orm import Session, sessionmaker
+
+from db import crud
+from db.session import write_session
+from server.auth import audit
+
+LOCK_ON_BEGIN = "pendant_lock_controller"  # Session.info: the controller to lock at BEGIN
+WRITER = "pendant_writer"  # Session.info: a writer's session (BEGIN IMMEDIATE)
+
+Maker = sessionmaker[Session]
+
+
+def _lock_at_begin(db: Session, _transaction: object, connection: Any) -> None:
+    """``after_begin`` of a writer's session: lock its controller's row first (PostgreSQL;
+    SQLite's ``BEGIN IMMEDIATE`` has already locked the database)."""
+    cid = db.info.pop(LOCK_ON_BEGIN, None)
+    if cid is not None and connection.dialect.name != "sqlite":
+        crud.lock_controller(connection, cid)
+
+
+def install(make_session: Maker) -> None:
+    """The row lock at BEGIN for the writers' sessions of ``make_session`` (idempotent)."""
+    if not event.contains(make_session, "after_begin", _lock_at_begin):
+        event.listen(make_session, "after_begin", _lock_at_begin)
+
+
+def writer(make_session: Maker, controller_id: int | None = None) -> Session:
+    """A writer's session of ``make_session`` (``BEGIN IMMEDIATE`` on SQLite) whose transaction
+    begins by locking ``controller_id``'s row (PostgreSQL), whichever statement comes first."""
+    install(make_session)
+    db = write_session(make_session)
+    db.info[WRITER] = True
+    if controller_id is not None:
+        db.info[LOCK_ON_BEGIN] = controller_id
+    return db
+
+
+_SQLITE_TURNS: dict[str, threading.Lock] = {}  # database URL -> its writers' turn, per process
+_TURNS_LOCK = threading.Lock()
+
+
+@contextlib.contextmanager
+def sqlite_turn(db: Session) -> Iterator[None]:
+    """This process's turn to write ``db``'s SQLite database, held until the block ends (the
+    transaction committed or rolled back). Nothing for a reader's session, nor on PostgreSQL
+    (row locks), nor when the session's transaction has begun already (an Idempotency-Key
+    claimed before the route): it holds SQLite's write lock, and waiting for a turn while
+    holding it would deadlock with the thread whose turn it is."""
+    if not db.info.get(WRITER) or db.in_transaction():
+        yield
+        return
+    bind = db.get_bind()
+    if bind.dialect.name != "sqlite":
+        yield
+        return
+    key = str(bind.url)
+    with _TURNS_LOCK:
+        turn = _SQLITE_TURNS.setdefault(key, threading.Lock())
+    with turn:
+        yield
+
+
+def commit(db: Session, operation: str, **ids: int | None) -> None:
+    """Commit, with the operation's audit record (``op.<operation>``, naming ``ids``:
+    controller_id, session_id) when it changed rows no row hook recorded: every write leaves
+    one."""
+    audit.operation(db, operation, **ids)
+    db.commit()
+
+
+@contextlib.contextmanager
+def writing(make_session: Maker, controller_id: int | None = None, *, operation: str,
+            who: dict[str, Any] | None = None, **ids: int | None) -> Iterator[Session]:
+    """One write, whichever face: a writer's session (:func:`writer`, ``controller_id``'s row
+    locked), in this process's turn (:func:`sqlite_turn`), committed with the operation's audit
+    record (:func:`commit`) when the block ends, rolled back if it raises. ``who`` (an
+    :func:`server.auth.audit.actor`) is whom the audit names; without it, the current actor.
+
+    ``with writing(maker, cid, operation="commit_frame", who=caller) as db: edit_slot(db, ...)``
+    """
+    acting = audit.acting_as(who) if who is not None else contextlib.nullcontext()
+    with acting, writer(make_session, controller_id) as db, sqlite_turn(db):
+        try:
+            yield db
+            commit(db, operation, controller_id=controller_id, **ids)
+        except BaseException:
+            db.rollback()
+            raise
