@@ -328,9 +328,10 @@ def store_controller_file(db: Session, controller_id: int, fmt: str, text: str,
 # ------------------------------------------------------------------------------- sessions
 
 def open_session(db: Session, controller: Controller, method: str, target_table: str,
-                 target_no: int, params: dict[str, Any]) -> CalibSession:
+                 target_no: int, params: dict[str, Any],
+                 opened_by: str | None = None) -> CalibSession:
     s = CalibSession(controller_id=controller.id, method=method, target_table=target_table,
-                     target_no=target_no, params=params, state="open")
+                     target_no=target_no, params=params, state="open", opened_by=opened_by)
     db.add(s)
     db.flush()
     return s
@@ -465,7 +466,8 @@ def backup(db: Session, c: Controller) -> dict[str, Any]:
         "external_history": [_history_doc(h) for h in history(db, c.id, "extkin")],
         "sessions": [{"id": s.id, "method": s.method, "target_table": s.target_table,
                       "target_no": s.target_no, "params": s.params, "state": s.state,
-                      "created_at": _iso(s.created_at), "result": s.result_values(),
+                      "created_at": _iso(s.created_at), "opened_by": s.opened_by,
+                      "result": s.result_values(),
                       "report": s.report, "points": [point(p) for p in s.points]}
                      for s in list_sessions(db, c.id)],
         "files": [{"format": f.format, "text": f.text, "encoding": f.encoding}
@@ -501,6 +503,7 @@ def restore_backup(db: Session, c: Controller, doc: dict[str, Any]) -> tuple[int
         s = CalibSession(controller_id=c.id, method=sd["method"], target_table=sd["target_table"],
                          target_no=int(sd["target_no"]), params=sd.get("params") or {},
                          state=sd["state"], created_at=_dt(sd.get("created_at")) or utcnow(),
+                         opened_by=sd.get("opened_by"),
                          report=sd.get("report"), updated_at=utcnow())  # made now (rows.py)
         s.set_result_values(sd.get("result"))
         for pd in sd.get("points", []):

@@ -197,6 +197,8 @@ class CalibSession(Base):
     version: Mapped[int] = mapped_column(default=1, server_default="1")
     updated_at: Mapped[datetime | None]
     target_version: Mapped[int | None]
+    # revision 0011: who opened it (the user name the audit records; NULL before 0011)
+    opened_by: Mapped[str | None] = mapped_column(String(64))
 
     points: Mapped[list[TaughtPoint]] = relationship(back_populates="session",
                                                      order_by="TaughtPoint.step",

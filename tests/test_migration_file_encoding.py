@@ -4,29 +4,18 @@ with its encoding beside it, and exports the same bytes."""
 
 from __future__ import annotations
 
-from datetime import datetime, timezone
-
 import sqlalchemy as sa
 from alembic import command
-
-from db.session import alembic_config, make_engine
+from migration_helpers import add_controller, at_revision, utc_now
 
 
 def test_a_marked_kept_file_gets_its_encoding_column(fresh_db):  # noqa: ANN001
-    url = fresh_db(migrated=False)
-    cfg = alembic_config(url)
-    command.upgrade(cfg, "0009_rws_secret")
-    engine = make_engine(url)
-    meta = sa.MetaData()
-    meta.reflect(engine)
-    controller, files = meta.tables["controller"], meta.tables["controller_file"]
-    now = datetime.now(timezone.utc).replace(tzinfo=None)
-    row = {c.name: now if isinstance(c.type, sa.DateTime) else 0 for c in controller.c
-           if not c.nullable and c.name != "id" and c.server_default is None}
-    row.update(name="old-cell", joints_deg=[0.0] * 6)
+    cfg, engine, meta = at_revision(fresh_db, "0009_rws_secret")
+    files = meta.tables["controller_file"]
+    now = utc_now()
     text = 'TOOL_NAME[1,]="Greifer Öl"\n'
     with engine.begin() as conn:
-        cid = conn.execute(controller.insert().values(**row)).inserted_primary_key[0]
+        cid = add_controller(conn, meta)
         conn.execute(files.insert().values(controller_id=cid, format="kuka",
                                            text="\ue000cp1252\ue000" + text,
                                            imported_at=now))

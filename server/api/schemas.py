@@ -559,6 +559,8 @@ class SessionOut(Out):
     result: PoseOut | None
     report: ReportOut | None
     created_at: datetime
+    opened_by: str | None = Field(description="Who opened the session (the user name "
+                                  "the audit records); null for one opened before it was recorded")
 
 
 class BeamRecordingIn(BaseModel):

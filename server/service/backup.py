@@ -192,6 +192,7 @@ class SessionIn(_Doc):
     params: dict[str, Any] = Field(default_factory=dict)
     state: Literal["open", "computed", "saved", "discarded"]
     created_at: str | None = None
+    opened_by: str | None = Field(None, max_length=64)  # absent before revision 0011
     result: Annotated[list[Annotated[float, Field(ge=-1e6, le=1e6)]],
                       Field(min_length=6, max_length=6)] | None = None
     report: dict[str, Any] | None = None

@@ -23,6 +23,7 @@ from db import crud
 from db.models import EXT_KIN_SLOTS, CalibSession, ExternalKinematic, FrameEntry
 from db.outbox import emit
 from server.api.schemas import ReportOut, TouchUpIn, jsonable
+from server.auth import audit
 from server.formats.recording import parse_recording
 from server.menus import METHODS
 from server.menus.methods import PARAM_HELP, MethodInputs, MethodSpec, Step, TaughtData
@@ -140,7 +141,9 @@ def session(db: Session, controller_id: int, session_id: int, if_match: str | No
 def open_session(db: Session, controller_id: int, method: str, target_no: int,
                  params: dict[str, Any]) -> CalibSession:
     """Open a menu run on a target slot; the params the method needs are checked now, and the
-    slots they name too (an empty touching or reference tool, a base that is no fixed tool)."""
+    slots they name too (an empty touching or reference tool, a base that is no fixed tool).
+    The session records who opened it: the user name the audit records for this actor
+    (``no-auth`` with auth off, ``cli:USER`` from the CLI, None for the system)."""
     c = crud.get_controller(db, controller_id)
     spec = METHODS[method]
     for p in spec.required:
@@ -154,7 +157,8 @@ def open_session(db: Session, controller_id: int, method: str, target_no: int,
     if spec.table == "extkin" and target_no > EXT_KIN_SLOTS:
         raise CalibrationError(("target_no",), f"{spec.name} writes an external kinematic "
                                f"(EX_KIN 1..{EXT_KIN_SLOTS}), got {target_no}")
-    s = crud.open_session(db, c, spec.name, spec.table, target_no, jsonable(params))
+    s = crud.open_session(db, c, spec.name, spec.table, target_no, jsonable(params),
+                          opened_by=audit.current().user_name)
     if spec.menu == "ext" or any(k in params for k in ("tool_no", "reference_tool_no",
                                                         "fixed_tool_no")):
         resolve_inputs(db, s)  # an empty touching tool is refused now, not at Compute

@@ -55,7 +55,7 @@ def session_out(s: CalibSession) -> SessionOut:
                       extra_steps_allowed=max(spec.extra_steps - len(taught_extra), 0),
                       result=None if result is None else PoseOut.of(result),
                       report=None if s.report is None else ReportOut.model_validate(s.report),
-                      created_at=s.created_at)
+                      created_at=s.created_at, opened_by=s.opened_by)
 
 
 def step_out(i: int, st: Step, required: bool, p: TaughtPoint | None) -> StepOut:
