@@ -1,7 +1,7 @@
 """The pendant page's second hour in Debian's Chromium (issue 27): a slot's history with a
 Restore that asks first, a JSON backup restored from its preview with its progress in words,
-the open sessions listed to pick one from (none taken over unasked), and the Frames table
-readable at 1280 px."""
+the open sessions listed to pick one from (whose each is; none taken over unasked), and the
+Frames table readable at 1280 px."""
 
 from __future__ import annotations
 
@@ -122,6 +122,29 @@ def test_open_sessions_are_listed_and_the_person_picks_one(page, site):
     assert re.search(r"→ TOOL 4$", page.locator("#session-title").inner_text())
     assert page.locator("#step-label").text_content().startswith("Step 2 of 4")
     for s in (first, second):  # leave the module's database as it was
+        api(page, site, "POST", f"/sessions/{s['id']}/discard", data={})
+
+
+def test_open_sessions_say_whose_they_are(page, site):
+    """Another user's session is listed with their name; the viewer's own is marked theirs."""
+    r = page.request.post(site + "/users", data={"name": "olga", "role": "Programmer"})
+    assert r.ok, r.text()
+    r = page.request.post(site + "/users/olga/tokens", data={})
+    assert r.ok, r.text()
+    olga = {"Authorization": "Bearer " + r.json()["token"]}
+    menu = {"method": "tool.xyz_4point"}
+    hers = api(page, site, "POST", "/sessions", headers=olga, data={**menu, "target_no": 6})
+    mine = api(page, site, "POST", "/sessions", data={**menu, "target_no": 8})
+    open_pendant(page, site)
+    listed = page.locator("#open-sessions li")
+    by_id = {s["id"]: listed.filter(has_text=f"(session {s['id']})") for s in (hers, mine)}
+    her_line = by_id[hers["id"]].inner_text()
+    assert "TOOL 6: 0 of 4 points taught, open" in her_line and " by olga (session" in her_line, her_line
+    assert "yours" not in her_line
+    assert " by admin (yours) (session" in by_id[mine["id"]].inner_text()
+    assert by_id[mine["id"]].get_attribute("class") == "mine"
+    assert by_id[hers["id"]].get_attribute("class") is None
+    for s in (hers, mine):  # leave the module's database as it was
         api(page, site, "POST", f"/sessions/{s['id']}/discard", data={})
 
 

@@ -33,6 +33,7 @@ const state = {
   bases: [],
   exts: [], // external kinematics (EX_KIN 1..6)
   targets: {}, // the slot last opened per table: each menu proposes its own (tool, base, extkin)
+  me: undefined, // the user logged in (whoami), once asked
 };
 
 /** The external kinematics each ext menu calibrates (server.service.external.METHOD_KINDS). */
@@ -667,18 +668,27 @@ async function discard() {
 
 // ------------------------------------------------------------------------------ open sessions
 
+/** Who is logged in (`/auth/me`'s user), asked once; null when the service does not say. */
+async function whoami() {
+  if (state.me === undefined) state.me = await api("GET", "/auth/me").then((me) => me.user, () => null);
+  return state.me;
+}
+
 /** The controller's unfinished sessions (open or computed), listed above Open session with
- * their menu, slot and points taught; Resume takes the one the person picks. A session
- * opened elsewhere (a script, another page) is never taken over without being picked. */
+ * their menu, slot, points taught and who opened them (the viewer's own marked "yours");
+ * Resume takes the one the person picks. A session opened elsewhere (a script, another page,
+ * another user) is never taken over without being picked. */
 async function loadOpenSessions() {
   const cid = state.cid;
-  const open = (await api("GET", ctl("/sessions"))).filter((s) => s.state === "open" || s.state === "computed");
+  const [all, me] = await Promise.all([api("GET", ctl("/sessions")), whoami()]);
+  const open = all.filter((s) => s.state === "open" || s.state === "computed");
   if (cid !== state.cid || state.session) return; // the person moved on meanwhile
   const box = $("#open-sessions");
   box.hidden = !open.length;
   $("#open-sessions-h").textContent = `Open sessions (${open.length}): resume one, or open a new one below`;
-  $("#open-sessions ul").replaceChildren(...open.slice().reverse().map((s) => el("li", { "data-session": s.id },
-    el("span", { class: "session-text", text: describeSession(s, TABLE_LABEL[s.target_table]) }),
+  $("#open-sessions ul").replaceChildren(...open.slice().reverse().map((s) => el("li", {
+      "data-session": s.id, class: me && s.opened_by === me ? "mine" : null },
+    el("span", { class: "session-text", text: describeSession(s, TABLE_LABEL[s.target_table], me) }),
     el("button", { type: "button", class: "small", "aria-label": `Resume session ${s.id}`, text: "Resume",
                    onclick: () => act($("#wizard"), () => resumeSession(s.id)) }))));
 }

@@ -101,13 +101,16 @@ export function describeChange(h) {
 // ------------------------------------------------------------------------------ sessions
 
 /** One open session for the list a person picks from: which menu, its slot, the points
- * taught, when it was opened. `label` is the table's name ("TOOL", "BASE", "EX_KIN"). */
-export function describeSession(s, label) {
+ * taught, when and by whom it was opened ("by alice", and "(yours)" when `me`, the user
+ * logged in, opened it; nothing when the service did not record who). `label` is the
+ * table's name ("TOOL", "BASE", "EX_KIN"). */
+export function describeSession(s, label, me = null) {
   const required = s.steps.filter((st) => st.required).length;
   const taught = s.steps.filter((st) => st.filled).length;
   const points = required ? `${taught} of ${required} point${required === 1 ? "" : "s"} taught`
                           : `${taught} point${taught === 1 ? "" : "s"} taught`;
-  return `${s.title} → ${label} ${s.target_no}: ${points}, ${s.state}, opened ${when(s.created_at)} (session ${s.id})`;
+  const by = s.opened_by ? ` by ${s.opened_by}${s.opened_by === me ? " (yours)" : ""}` : "";
+  return `${s.title} → ${label} ${s.target_no}: ${points}, ${s.state}, opened ${when(s.created_at)}${by} (session ${s.id})`;
 }
 
 // ------------------------------------------------------------------------------ jobs

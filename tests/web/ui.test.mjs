@@ -72,6 +72,14 @@ test("describeSession: which menu, which slot, how many points", () => {
   assert.match(describeSession({ ...s, steps: [] }, "TOOL"), /: 0 points taught/);
 });
 
+test("describeSession: whose it is, the viewer's own marked", () => {
+  const s = { id: 7, title: "Tool > XYZ 4-point", target_no: 2, state: "open", created_at: "2026-11-26T15:10:00",
+              steps: [], opened_by: "olga" };
+  assert.equal(describeSession(s, "TOOL", "eva"), "Tool > XYZ 4-point → TOOL 2: 0 points taught, open, opened 2026-11-26 15:10 by olga (session 7)");
+  assert.match(describeSession(s, "TOOL", "olga"), /opened 2026-11-26 15:10 by olga \(yours\) \(session 7\)$/);
+  assert.match(describeSession({ ...s, opened_by: null }, "TOOL", "olga"), /opened 2026-11-26 15:10 \(session 7\)$/); // not recorded
+});
+
 test("jobText: what the job is doing, in words", () => {
   assert.equal(jobText({ state: "running", progress: 0.1, message: "restoring the backup" }), "restoring the backup: 10 %");
   assert.equal(jobText({ state: "queued", progress: 0, message: "" }), "waiting for a worker");
