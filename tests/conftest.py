@@ -10,9 +10,13 @@ Two markers sort the suite for ``tests/run`` (they are set here, at collection, 
   database (solvers, formats, analysis statistics, doctests) and tests that name their own
   SQLite file run in the SQLite pass only: on PostgreSQL they would prove the same thing
   again. ``@pytest.mark.db`` marks one by hand.
-- ``load``: the load and crash tests (``LOAD_MODULES``): several uvicorn workers, SIGKILLs, a
-  45-analyses flood with a latency bound. They are also ``serial``; the lowest-versions pass
-  leaves them out (``tests/run`` says why).
+- ``load``: the load and crash tests (``LOAD_MODULES``, and ``@pytest.mark.load`` by hand):
+  several uvicorn workers, SIGKILLs, a 45-analyses flood with a latency bound, revocations
+  under a jog load. They are also ``serial``; the lowest-versions pass leaves them out
+  (``tests/run`` says why).
+- ``slow`` (by hand): a test whose cost is size or trials (20 000 history rows, Monte Carlo
+  coverage): it repeats calls that smaller tests make, so the lowest-versions pass leaves it
+  out; passes 1 and 2 run it, beside other tests.
 - ``serial``: a test that loads the machine itself or measures it (the ``load`` tests, and
   ``@pytest.mark.serial`` where a test says so). When pytest-xdist runs the suite in several
   processes (``tests/run``: ``-n auto``) a serial test runs alone: it waits until the other
@@ -98,7 +102,9 @@ def pytest_configure(config: pytest.Config) -> None:
     config.addinivalue_line("markers", "db: opens the suite's database (the PostgreSQL pass "
                                        "runs it); set by tests/conftest.py")
     config.addinivalue_line("markers", "load: a load or crash test (also serial); set by "
-                                       "tests/conftest.py")
+                                       "tests/conftest.py for LOAD_MODULES, or by hand")
+    config.addinivalue_line("markers", "slow: costs size or trials, repeating calls smaller "
+                                       "tests make (left out of the lowest-versions pass)")
     config.addinivalue_line("markers", "serial: runs on its own, not beside other tests "
                                        "(under pytest-xdist)")
 
@@ -107,8 +113,9 @@ def pytest_collection_modifyitems(config: pytest.Config, items: list[pytest.Item
     for item in items:
         if item.get_closest_marker("db") is None and "fresh_db" in getattr(item, "fixturenames", ()):
             item.add_marker(pytest.mark.db)
-        if item.path.name in LOAD_MODULES:
+        if item.path.name in LOAD_MODULES and item.get_closest_marker("load") is None:
             item.add_marker(pytest.mark.load)
+        if item.get_closest_marker("load") is not None and item.get_closest_marker("serial") is None:
             item.add_marker(pytest.mark.serial)
 
 

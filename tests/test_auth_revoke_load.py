@@ -3,7 +3,9 @@ once, and the token stops working within a second, on both backends.
 
 The service runs as a process of its own (its token cache is not this process'); three
 threads jog its robot all along; ``pendant tokens revoke ID`` (and ``pendant users revoke``)
-run here, on their own database connection, as the command does."""
+run here, on their own database connection, as the command does. The three tests under load
+are marked ``load`` (tests/conftest.py: they run alone, and the lowest-versions pass leaves them
+out: the CLI and routes they call are called there by test_auth_cli and test_auth_api)."""
 
 from __future__ import annotations
 
@@ -126,7 +128,7 @@ def refused_within(url: str, secret: str, seconds: float) -> float | None:
             time.sleep(0.02)
 
 
-@pytest.mark.serial
+@pytest.mark.load
 def test_cli_revoke_under_jog_load_returns_at_once_and_the_token_stops(fresh_db, tmp_path):
     db = fresh_db()
     assert cli("users", "add", "eva", "--role", "Expert", "--db", db)[0] == 0
@@ -154,7 +156,7 @@ def test_cli_revoke_under_jog_load_returns_at_once_and_the_token_stops(fresh_db,
     assert set(codes) == {200}, sorted(set(codes))
 
 
-@pytest.mark.serial
+@pytest.mark.load
 def test_cli_user_revoke_under_jog_load(fresh_db, tmp_path):
     db = fresh_db()
     with service(db) as url, jogging(url) as codes:
@@ -170,7 +172,7 @@ def test_cli_user_revoke_under_jog_load(fresh_db, tmp_path):
     assert set(codes) == {200}, sorted(set(codes))
 
 
-@pytest.mark.serial
+@pytest.mark.load
 def test_rest_user_revoke_under_jog_load(fresh_db, tmp_path):
     """``DELETE /users/{name}`` while three clients jog: answered within 2 s, refused at once."""
     db = fresh_db()

@@ -9,6 +9,7 @@ interface) and asserts the face refuses it.
 from __future__ import annotations
 
 import asyncio
+import logging
 import os
 import stat
 import subprocess
@@ -22,7 +23,9 @@ from api_helpers import ADMIN_TOKEN, C, make_client, ok
 from asyncua import Client, ua
 from asyncua.crypto.security_policies import SecurityPolicyBasic256Sha256
 from browser_helpers import free_port
-from opcua_helpers import Face, client_certificate, namespaces, secure_client, start_face
+from cryptography import x509
+from opcua_helpers import (ClientCert, Face, client_certificate, namespaces, secure_client,
+                           start_face)
 
 from server.auth import tokens
 from server.opcua.pki import KEY_NAME
@@ -312,43 +315,64 @@ def test_the_pki_folder_is_the_instances_own_and_private(cell: dict) -> None:
     assert pki.is_relative_to(cell["folder"])
 
 
-def test_an_untrusted_client_is_refused_until_trusted_once(cell: dict, tmp_path: Path) -> None:
+async def read_server_name(cell: dict, cert: ClientCert, timeout: float = 10) -> str:
+    client = await secure_client(cell["face"].endpoint, cert, "admin", ADMIN_TOKEN,
+                                 timeout=timeout)
+    async with client:
+        return (await client.nodes.server.read_browse_name()).Name
+
+
+REFUSED_WAIT_S = 3.0  # a client gives up on a refused channel after this
+
+
+def refused_channel(cell: dict, cert: ClientCert, why: str,
+                    caplog: pytest.LogCaptureFixture) -> None:
+    """A channel with ``cert`` gets no session, and the face says it refused the channel,
+    naming the certificate and ``why``. The face drops a refused channel without an answer:
+    the client waits out its timeout, so a short one here (an accepted channel answers in
+    well under a second; the face's log, polled for, tells a refusal from a slow face)."""
+    subject = x509.load_der_x509_certificate(cert.der()).subject.rfc4514_string()
+
+    def said() -> bool:
+        return any(subject in r.getMessage() and why in r.getMessage()
+                   for r in caplog.records)
+
+    caplog.clear()
+    with caplog.at_level(logging.WARNING, logger="pendant.opcua"):
+        with pytest.raises((ua.UaError, OSError, asyncio.TimeoutError)):
+            asyncio.run(read_server_name(cell, cert, timeout=REFUSED_WAIT_S))
+        deadline = time.monotonic() + 30
+        while not said() and time.monotonic() < deadline:
+            time.sleep(0.05)
+    assert said(), caplog.text
+
+
+def test_an_untrusted_client_is_refused_until_trusted_once(
+        cell: dict, tmp_path: Path, caplog: pytest.LogCaptureFixture) -> None:
     from server.cli.main import main
 
     stranger = client_certificate(tmp_path, "new-cell-pc")
 
-    async def read() -> str:
-        client = await secure_client(cell["face"].endpoint, stranger, "admin", ADMIN_TOKEN)
-        async with client:
-            return (await client.nodes.server.read_browse_name()).Name
-
-    with pytest.raises((ua.UaError, OSError, asyncio.TimeoutError)):
-        asyncio.run(read())
+    refused_channel(cell, stranger, "is not trusted", caplog)
     (kept,) = (cell["face"].pki / "rejected").glob("new-cell-pc-*.der")
     assert kept.read_bytes() == stranger.der()
     assert main(["opcua", "trust", str(kept), "--pki", str(cell["face"].pki)]) == 0
-    assert asyncio.run(read()) == "Server"
+    assert asyncio.run(read_server_name(cell, stranger)) == "Server"
 
 
-def test_expired_and_not_yet_valid_certificates_are_refused(cell: dict, tmp_path: Path,
-                                                            capsys: pytest.CaptureFixture) -> None:
+def test_expired_and_not_yet_valid_certificates_are_refused(
+        cell: dict, tmp_path: Path, capsys: pytest.CaptureFixture,
+        caplog: pytest.LogCaptureFixture) -> None:
     from server.cli.main import main
 
     old = client_certificate(tmp_path / "old", "old-pc", valid_from_days=-30, valid_days=10)
     early = client_certificate(tmp_path / "early", "early-pc", valid_from_days=5)
-    for cert in (old, early):
+    for cert, why in ((old, "refused: expired on"), (early, "refused: not valid before")):
         assert main(["opcua", "trust", cert.cert, "--pki", str(cell["face"].pki)]) == 2
         assert "CERT:" in capsys.readouterr().err
         # placed in the trust list by hand: the channel is still refused
         (cell["face"].pki / "trusted" / Path(cert.cert).name).write_bytes(cert.der())
-
-        async def read(cert=cert) -> str:
-            client = await secure_client(cell["face"].endpoint, cert, "admin", ADMIN_TOKEN)
-            async with client:
-                return (await client.nodes.server.read_browse_name()).Name
-
-        with pytest.raises((ua.UaError, OSError, asyncio.TimeoutError)):
-            asyncio.run(read())
+        refused_channel(cell, cert, why, caplog)
 
     # registering an expired certificate for a user is refused, naming why
     ok(cell["rest"].post("/users", json={"name": "oldie", "role": "Expert"}))

@@ -21,6 +21,8 @@ sys.path.insert(0, str(Path(__file__).resolve().parents[1]))  # the repository: 
 
 from benchmarks.bounds_coverage import coverage, light_barrier_coverage  # noqa: E402
 
+pytestmark = pytest.mark.slow  # 1000 trials a scene: left out of the lowest-versions pass
+
 
 def _check(cov, low: float, high: float) -> None:
     measured = {k: getattr(cov, k) for k in ("position", "angle", "mahalanobis")}

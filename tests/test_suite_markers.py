@@ -1,8 +1,11 @@
 """The markers tests/run sorts the suite by (set in tests/conftest.py at collection): ``db``
 for a test that opens the suite's database -- it uses the ``fresh_db`` fixture, at any depth
--- ``load`` (and ``serial``) for the load and crash tests."""
+-- ``load`` (and ``serial``) for the load and crash tests; ``slow`` (by hand) runs beside
+others."""
 
 from __future__ import annotations
+
+import pytest
 
 
 def test_a_test_using_the_client_fixture_is_db(request, client):  # noqa: ANN001
@@ -18,6 +21,17 @@ def test_a_test_making_its_own_database_is_db(request, fresh_db):  # noqa: ANN00
 def test_a_test_that_opens_no_database_is_not_db(request, tmp_path, rng):  # noqa: ANN001
     # conftest's rng fixture: no database behind it
     assert request.node.get_closest_marker("db") is None
+    assert request.node.get_closest_marker("serial") is None
+    assert request.node.get_closest_marker("load") is None
+
+
+@pytest.mark.load
+def test_a_test_marked_load_by_hand_runs_alone(request):  # noqa: ANN001
+    assert request.node.get_closest_marker("serial") is not None
+
+
+@pytest.mark.slow
+def test_a_slow_test_runs_beside_others(request):  # noqa: ANN001
     assert request.node.get_closest_marker("serial") is None
     assert request.node.get_closest_marker("load") is None
 
