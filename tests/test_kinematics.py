@@ -79,7 +79,7 @@ def test_joint_limit_names_joint_value_and_limit():
     with pytest.raises(KinematicsError) as e:
         dh.check_joint_limits(kuka, [0, 60, 0, 0, 0, 0])
     assert e.value.loc == ("joints_deg", 1)
-    assert "joint 2 at 60.000 deg" in e.value.reason and "[-190, 45]" in e.value.reason
+    assert "A2 (joint 2) at 60.000 deg" in e.value.reason and "[-190, 45]" in e.value.reason
 
 
 def test_wrong_joint_count_is_named():
