@@ -1,7 +1,7 @@
 """Shared fixtures: the robot library, a seeded random generator, and for the browser
 tests a live service on a temporary SQLite file with Debian's Chromium.
 
-Two markers sort the suite for ``tests/run`` (they are set here, at collection, not by hand):
+Markers sort the suite for ``tests/run`` (they are set here, at collection, not by hand):
 
 - ``db``: the test opens the suite's database, so the PostgreSQL pass runs it
   (``-m db``). A test is ``db`` when it uses the :func:`fresh_db` fixture, at any depth (the
@@ -17,6 +17,12 @@ Two markers sort the suite for ``tests/run`` (they are set here, at collection, 
 - ``slow`` (by hand): a test whose cost is size or trials (20 000 history rows, Monte Carlo
   coverage): it repeats calls that smaller tests make, so the lowest-versions pass leaves it
   out; passes 1 and 2 run it, beside other tests.
+- ``protocol``: a face's wire protocol and process handling as an outside party meets them
+  (``PROTOCOL_MODULES``: node-opcua against the OPC UA face, the face's certificate
+  handshakes, ``serve``'s flags and restarts). What they prove does not depend on the database
+  (each face's reads and writes run on PostgreSQL in that face's other tests) nor on a library
+  floor the other tests do not reach (test_opcua.py opens encrypted channels,
+  test_auth_certificates.py reads certificates): passes 2 and 3 leave them out.
 - ``serial``: a test that loads the machine itself or measures it (the ``load`` tests, and
   ``@pytest.mark.serial`` where a test says so). When pytest-xdist runs the suite in several
   processes (``tests/run``: ``-n auto``) a serial test runs alone: it waits until the other
@@ -96,6 +102,8 @@ def chromium():  # noqa: ANN201
 
 TESTS_DIR = Path(__file__).resolve().parent
 LOAD_MODULES = frozenset({"test_workers.py", "test_jobs_flood.py"})
+PROTOCOL_MODULES = frozenset({"test_opcua_node.py", "test_opcua_security.py",
+                              "test_rws_serve.py", "test_serve_restart.py"})
 
 
 def pytest_configure(config: pytest.Config) -> None:
@@ -105,6 +113,9 @@ def pytest_configure(config: pytest.Config) -> None:
                                        "tests/conftest.py for LOAD_MODULES, or by hand")
     config.addinivalue_line("markers", "slow: costs size or trials, repeating calls smaller "
                                        "tests make (left out of the lowest-versions pass)")
+    config.addinivalue_line("markers", "protocol: a face's wire protocol or process handling "
+                                       "as an outside party meets them (passes 1 only); set "
+                                       "by tests/conftest.py for PROTOCOL_MODULES")
     config.addinivalue_line("markers", "serial: runs on its own, not beside other tests "
                                        "(under pytest-xdist)")
 
@@ -115,6 +126,8 @@ def pytest_collection_modifyitems(config: pytest.Config, items: list[pytest.Item
             item.add_marker(pytest.mark.db)
         if item.path.name in LOAD_MODULES and item.get_closest_marker("load") is None:
             item.add_marker(pytest.mark.load)
+        if item.path.name in PROTOCOL_MODULES:
+            item.add_marker(pytest.mark.protocol)
         if item.get_closest_marker("load") is not None and item.get_closest_marker("serial") is None:
             item.add_marker(pytest.mark.serial)
 

@@ -6,6 +6,7 @@ others."""
 from __future__ import annotations
 
 import pytest
+from conftest import PROTOCOL_MODULES
 
 
 def test_a_test_using_the_client_fixture_is_db(request, client):  # noqa: ANN001
@@ -74,3 +75,9 @@ def test_tests_get_their_database_and_fixtures_from_conftest():
              if p.name not in ("conftest.py", "db_backends.py", Path(__file__).name)
              for what in ("fresh_url(", "import *") if what in p.read_text()]
     assert not found, found
+
+
+def test_the_faces_protocol_tests_are_marked_protocol(request):  # noqa: ANN001
+    for name in PROTOCOL_MODULES:  # a renamed module would silently rejoin passes 2 and 3
+        assert (request.config.rootpath / "tests" / name).is_file(), name
+    assert request.node.get_closest_marker("protocol") is None
