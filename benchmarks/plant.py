@@ -37,6 +37,7 @@ from __future__ import annotations
 
 import argparse
 import asyncio
+import collections
 import json
 import os
 import random
@@ -61,6 +62,7 @@ from opcua_helpers import client_certificate  # noqa: E402  (a client's self-sig
 TOKEN = "pdt_plant-benchmark-administrator-0123456789"  # the service's first Administrator
 HEADERS = {"Authorization": f"Bearer {TOKEN}"}
 P99_TARGET_MS = 50.0
+CLIENTS = 64  # connections the load comes on (a plant's cell PCs, MES and pages: each its own)
 READ_LUA = """
 local n = 0
 local headers = {["Authorization"] = "%(auth)s"}
@@ -188,20 +190,31 @@ def make_cells(base: str, n: int) -> list[str]:
 
 class Http:
     """A lean HTTP/1.1 keep-alive client for the load (httpx cost the generator ~1 ms of CPU a
-    request, on the cores the service needs): a pool of connections, a request on an idle one
-    (or a new one), the answer read by its Content-Length."""
+    request, on the cores the service needs): a pool of connections, a request on the idle one
+    that has waited longest (or a new one), the answer read by its Content-Length.
+
+    A plant's requests come from many clients (cell PCs, MES, pages), each on its own
+    connection, which the kernel hands to the API workers in turn: :meth:`open` makes
+    ``clients`` connections first and requests take them in turn, so the load spreads over the
+    workers as a plant's does (reusing the latest connection, a handful carried the whole load
+    and one worker took twice the other's share)."""
 
     def __init__(self, host: str, port: int, headers: dict[str, str]) -> None:
         self.host, self.port = host, port
         self.head = "".join(f"{k}: {v}\r\n" for k, v in headers.items())
-        self.idle: list[tuple[asyncio.StreamReader, asyncio.StreamWriter]] = []
+        self.idle: collections.deque[tuple[asyncio.StreamReader, asyncio.StreamWriter]] = \
+            collections.deque()
+
+    async def open(self, clients: int) -> None:
+        for _ in range(clients):
+            self.idle.append(await asyncio.open_connection(self.host, self.port))
 
     async def request(self, method: str, path: str, body: bytes | None = None) -> tuple[int, bytes]:
         """One request; on a kept connection the service closed meanwhile (its keep-alive
         timeout), once more on a new connection."""
         reused = bool(self.idle)
         try:
-            return await self._send(self.idle.pop() if reused else None, method, path, body)
+            return await self._send(self.idle.popleft() if reused else None, method, path, body)
         except (asyncio.IncompleteReadError, ConnectionError):
             if not reused:
                 raise
@@ -276,6 +289,7 @@ async def plant_load(base: str, touch_urls: list[str], cells: int, rate: float,
     cpu0 = resource.getrusage(resource.RUSAGE_SELF)
     host, port = base.removeprefix("http://").split(":")
     client = Http(host, int(port), HEADERS)
+    await client.open(CLIENTS)
     try:
         def touch(k: int) -> tuple:
             return "POST", rnd.choice(touch_urls), rnd.choice(bodies)
@@ -337,9 +351,14 @@ def cpu_share(before: dict[int, tuple[str, float]], after: dict[int, tuple[str, 
     process that ended between the two samples is not counted: PostgreSQL's connections
     outlive a phase)."""
     used: dict[str, float] = {}
+    workers: list[float] = []
     for pid, (role, cpu) in after.items():
-        used[role] = used.get(role, 0.0) + (cpu - before.get(pid, (role, 0.0))[1]) / seconds
-    return ", ".join(f"{k} {v:.2f}" for k, v in sorted(used.items(), key=lambda kv: -kv[1]))
+        share = (cpu - before.get(pid, (role, 0.0))[1]) / seconds
+        used[role] = used.get(role, 0.0) + share
+        if role == "api" and share > 0.005:
+            workers.append(share)
+    return (", ".join(f"{k} {v:.2f}" for k, v in sorted(used.items(), key=lambda kv: -kv[1]))
+            + f" (API processes: {' + '.join(f'{w:.2f}' for w in sorted(workers))})")
 
 
 def read_capacity(base: str, cells: int, seconds: float, tmp: Path) -> dict:
