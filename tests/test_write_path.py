@@ -12,9 +12,10 @@ import threading
 import time
 
 import pytest
-
 from api_helpers import C, make_client, open_session
+
 from db import session as db_session
+from server.service import transaction
 
 
 def test_a_writer_waiting_for_sqlites_lock_leaves_the_event_loop_free(client):
@@ -68,6 +69,37 @@ def test_a_process_writers_take_turns_rather_than_poll_sqlites_lock(db_url, monk
     assert codes == [200] * 72, sorted(set(codes))
 
 
+def test_writers_queued_behind_a_locked_database_give_up_with_503(db_url, monkeypatch):
+    """Another process holds SQLite's write lock past the busy timeout (a long restore): the
+    writer waiting for it and those queued behind it for their turn each answer 503 'busy'
+    with Retry-After, naming the wait, instead of holding their threads for good."""
+    if not db_url.startswith("sqlite"):
+        pytest.skip("SQLite's database-wide write lock; PostgreSQL locks the controller's row")
+    monkeypatch.setattr(db_session, "BUSY_TIMEOUT_MS", 300)
+    monkeypatch.setattr(transaction, "TURN_TIMEOUT_S", 0.3)
+    with make_client(db_url) as client:
+        urls = [open_session(client, "tool.xyz_4point", n) for n in range(1, 4)]
+        other = sqlite3.connect(client.app.state.engine.url.database, isolation_level=None)
+        other.execute("BEGIN IMMEDIATE")
+        answers: list = []
+        try:
+            threads = [threading.Thread(target=lambda u=u: answers.append(
+                client.post(f"{u}/touch-up", json={"step": 0}))) for u in urls]
+            for t in threads:
+                t.start()
+            for t in threads:
+                t.join(20)
+        finally:
+            other.execute("ROLLBACK")
+            other.close()
+        assert [r.status_code for r in answers] == [503] * 3
+        for r in answers:
+            assert r.headers["Retry-After"] == "1"
+            assert r.json()["detail"][0]["type"] == "busy"
+            assert "locked by another writer for 0.3 s" in r.json()["detail"][0]["msg"]
+        assert client.post(f"{urls[0]}/touch-up", json={"step": 0}).status_code == 200
+
+
 def test_a_touch_up_is_one_transaction_with_its_clock(client):
     """The point, the session's version and the emulated clock change together: a touch-up
     refused after the point is built (a closed session) leaves the clock where it was."""
@@ -87,9 +119,9 @@ def test_a_service_process_freezes_its_start_out_of_the_garbage_collectors_walks
     start-up objects go to the collector's permanent generation, so a full collection does
     not walk them (80-170 ms per collection otherwise). An app of a test (no ``freeze_gc``)
     freezes nothing: what it leaves must stay collectable."""
+    from api_helpers import app_settings
     from fastapi.testclient import TestClient
 
-    from api_helpers import app_settings
     from server.api.app import create_app
 
     gc.unfreeze()

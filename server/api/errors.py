@@ -14,11 +14,14 @@ from typing import Any
 from fastapi import FastAPI, Request
 from fastapi.exceptions import RequestValidationError
 from fastapi.responses import JSONResponse
+from sqlalchemy.exc import OperationalError
 from sqlalchemy.orm.exc import StaleDataError
 from starlette.exceptions import HTTPException
 
+from db import session as db_session
 from db.crud import NotFound, StateConflict
 from server.api.preconditions import PreconditionFailed, PreconditionRequired, etag
+from server.service.transaction import DatabaseBusy
 from solvers.errors import CalibrationError, KinematicsError
 
 log = logging.getLogger("pendant")
@@ -168,9 +171,26 @@ def install(app: FastAPI) -> None:
             (), "the row changed while this request ran; nothing was written: read and retry",
             "conflict"))
 
+    @app.exception_handler(DatabaseBusy)
+    async def _busy(_: Request, exc: DatabaseBusy) -> JSONResponse:
+        return _busy_answer(str(exc))
+
+    @app.exception_handler(OperationalError)
+    async def _locked(request: Request, exc: OperationalError) -> JSONResponse:
+        if "database is locked" in str(exc.orig):  # SQLite's busy timeout ran out
+            return _busy_answer("the database was locked by another writer for "
+                                f"{db_session.BUSY_TIMEOUT_MS / 1000:g} s")
+        return await _unexpected(request, exc)
+
     @app.exception_handler(Exception)
     async def _unexpected(request: Request, exc: Exception) -> JSONResponse:
         log.exception("unexpected error on %s %s", request.method, request.url.path)
         return JSONResponse(status_code=500, content=detail(
             (), f"internal error ({type(exc).__name__}); the request changed nothing it had not "
                 "committed; see the service log", "internal"))
+
+
+def _busy_answer(why: str) -> JSONResponse:
+    """503: another writer (a long restore, the CLI) held the database; nothing was written."""
+    return JSONResponse(status_code=503, headers={"Retry-After": "1"}, content=detail(
+        (), f"{why}; nothing was written: retry", "busy"))

@@ -33,7 +33,7 @@ from sqlalchemy import event
 from sqlalchemy.orm import Session, sessionmaker
 
 from db import crud
-from db.session import write_session
+from db.session import BUSY_TIMEOUT_MS, write_session
 from server.auth import audit
 
 LOCK_ON_BEGIN = "pendant_lock_controller"  # Session.info: the controller to lock at BEGIN
@@ -69,6 +69,7 @@ def writer(make_session: Maker, controller_id: int | None = None) -> Session:
 
 _SQLITE_TURNS: dict[str, threading.Lock] = {}  # database URL -> its writers' turn, per process
 _TURNS_LOCK = threading.Lock()
+TURN_TIMEOUT_S = BUSY_TIMEOUT_MS / 1000  # a writer waits this long for its turn, then 503
 
 
 @contextlib.contextmanager
@@ -88,8 +89,22 @@ def sqlite_turn(db: Session) -> Iterator[None]:
     key = str(bind.url)
     with _TURNS_LOCK:
         turn = _SQLITE_TURNS.setdefault(key, threading.Lock())
-    with turn:
+    # as long as SQLite's own busy handler waits: a writer queued behind one that waits for
+    # another process (a long restore) gives up as SQLite would, freeing its thread
+    if not turn.acquire(timeout=TURN_TIMEOUT_S):
+        raise DatabaseBusy(TURN_TIMEOUT_S)
+    try:
         yield
+    finally:
+        turn.release()
+
+
+class DatabaseBusy(Exception):
+    """The database stayed locked by another writer for ``waited_s`` (a 503 on REST)."""
+
+    def __init__(self, waited_s: float) -> None:
+        super().__init__(f"the database was locked by another writer for {waited_s:g} s")
+        self.waited_s = waited_s
 
 
 def commit(db: Session, operation: str, **ids: int | None) -> None:
