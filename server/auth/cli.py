@@ -73,6 +73,17 @@ def _fail(err: Exception) -> int:
 
 
 def run_users(args: Any) -> int:
+    password = None
+    if args.action == "rws-password":  # asked before the write begins: the service's writers
+        with cli_session(args.db, write=False) as db:  # do not wait while a person types
+            try:
+                tokens.get_user(db, args.name)  # an unknown user before the password prompt
+            except LookupError as err:
+                return _fail(err)
+        try:
+            password = _new_password()
+        except ValueError as err:
+            return _fail(err)
     with cli_session(args.db, write=args.action != "list", operation="users") as db:
         try:
             if args.action == "add":
@@ -91,8 +102,8 @@ def run_users(args: Any) -> int:
             elif args.action == "rws-password":
                 from server.rws import digest, ops
 
-                tokens.get_user(db, args.name)  # an unknown user before the password prompt
-                ops.set_rws_ha1(db, args.name, digest.ha1(args.name, _new_password()))
+                tokens.get_user(db, args.name)  # revoked or removed since the prompt
+                ops.set_rws_ha1(db, args.name, digest.ha1(args.name, str(password)))
                 print(f"{args.name} logs in to the RWS face with that password (stored as "
                       "its Digest HA1)")
             else:
