@@ -53,7 +53,46 @@ async def load_nodesets(server: Server) -> tuple[int, int, int]:
     di = await server.get_namespace_index(DI_URI)
     rob = await server.get_namespace_index(ROBOTICS_URI)
     ns = await server.register_namespace(PENDANT_URI)
+    await namespace_metadata(server, ns)
     return di, rob, ns
+
+
+# The date pendant's namespace model (the PendantEventType, the NodeId scheme of
+# docs/opcua.md) was last published: move it with a change to either.
+PENDANT_NAMESPACE_PUBLISHED = datetime(2026, 11, 27, tzinfo=UTC)
+# String NodeIds of static Nodes (OPC 10000-5 §6.3.13: identical in every server of this
+# NamespaceVersion): the metadata object below and its properties. Instance nodes are not.
+PENDANT_STATIC_STRING_IDS = r"^NamespaceMetadata(\.[A-Za-z]+)?$"
+
+
+async def namespace_metadata(server: Server, ns: int) -> Node:
+    """Server/Namespaces' ``NamespaceMetadataType`` object for pendant's namespace (OPC 10000-5
+    §6.3.13-14), beside the ones the DI and Robotics nodesets bring.
+
+    Static Nodes are the same in every server, Value included: here the PendantEventType
+    and its properties (Numeric ids, handed out in the same order at every start) and this
+    object's properties. Every controller's node (String ids of docs/opcua.md) is live data,
+    so String is not a static IdType; ``StaticStringNodeIdPattern`` names the static ones.
+    """
+    from server import __version__
+
+    meta = (await instantiate(
+        server.get_node(ua.ObjectIds.Server_Namespaces),
+        server.get_node(ua.ObjectIds.NamespaceMetadataType),
+        nodeid=ua.NodeId("NamespaceMetadata", ns), bname=ua.QualifiedName(PENDANT_URI, ns),
+        dname=ua.LocalizedText(PENDANT_URI), instantiate_optional=False))[0]
+    values = {
+        "NamespaceUri": ua.Variant(PENDANT_URI, ua.VariantType.String),
+        "NamespaceVersion": ua.Variant(__version__, ua.VariantType.String),
+        "NamespacePublicationDate": ua.Variant(PENDANT_NAMESPACE_PUBLISHED, ua.VariantType.DateTime),
+        "IsNamespaceSubset": ua.Variant(False, ua.VariantType.Boolean),
+        "StaticNodeIdTypes": ua.Variant([ua.IdType.Numeric], ua.VariantType.Int32),
+        "StaticNumericNodeIdRange": ua.Variant([], ua.VariantType.String),
+        "StaticStringNodeIdPattern": ua.Variant(PENDANT_STATIC_STRING_IDS, ua.VariantType.String),
+    }
+    for name, value in values.items():
+        await (await meta.get_child(f"0:{name}")).write_value(value)
+    return meta
 
 
 @dataclass
