@@ -141,10 +141,10 @@ def test_a_poll_reads_only_the_controllers_that_changed(cell: dict,
     full = state.controller_state
     me = threading.get_ident()
 
-    def counting(db, c):  # the face's own poll runs on its thread: not this reader's reads
+    def counting(db, c, slots=None):  # the face's own poll runs on its thread: not this reader's
         if threading.get_ident() == me:
             read.append(c.name)
-        return full(db, c)
+        return full(db, c, slots)
     monkeypatch.setattr(state, "controller_state", counting)
 
     reader = state.CellReader()
@@ -163,7 +163,7 @@ def test_a_poll_reads_only_the_controllers_that_changed(cell: dict,
                                                       "increment": 1.0})),
         lambda: open_session(rest, "tool.xyz_4point", 6),
     ]
-    for change in changes:
+    for change, slots_changed in zip(changes, (True, False, False)):
         before = reader.states[cid]
         change()
         read.clear()
@@ -171,5 +171,7 @@ def test_a_poll_reads_only_the_controllers_that_changed(cell: dict,
         assert read == [name], read
         assert after[cid] != before
         assert after[quiet] is first[quiet]
+        # a jog or a session keeps the cell's slots: they are not read again
+        assert (after[cid].slots is before.slots) is not slots_changed
     assert after[cid].slot("tool", 5).name == "probe"
     assert after[cid].sessions

@@ -16,7 +16,7 @@ from sqlalchemy.orm import Session, sessionmaker
 
 from db import crud
 from db.auth_models import AuditRecord
-from db.models import CalibSession, Controller, Event, FrameEntry
+from db.models import CalibSession, Controller, Event, FrameEntry, TaughtPoint
 from server.service.robot import robot_of
 
 
@@ -95,16 +95,24 @@ def slot_state(e: FrameEntry) -> SlotState:
         error_max_mm=e.error_max_mm, updated_at=e.updated_at.isoformat() if e.updated_at else "")
 
 
-def controller_state(db: Session, c: Controller) -> ControllerState:
+def controller_state(db: Session, c: Controller,
+                     slots: tuple[SlotState, ...] | None = None) -> ControllerState:
+    """``c`` as the face shows it; ``slots`` when the caller knows they did not change."""
     robot = robot_of(c)
-    live = db.scalars(select(CalibSession).where(
-        CalibSession.controller_id == c.id,
-        CalibSession.state.in_(("open", "computed"))).order_by(CalibSession.id)).all()
-    sessions = tuple(SessionState(s.id, s.method, f"{s.target_table} {s.target_no}", s.state,
-                                  len(s.points)) for s in live)
+    live = db.execute(
+        select(CalibSession.id, CalibSession.method, CalibSession.target_table,
+               CalibSession.target_no, CalibSession.state, func.count(TaughtPoint.id))
+        .outerjoin(TaughtPoint, TaughtPoint.session_id == CalibSession.id)
+        .where(CalibSession.controller_id == c.id,
+               CalibSession.state.in_(("open", "computed")))
+        .group_by(CalibSession.id).order_by(CalibSession.id)).all()
+    sessions = tuple(SessionState(sid, method, f"{table} {no}", st, n)
+                     for sid, method, table, no, st, n in live)
     last = db.execute(select(AuditRecord.user_name, AuditRecord.role)
                       .where(AuditRecord.controller_id == c.id, AuditRecord.user_name.is_not(None))
                       .order_by(AuditRecord.id.desc()).limit(1)).first()
+    if slots is None:
+        slots = tuple(slot_state(e) for e in crud.list_entries(db, c.id))
     return ControllerState(
         id=c.id, name=c.name, robot_name=robot.name,
         robot_key="custom" if c.custom_robot else (c.robot_key or "kuka_kr6_r900_sixx"),
@@ -113,7 +121,7 @@ def controller_state(db: Session, c: Controller) -> ControllerState:
         joints_deg=tuple(float(q) for q in c.joints_deg),
         joint_limits_deg=tuple((float(lo), float(hi)) for lo, hi in robot.limits_deg()),
         active_tool_no=c.active_tool_no, active_base_no=c.active_base_no,
-        slots=tuple(slot_state(e) for e in crud.list_entries(db, c.id)), sessions=sessions)
+        slots=slots, sessions=sessions)
 
 
 def read_cells(make_session: sessionmaker[Session]) -> dict[int, ControllerState]:
@@ -125,12 +133,15 @@ def read_cells(make_session: sessionmaker[Session]) -> dict[int, ControllerState
 class CellReader:
     """:func:`read_cells` for a poll: a few whole-table queries tell which controllers changed
     since the last read (their row, their slots' versions, their open sessions, a new audit
-    record naming them); only those are read in full, the others' states are the same objects
-    as before (``is``: nothing to compare). A poll of 300 unchanged cells reads no slot."""
+    record naming them); only those are read again, the others' states are the same objects
+    as before (``is``: nothing to compare). A poll of 300 unchanged cells reads no slot, and a
+    changed cell whose slots kept their rows and versions (a touch-up, a jog) keeps its slots
+    (the ORM bumps a slot's version on every change)."""
 
     def __init__(self) -> None:
         self.states: dict[int, ControllerState] = {}
         self.marks: dict[int, tuple] = {}
+        self.slot_rows: dict[int, list | None] = {}  # (id, version) of each controller's slots
         self.audit_id = -1
 
     def read(self, make_session: sessionmaker[Session]) -> dict[int, ControllerState]:
@@ -162,15 +173,23 @@ class CellReader:
                      if self.marks.get(cid) != m or cid in audited or cid not in self.states]
             if self.audit_id < 0:
                 stale = list(fresh)
+            read: dict[int, ControllerState] = {}
+            slot_rows = {cid: [] for cid in stale}
             if stale:
+                for cid, sid, version in db.execute(
+                        select(FrameEntry.controller_id, FrameEntry.id, FrameEntry.version)
+                        .where(FrameEntry.controller_id.in_(stale)).order_by(FrameEntry.id)):
+                    slot_rows[cid].append((sid, version))
                 rows = db.scalars(select(Controller).where(Controller.id.in_(stale))).all()
-                read = {c.id: controller_state(db, c) for c in rows}
-            else:
-                read = {}
+                for c in rows:  # a slot row of the same id and version is the same slot
+                    same = c.id in self.states and self.slot_rows.get(c.id) == slot_rows[c.id]
+                    read[c.id] = controller_state(db, c, self.states[c.id].slots if same else None)
         states = {cid: read.get(cid) or self.states[cid] for cid in fresh
                   if cid in read or cid in self.states}
         self.states, self.audit_id = states, audit_id
         self.marks = {cid: m for cid, m in fresh.items() if cid in states}
+        self.slot_rows = {cid: slot_rows[cid] if cid in slot_rows else self.slot_rows.get(cid)
+                          for cid in states}
         return states
 
 
