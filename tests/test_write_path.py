@@ -69,6 +69,36 @@ def test_a_process_writers_take_turns_rather_than_poll_sqlites_lock(db_url, monk
     assert codes == [200] * 72, sorted(set(codes))
 
 
+def test_reads_answer_while_more_writers_wait_than_a_pool_has_threads(client):
+    """50 touch-ups wait for SQLite's write lock (held by another process), more than the 40
+    threads a route pool has: a read still answers at once, as it does at 100 touch-ups/s
+    beside the MES reads (the writers hold threads of their own, not the readers')."""
+    engine = client.app.state.engine
+    if engine.dialect.name != "sqlite":
+        pytest.skip("SQLite's database-wide write lock; PostgreSQL locks the controller's row")
+    url = open_session(client, "tool.xyz_4point", 1)
+    other = sqlite3.connect(engine.url.database, isolation_level=None)
+    other.execute("BEGIN IMMEDIATE")
+    codes: list[int] = []
+    writers = [threading.Thread(target=lambda k=k: codes.append(
+        client.post(f"{url}/touch-up", json={"step": k % 4}).status_code)) for k in range(50)]
+    try:
+        for t in writers:
+            t.start()
+        time.sleep(0.5)  # the writers are queued (none can answer while the lock is held)
+        assert codes == []
+        t0 = time.perf_counter()
+        read = client.get(f"{C}/tools/1")
+        waited_s = time.perf_counter() - t0
+        assert read.status_code == 200 and waited_s < 2.0, waited_s
+    finally:
+        other.execute("ROLLBACK")
+        other.close()
+        for t in writers:
+            t.join(60)
+    assert codes == [200] * 50, sorted(set(codes))
+
+
 def test_writers_queued_behind_a_locked_database_give_up_with_503(db_url, monkeypatch):
     """Another process holds SQLite's write lock past the busy timeout (a long restore): the
     writer waiting for it and those queued behind it for their turn each answer 503 'busy'

@@ -6,11 +6,11 @@ It is a write as every face runs one (:mod:`server.service.transaction`): a writ
 (SQLite ``BEGIN IMMEDIATE``; on PostgreSQL the controller of the path locked at ``BEGIN``), this
 process's turn on SQLite, and the operation's audit record (the route's name) at the commit.
 
-The transaction runs in the route's worker thread, never on the event loop: a sync route
-taking a session (``SessionDep``) is wrapped by :func:`one_thread`, which takes the turn and
-commits (or rolls back) in that thread as the route returns, so the write lock is held only
-while the route works. An async route, or an Idempotency-Key claimed before the route, commits
-in :func:`get_session` (in the threadpool too).
+The transaction lives in the route's worker thread, never on the event loop. ``SessionDep``
+(:func:`get_session`) only makes the session (no statement yet); every route taking one is a
+sync route wrapped by :func:`one_thread`, which in one worker thread takes the turn, claims
+the request's Idempotency-Key, runs the route, commits (or rolls back) and closes the session,
+so the write lock is held only while the route works.
 
 The load this serves: a plant of a few hundred cells, a person touching up every few seconds,
 ~100 writes/s at worst plus MES reads (``benchmarks/plant.py``, README "Measured").
@@ -18,20 +18,23 @@ The load this serves: a plant of a few hundred cells, a person touching up every
 
 from __future__ import annotations
 
+import asyncio
+import contextvars
 import functools
 import inspect
-from collections.abc import AsyncIterator, Callable
+from concurrent.futures import ThreadPoolExecutor
+from collections.abc import Callable
 from typing import Annotated, Any
 
 from fastapi import Depends, FastAPI, Request
 from fastapi.routing import APIRoute
 from sqlalchemy.orm import Session
-from starlette.concurrency import run_in_threadpool
 
 from server.api import idempotency
 from server.service import transaction
 
 READ_METHODS = ("GET", "HEAD", "OPTIONS")
+REQUEST_PARAM = "pendant_request_"  # the request, given to every wrapped route (one_thread)
 
 
 def _controller_id(request: Request) -> int | None:
@@ -42,43 +45,20 @@ def _controller_id(request: Request) -> int | None:
         return None  # not an int: the route's own validation answers 422
 
 
-def _begin_write(db: Session, request: Request) -> None:
-    """Begin the transaction now (its ``after_begin`` hook locks the controller), and claim the
-    request's Idempotency-Key in it (``server.api.idempotency``)."""
-    db.connection()
-    idempotency.claim(db, request)
-
-
-async def get_session(request: Request) -> AsyncIterator[Session]:
-    """A session of this app's engine: a writer's (``BEGIN IMMEDIATE``, the controller's row
-    lock) for any method but GET/HEAD/OPTIONS; committed after the route (what
-    :func:`one_thread` did not commit already), rolled back on any error.
-
-    Used with ``scope="function"`` so the commit happens before the response is sent."""
+async def get_session(request: Request) -> Session:
+    """The request's session, not begun: a writer's (``BEGIN IMMEDIATE``, the controller's row
+    lock at BEGIN) for any method but GET/HEAD/OPTIONS. The route's thread begins, commits and
+    closes it (:func:`one_thread`); an Idempotency-Key's body is read here, on the loop, for
+    the claim's fingerprint."""
     maker = request.app.state.sessionmaker
-    writes = request.method not in READ_METHODS
-    db = transaction.writer(maker, _controller_id(request)) if writes else maker()
-    try:
-        if writes and idempotency.has_key(request):
-            await idempotency.read_body(request)
-            await run_in_threadpool(_begin_write, db, request)
-        yield db
-        if db.in_transaction():
-            if writes:
-                route = request.scope.get("route")
-                await run_in_threadpool(_audited_commit, db, getattr(route, "name", "request"),
-                                        request.path_params)
-            else:
-                await run_in_threadpool(db.commit)
-    except BaseException:
-        if db.in_transaction():
-            await run_in_threadpool(db.rollback)
-        raise
-    finally:
-        db.close()
+    if request.method in READ_METHODS:
+        return maker()
+    if idempotency.has_key(request):
+        await idempotency.read_body(request)
+    return transaction.writer(maker, _controller_id(request))
 
 
-SessionDep = Annotated[Session, Depends(get_session, scope="function")]
+SessionDep = Annotated[Session, Depends(get_session)]
 AUDIT_KEYS = ("controller_id", "session_id")  # path parameters an operation's record names
 
 
@@ -90,31 +70,70 @@ def _audited_commit(db: Session, operation: str, params: dict[str, Any]) -> None
     transaction.commit(db, operation, **ids)
 
 
+# The routes' worker threads: readers and writers apart, so a read never waits for a thread
+# that writers hold while they queue for the database's write lock (SQLite: one writer at a
+# time across every process; at 100 touch-ups/s from two workers the writers queued there took
+# all 40 threads of a shared pool and the reads behind them waited seconds)
+READERS = ThreadPoolExecutor(max_workers=40, thread_name_prefix="read")  # anyio's default 40
+WRITERS = ThreadPoolExecutor(max_workers=40, thread_name_prefix="write")
+
+
+async def in_worker_thread(pool: ThreadPoolExecutor, fn: Callable[..., Any], *args: Any) -> Any:
+    """``fn(*args)`` in one of ``pool``'s threads, with the caller's context variables (the
+    request's audit context), awaited on the event loop.
+
+    Rather than Starlette's ``run_in_threadpool``: anyio's thread hop (its capacity limiter,
+    cancel scopes and backend look-ups) cost a read a quarter of its CPU (py-spy, README
+    "Measured"); the event loop's own executor hop does the same job."""
+    ctx = contextvars.copy_context()
+    return await asyncio.get_running_loop().run_in_executor(pool, ctx.run, fn, *args)
+
+
 def one_thread(endpoint: Callable[..., Any]) -> Callable[..., Any]:
-    """``endpoint`` (a sync route) committing the session it was given in its own worker
-    thread as it returns (rolled back if it raises). Async routes are returned unchanged.
-    A writing route on SQLite runs in its process's turn
-    (:func:`server.service.transaction.sqlite_turn`)."""
+    """``endpoint`` (a sync route) run in a worker thread (:func:`in_worker_thread`); when it
+    takes a session, that thread is the transaction's: this process's turn on SQLite
+    (:func:`server.service.transaction.sqlite_turn`), the Idempotency-Key claimed, the route,
+    the audited commit, or the rollback if anything raised; then the session is closed.
+    Async routes are returned unchanged."""
     if inspect.iscoroutinefunction(endpoint) or getattr(endpoint, "_one_thread", False):
         return endpoint
 
-    @functools.wraps(endpoint)
-    def run(*args: Any, **kwargs: Any) -> Any:
+    def in_thread(request: Request, args: tuple, kwargs: dict[str, Any]) -> Any:
         db = next((v for v in kwargs.values() if isinstance(v, Session)), None)
         if db is None:
             return endpoint(*args, **kwargs)
-        with transaction.sqlite_turn(db):
-            try:
-                result = endpoint(*args, **kwargs)
-                _audited_commit(db, endpoint.__name__, kwargs)
-            except BaseException:
-                db.rollback()
-                raise
+        try:
+            with transaction.sqlite_turn(db):
+                try:
+                    if request.method not in READ_METHODS and idempotency.has_key(request):
+                        db.connection()  # BEGIN (the controller locked), then the key claimed
+                        idempotency.claim(db, request)
+                    result = endpoint(*args, **kwargs)
+                    _audited_commit(db, endpoint.__name__, kwargs)
+                except BaseException:
+                    db.rollback()
+                    raise
+        finally:
+            db.close()
         return result
 
-    # the endpoint's annotations, evaluated in its own module: FastAPI before 0.123 reads string
-    # annotations (``from __future__ import annotations``) in the wrapper's globals
-    run.__signature__ = inspect.signature(endpoint, eval_str=True)  # type: ignore[attr-defined]
+    # the endpoint's parameters (annotations evaluated in its own module: FastAPI before 0.123
+    # reads string annotations in the wrapper's globals) and the request, for the key's claim
+    # (FastAPI gives the request to one parameter only: the endpoint's own, if it has one)
+    sig = inspect.signature(endpoint, eval_str=True)
+    params = list(sig.parameters.values())
+    own = next((p.name for p in params if p.annotation is Request), None)
+    if own is None:
+        params.append(inspect.Parameter(REQUEST_PARAM, inspect.Parameter.KEYWORD_ONLY,
+                                        annotation=Request))
+
+    @functools.wraps(endpoint)
+    async def run(*args: Any, **kwargs: Any) -> Any:
+        request = kwargs[own] if own else kwargs.pop(REQUEST_PARAM)
+        pool = READERS if request.method in READ_METHODS else WRITERS
+        return await in_worker_thread(pool, in_thread, request, args, kwargs)
+
+    run.__signature__ = sig.replace(parameters=params)  # type: ignore[attr-defined]
     run._one_thread = True  # type: ignore[attr-defined]
     return run
 
