@@ -29,6 +29,8 @@ from sqlalchemy.orm import Session, sessionmaker
 DB_DIR = Path(__file__).resolve().parent
 WRITE = {"sqlite_begin": "BEGIN IMMEDIATE"}  # execution options of a writing session
 BUSY_TIMEOUT_MS = 30000  # how long a SQLite statement waits for a lock held by another writer
+PG_POOL_SIZE = 10  # PostgreSQL connections a process keeps open (docs/deploy.md)
+POOL_TIMEOUT_S = 30.0  # how long a request waits for a free connection of its process (503)
 MIGRATION_LOCK_ID = 0x70656E64  # "pend": the pg_advisory_lock key of the schema step
 
 
@@ -37,8 +39,15 @@ def make_engine(url: str) -> Engine:
     is_sqlite = url.startswith("sqlite")
     connect_args = ({"check_same_thread": False, "timeout": BUSY_TIMEOUT_MS / 1000}
                     if is_sqlite else {})
-    engine = create_engine(url, connect_args=connect_args, pool_size=30 if is_sqlite else 5,
-                           max_overflow=10, pool_pre_ping=not is_sqlite)
+    # PostgreSQL: a process opens up to PG_POOL_SIZE connections and keeps them; a request
+    # finding them all busy waits for one. No overflow connections: SQLAlchemy closes each as
+    # it is returned, and a new backend costs PostgreSQL a fork and a SCRAM login; with 5
+    # kept and 10 overflowing, at 100 touch-ups/s beside 300 reads/s, that churn took half a
+    # core of the VM's two (benchmarks/plant.py, README "Measured")
+    engine = create_engine(url, connect_args=connect_args,
+                           pool_size=30 if is_sqlite else PG_POOL_SIZE,
+                           max_overflow=10 if is_sqlite else 0, pool_timeout=POOL_TIMEOUT_S,
+                           pool_pre_ping=not is_sqlite)
     if is_sqlite:
         @event.listens_for(engine, "connect")
         def _pragmas(dbapi_conn, _record) -> None:  # noqa: ANN001
@@ -67,6 +76,22 @@ def make_sessionmaker(engine: Engine) -> sessionmaker[Session]:
 def write_engine(engine: Engine) -> Engine:
     """``engine`` whose transactions are a writer's (``BEGIN IMMEDIATE`` on SQLite)."""
     return engine.execution_options(**WRITE)
+
+
+@functools.lru_cache(maxsize=64)
+def read_engine(engine: Engine) -> Engine:
+    """``engine`` for a session that only reads. On PostgreSQL in autocommit: each statement
+    runs on its own snapshot, as it does inside a READ COMMITTED transaction anyway, without
+    the BEGIN and COMMIT round trips (two of a one-row read's three). SQLite keeps its
+    transaction: there a read's statements share one snapshot, and nothing goes over a wire."""
+    if engine.dialect.name == "postgresql":
+        return engine.execution_options(isolation_level="AUTOCOMMIT")
+    return engine
+
+
+def read_session(maker: sessionmaker[Session]) -> Session:
+    """A session of ``maker`` for a request that only reads (:func:`read_engine`)."""
+    return maker(bind=read_engine(maker.kw["bind"]))
 
 
 def write_session(maker: sessionmaker[Session]) -> Session:

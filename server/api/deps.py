@@ -30,6 +30,7 @@ from fastapi import Depends, FastAPI, Request
 from fastapi.routing import APIRoute
 from sqlalchemy.orm import Session
 
+from db.session import read_session
 from server.api import idempotency
 from server.service import transaction
 
@@ -52,7 +53,7 @@ async def get_session(request: Request) -> Session:
     the claim's fingerprint."""
     maker = request.app.state.sessionmaker
     if request.method in READ_METHODS:
-        return maker()
+        return read_session(maker)
     if idempotency.has_key(request):
         await idempotency.read_body(request)
     return transaction.writer(maker, _controller_id(request))
