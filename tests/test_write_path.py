@@ -12,6 +12,7 @@ import threading
 import time
 
 import pytest
+from sqlalchemy.exc import TimeoutError as PoolTimeout
 from api_helpers import C, make_client, open_session
 
 from db import session as db_session
@@ -128,6 +129,28 @@ def test_writers_queued_behind_a_locked_database_give_up_with_503(db_url, monkey
             assert r.json()["detail"][0]["type"] == "busy"
             assert "locked by another writer for 0.3 s" in r.json()["detail"][0]["msg"]
         assert client.post(f"{urls[0]}/touch-up", json={"step": 0}).status_code == 200
+
+
+def test_a_request_that_finds_no_connection_free_answers_503(db_url, monkeypatch):
+    """Every database connection of the worker stays busy (PostgreSQL keeps 10 per process):
+    a request waits the pool's timeout, then answers 503 'busy' with Retry-After, not a 500."""
+    monkeypatch.setattr(db_session, "POOL_TIMEOUT_S", 0.3)
+    with make_client(db_url) as client:
+        engine = client.app.state.engine
+        if not hasattr(engine.pool, "timeout"):
+            pytest.skip("an in-memory SQLite database has one connection per thread, no queue")
+        held = []
+        try:
+            with pytest.raises(PoolTimeout):
+                while len(held) < 200:
+                    held.append(engine.raw_connection())
+            r = client.get(f"{C}/tools/1")
+        finally:
+            for conn in held:
+                conn.close()
+        assert r.status_code == 503 and r.headers["Retry-After"] == "1", r.text
+        assert "every database connection of this worker stayed busy for 0.3 s" in r.text
+        assert client.get(f"{C}/tools/1").status_code == 200
 
 
 def test_a_touch_up_is_one_transaction_with_its_clock(client):

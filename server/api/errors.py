@@ -15,6 +15,7 @@ from fastapi import FastAPI, Request
 from fastapi.exceptions import RequestValidationError
 from fastapi.responses import JSONResponse
 from sqlalchemy.exc import OperationalError
+from sqlalchemy.exc import TimeoutError as PoolTimeout
 from sqlalchemy.orm.exc import StaleDataError
 from starlette.exceptions import HTTPException
 
@@ -180,7 +181,17 @@ def install(app: FastAPI) -> None:
         if "database is locked" in str(exc.orig):  # SQLite's busy timeout ran out
             return _busy_answer("the database was locked by another writer for "
                                 f"{db_session.BUSY_TIMEOUT_MS / 1000:g} s")
+        if "too many clients" in str(exc.orig):  # PostgreSQL's max_connections reached
+            log.warning("PostgreSQL refused a connection: max_connections reached "
+                        "(docs/deploy.md: 10 per pendant process)")
+            return _busy_answer("the database has no connection free (its max_connections)")
         return await _unexpected(request, exc)
+
+    @app.exception_handler(PoolTimeout)
+    async def _pool(request: Request, exc: PoolTimeout) -> JSONResponse:
+        log.warning("every database connection of this process stayed busy: %s", exc)
+        return _busy_answer(f"every database connection of this worker stayed busy for "
+                            f"{request_pool_timeout_s(request):g} s")
 
     @app.exception_handler(Exception)
     async def _unexpected(request: Request, exc: Exception) -> JSONResponse:
@@ -190,7 +201,14 @@ def install(app: FastAPI) -> None:
                 "committed; see the service log", "internal"))
 
 
+def request_pool_timeout_s(request: Request) -> float:
+    """How long a request waits for one of its process's database connections."""
+    pool = request.app.state.engine.pool
+    return float(pool.timeout()) if hasattr(pool, "timeout") else 30.0  # QueuePool's default
+
+
 def _busy_answer(why: str) -> JSONResponse:
-    """503: another writer (a long restore, the CLI) held the database; nothing was written."""
+    """503: another writer (a long restore, the CLI) held the database, or no connection to it
+    was free; nothing was written."""
     return JSONResponse(status_code=503, headers={"Retry-After": "1"}, content=detail(
         (), f"{why}; nothing was written: retry", "busy"))
