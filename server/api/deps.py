@@ -86,6 +86,10 @@ async def in_worker_thread(pool: ThreadPoolExecutor, fn: Callable[..., Any], *ar
     Rather than Starlette's ``run_in_threadpool``: anyio's thread hop (its capacity limiter,
     cancel scopes and backend look-ups) cost a read a quarter of its CPU (py-spy, README
     "Measured"); the event loop's own executor hop does the same job."""
+    # a checkpoint first: a request cancelled before its route starts (its client left while
+    # the body was parsed, server.api.limits) is cancelled here, before the thread has it;
+    # once a thread runs the route, the route finishes and commits
+    await asyncio.sleep(0)
     ctx = contextvars.copy_context()
     return await asyncio.get_running_loop().run_in_executor(pool, ctx.run, fn, *args)
 

@@ -12,9 +12,10 @@ An ASGI middleware on every request that has a body (not GET, HEAD, OPTIONS):
   cancelled before it changed anything. Between chunks only: a slow upload that keeps sending
   goes on.
 - **Disconnect.** While the request runs, the middleware listens for the client leaving
-  (``http.disconnect`` before the answer was sent) and cancels the request. A route
-  computing in a worker thread finishes its step, then the cancellation reaches the request
-  and the session dependency rolls back: nothing the client was not told about is committed.
+  (``http.disconnect`` before the answer was sent) and cancels the request. A request whose
+  route has not started (its body still arriving or being parsed) changes nothing; a route
+  already working in its thread finishes and commits (``server.api.deps.one_thread``), as if
+  the answer had been read: a client that retries with its Idempotency-Key gets that answer.
 """
 
 from __future__ import annotations
