@@ -1,7 +1,7 @@
 """Reads and writes of the pendant's tables. Every change of a slot leaves a history row.
 
 Functions take a SQLAlchemy ``Session`` and commit nothing themselves unless they say so;
-the routes commit once per request (``deps.get_session``).
+a request commits once, in its route's thread (``server.api.deps.one_thread``).
 """
 
 from __future__ import annotations

@@ -181,7 +181,8 @@ def install(app: FastAPI) -> None:
         if "database is locked" in str(exc.orig):  # SQLite's busy timeout ran out
             return _busy_answer("the database was locked by another writer for "
                                 f"{db_session.BUSY_TIMEOUT_MS / 1000:g} s")
-        if "too many clients" in str(exc.orig):  # PostgreSQL's max_connections reached
+        if any(m in str(exc.orig) for m in ("too many clients",  # max_connections reached
+                                            "remaining connection slots are reserved")):
             log.warning("PostgreSQL refused a connection: max_connections reached "
                         "(docs/deploy.md: 10 per pendant process)")
             return _busy_answer("the database has no connection free (its max_connections)")

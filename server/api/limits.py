@@ -15,7 +15,8 @@ An ASGI middleware on every request that has a body (not GET, HEAD, OPTIONS):
   (``http.disconnect`` before the answer was sent) and cancels the request. A request whose
   route has not started (its body still arriving or being parsed) changes nothing; a route
   already working in its thread finishes and commits (``server.api.deps.one_thread``), as if
-  the answer had been read: a client that retries with its Idempotency-Key gets that answer.
+  the answer had been read; its Idempotency-Key keeps no answer (a retry with it gets 409
+  "still being processed"), so a client that left reads the resource to see what happened.
 """
 
 from __future__ import annotations

@@ -95,6 +95,11 @@ def slot_state(e: FrameEntry) -> SlotState:
         error_max_mm=e.error_max_mm, updated_at=e.updated_at.isoformat() if e.updated_at else "")
 
 
+def created_at(c: Controller) -> str:
+    """When the controller's row was made, UTC, as ``YYYYMMDDTHHMMSSffffffZ``."""
+    return c.created_at.strftime("%Y%m%dT%H%M%S%fZ")
+
+
 def controller_state(db: Session, c: Controller,
                      slots: tuple[SlotState, ...] | None = None) -> ControllerState:
     """``c`` as the face shows it; ``slots`` when the caller knows they did not change."""
@@ -116,7 +121,7 @@ def controller_state(db: Session, c: Controller,
     return ControllerState(
         id=c.id, name=c.name, robot_name=robot.name,
         robot_key="custom" if c.custom_robot else (c.robot_key or "kuka_kr6_r900_sixx"),
-        created_at=c.created_at.strftime("%Y%m%dT%H%M%S%fZ"),
+        created_at=created_at(c),
         current_user=(last[1] or "") if last else "",
         joints_deg=tuple(float(q) for q in c.joints_deg),
         joint_limits_deg=tuple((float(lo), float(hi)) for lo, hi in robot.limits_deg()),
@@ -181,9 +186,12 @@ class CellReader:
                         .where(FrameEntry.controller_id.in_(stale)).order_by(FrameEntry.id)):
                     slot_rows[cid].append((sid, version))
                 rows = db.scalars(select(Controller).where(Controller.id.in_(stale))).all()
-                for c in rows:  # a slot row of the same id and version is the same slot
-                    same = c.id in self.states and self.slot_rows.get(c.id) == slot_rows[c.id]
-                    read[c.id] = controller_state(db, c, self.states[c.id].slots if same else None)
+                for c in rows:  # a slot row of the same id and version is the same slot,
+                    # of the same controller (SQLite hands out a deleted one's ids again)
+                    old = self.states.get(c.id)
+                    same = (old is not None and self.slot_rows.get(c.id) == slot_rows[c.id]
+                            and (old.name, old.created_at) == (c.name, created_at(c)))
+                    read[c.id] = controller_state(db, c, old.slots if same else None)
         states = {cid: read.get(cid) or self.states[cid] for cid in fresh
                   if cid in read or cid in self.states}
         self.states, self.audit_id = states, audit_id

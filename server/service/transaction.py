@@ -11,7 +11,8 @@ Every operation that changes rows runs in one transaction that
   time anyway, and a thread that loses ``BEGIN IMMEDIATE`` to a thread of its own process
   would otherwise wait in SQLite's busy handler, which sleeps 1, 2, 5, 10 ... up to 100 ms
   between tries; on the turn it runs as soon as the other commits. Writers of other processes
-  (a second worker, the CLI, a job) still meet in the busy handler;
+  (a second worker, the CLI, a job) still meet in the busy handler. On PostgreSQL the same
+  function lets at most :data:`PG_WRITERS` writers of a process at a time hold a connection;
 - ends with :func:`commit`: the operation's ``op.<name>`` audit record when it changed rows no
   row hook recorded (``server.auth.audit.operation``), then the commit; rolled back on any
   error.
@@ -33,7 +34,7 @@ from sqlalchemy import event
 from sqlalchemy.orm import Session, sessionmaker
 
 from db import crud
-from db.session import BUSY_TIMEOUT_MS, write_session
+from db.session import BUSY_TIMEOUT_MS, PG_POOL_SIZE, write_session
 from server.auth import audit
 
 LOCK_ON_BEGIN = "pendant_lock_controller"  # Session.info: the controller to lock at BEGIN
@@ -69,26 +70,33 @@ def writer(make_session: Maker, controller_id: int | None = None) -> Session:
 
 _SQLITE_TURNS: dict[str, threading.Lock] = {}  # database URL -> its writers' turn, per process
 _TURNS_LOCK = threading.Lock()
+PG_WRITERS = PG_POOL_SIZE - 3  # a process's PostgreSQL writers at once: 3 connections for reads
+_PG_WRITERS = threading.BoundedSemaphore(PG_WRITERS)
 TURN_TIMEOUT_S = BUSY_TIMEOUT_MS / 1000  # a writer waits this long for its turn, then 503
 
 
 @contextlib.contextmanager
 def sqlite_turn(db: Session) -> Iterator[None]:
-    """This process's turn to write ``db``'s SQLite database, held until the block ends (the
-    transaction committed or rolled back). Nothing for a reader's session, nor on PostgreSQL
-    (row locks), nor when the session's transaction has begun already (an Idempotency-Key
-    claimed before the route): it holds SQLite's write lock, and waiting for a turn while
-    holding it would deadlock with the thread whose turn it is."""
+    """This process's turn to write ``db``'s database, held until the block ends (the
+    transaction committed or rolled back). Nothing for a reader's session, nor when the
+    session's transaction has begun already (it may hold SQLite's write lock, and waiting for a
+    turn while holding it would deadlock with the thread whose turn it is).
+
+    SQLite: one writer of the process at a time (the database has one writer anyway).
+    PostgreSQL: at most :data:`PG_WRITERS` writers of the process at once. A writer holds one
+    of the process's pooled connections while it waits for its controller's row lock; without
+    a limit, writers queued on one busy controller (behind a long restore) would hold every
+    connection and the process's reads would wait for one."""
     if not db.info.get(WRITER) or db.in_transaction():
         yield
         return
     bind = db.get_bind()
-    if bind.dialect.name != "sqlite":
-        yield
-        return
-    key = str(bind.url)
-    with _TURNS_LOCK:
-        turn = _SQLITE_TURNS.setdefault(key, threading.Lock())
+    if bind.dialect.name == "sqlite":
+        key = str(bind.url)
+        with _TURNS_LOCK:
+            turn = _SQLITE_TURNS.setdefault(key, threading.Lock())
+    else:
+        turn = _PG_WRITERS
     # as long as SQLite's own busy handler waits: a writer queued behind one that waits for
     # another process (a long restore) gives up as SQLite would, freeing its thread
     if not turn.acquire(timeout=TURN_TIMEOUT_S):
