@@ -4,7 +4,7 @@ A request that writes is one transaction, committed before the answer is sent (a
 got a 2xx finds its change in the database), and atomic whichever process or host serves it.
 It is a write as every face runs one (:mod:`server.service.transaction`): a writer's session
 (SQLite ``BEGIN IMMEDIATE``; on PostgreSQL the controller of the path locked at ``BEGIN``), this
-process's turn on SQLite, and the operation's audit record (the route's name) at the commit.
+process's writers' turn, and the operation's audit record (the route's name) at the commit.
 
 The transaction lives in the route's worker thread, never on the event loop. ``SessionDep``
 (:func:`get_session`) only makes the session (no statement yet); every route taking one is a
@@ -96,8 +96,8 @@ async def in_worker_thread(pool: ThreadPoolExecutor, fn: Callable[..., Any], *ar
 
 def one_thread(endpoint: Callable[..., Any]) -> Callable[..., Any]:
     """``endpoint`` (a sync route) run in a worker thread (:func:`in_worker_thread`); when it
-    takes a session, that thread is the transaction's: this process's turn on SQLite
-    (:func:`server.service.transaction.sqlite_turn`), the Idempotency-Key claimed, the route,
+    takes a session, that thread is the transaction's: this process's writers' turn
+    (:func:`server.service.transaction.writers_turn`), the Idempotency-Key claimed, the route,
     the audited commit, or the rollback if anything raised; then the session is closed.
     Async routes are returned unchanged."""
     if inspect.iscoroutinefunction(endpoint) or getattr(endpoint, "_one_thread", False):
@@ -108,9 +108,9 @@ def one_thread(endpoint: Callable[..., Any]) -> Callable[..., Any]:
         if db is None:
             return endpoint(*args, **kwargs)
         try:
-            with transaction.sqlite_turn(db):
+            with transaction.writers_turn(db):
                 try:
-                    if request.method not in READ_METHODS and idempotency.has_key(request):
+                    if idempotency.has_key(request):  # a POST that sent one
                         db.connection()  # BEGIN (the controller locked), then the key claimed
                         idempotency.claim(db, request)
                     result = endpoint(*args, **kwargs)

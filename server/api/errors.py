@@ -189,10 +189,10 @@ def install(app: FastAPI) -> None:
         return await _unexpected(request, exc)
 
     @app.exception_handler(PoolTimeout)
-    async def _pool(request: Request, exc: PoolTimeout) -> JSONResponse:
+    async def _pool(_: Request, exc: PoolTimeout) -> JSONResponse:
         log.warning("every database connection of this process stayed busy: %s", exc)
         return _busy_answer(f"every database connection of this worker stayed busy for "
-                            f"{request_pool_timeout_s(request):g} s")
+                            f"{db_session.POOL_TIMEOUT_S:g} s")
 
     @app.exception_handler(Exception)
     async def _unexpected(request: Request, exc: Exception) -> JSONResponse:
@@ -200,12 +200,6 @@ def install(app: FastAPI) -> None:
         return JSONResponse(status_code=500, content=detail(
             (), f"internal error ({type(exc).__name__}); the request changed nothing it had not "
                 "committed; see the service log", "internal"))
-
-
-def request_pool_timeout_s(request: Request) -> float:
-    """How long a request waits for one of its process's database connections."""
-    pool = request.app.state.engine.pool
-    return float(pool.timeout()) if hasattr(pool, "timeout") else 30.0  # QueuePool's default
 
 
 def _busy_answer(why: str) -> JSONResponse:

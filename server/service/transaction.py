@@ -7,7 +7,7 @@ Every operation that changes rows runs in one transaction that
   ``db.session``); on PostgreSQL its ``BEGIN`` is followed at once by ``SELECT ... FOR
   UPDATE`` of the controller's row (:func:`_lock_at_begin`), so every read-modify-write of one
   controller runs after the previous one committed;
-- on SQLite, takes this process's **turn** (:func:`sqlite_turn`): SQLite has one writer at a
+- on SQLite, takes this process's **turn** (:func:`writers_turn`): SQLite has one writer at a
   time anyway, and a thread that loses ``BEGIN IMMEDIATE`` to a thread of its own process
   would otherwise wait in SQLite's busy handler, which sleeps 1, 2, 5, 10 ... up to 100 ms
   between tries; on the turn it runs as soon as the other commits. Writers of other processes
@@ -20,7 +20,7 @@ Every operation that changes rows runs in one transaction that
 :func:`writing` is all three for a face that opens its own transaction (OPC UA, RWS, KVP, the
 CLI, a route computing outside the request's transaction). The REST request path
 (``server.api.deps``) keeps its request-scoped session and its Idempotency-Key claim, and
-uses the same pieces: :func:`writer`, :func:`sqlite_turn`, :func:`commit`.
+uses the same pieces: :func:`writer`, :func:`writers_turn`, :func:`commit`.
 """
 
 from __future__ import annotations
@@ -76,7 +76,7 @@ TURN_TIMEOUT_S = BUSY_TIMEOUT_MS / 1000  # a writer waits this long for its turn
 
 
 @contextlib.contextmanager
-def sqlite_turn(db: Session) -> Iterator[None]:
+def writers_turn(db: Session) -> Iterator[None]:
     """This process's turn to write ``db``'s database, held until the block ends (the
     transaction committed or rolled back). Nothing for a reader's session, nor when the
     session's transaction has begun already (it may hold SQLite's write lock, and waiting for a
@@ -127,14 +127,14 @@ def commit(db: Session, operation: str, **ids: int | None) -> None:
 def writing(make_session: Maker, controller_id: int | None = None, *, operation: str,
             who: dict[str, Any] | None = None, **ids: int | None) -> Iterator[Session]:
     """One write, whichever face: a writer's session (:func:`writer`, ``controller_id``'s row
-    locked), in this process's turn (:func:`sqlite_turn`), committed with the operation's audit
+    locked), in this process's turn (:func:`writers_turn`), committed with the operation's audit
     record (:func:`commit`) when the block ends, rolled back if it raises. ``who`` (an
     :func:`server.auth.audit.actor`) is whom the audit names; without it, the current actor.
 
     ``with writing(maker, cid, operation="commit_frame", who=caller) as db: edit_slot(db, ...)``
     """
     acting = audit.acting_as(who) if who is not None else contextlib.nullcontext()
-    with acting, writer(make_session, controller_id) as db, sqlite_turn(db):
+    with acting, writer(make_session, controller_id) as db, writers_turn(db):
         try:
             yield db
             commit(db, operation, controller_id=controller_id, **ids)
