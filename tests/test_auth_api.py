@@ -313,14 +313,23 @@ def test_requests_that_carry_an_expired_cache_entry_share_one_verification(clien
     from server.auth import tokens
 
     calls: list[str] = []
-    verify = tokens.verified_actor
+    verify, cache_get = tokens.verified_actor, tokens.CACHE.get
+    looked = threading.Semaphore(0)  # one release per request that looked in the cache
+
+    def counted_get(digest):  # noqa: ANN001, ANN202
+        looked.release()
+        return cache_get(digest)
 
     def slow_verify(db_factory, digest):  # noqa: ANN001, ANN202
         calls.append(digest)
-        time.sleep(0.3)  # the other requests arrive meanwhile
+        # the lookup lasts until every request has found no entry (a bad token is never
+        # cached, so a request that came after the lookup ended would make one of its own)
+        for _ in range(6):
+            assert looked.acquire(timeout=30), "a request never reached the token check"
         return verify(db_factory, digest)
 
     monkeypatch.setattr(tokens, "verified_actor", slow_verify)
+    monkeypatch.setattr(tokens.CACHE, "get", counted_get)
     # the entry the first lookup makes holds for the whole test: a request that starts late on
     # a loaded machine (more than CACHE_TTL_S after it) would make a second lookup of its own
     monkeypatch.setattr(tokens.CACHE, "ttl_s", 600.0)

@@ -7,12 +7,15 @@ Every operation that changes rows runs in one transaction that
   ``db.session``); on PostgreSQL its ``BEGIN`` is followed at once by ``SELECT ... FOR
   UPDATE`` of the controller's row (:func:`_lock_at_begin`), so every read-modify-write of one
   controller runs after the previous one committed;
-- on SQLite, takes this process's **turn** (:func:`writers_turn`): SQLite has one writer at a
-  time anyway, and a thread that loses ``BEGIN IMMEDIATE`` to a thread of its own process
-  would otherwise wait in SQLite's busy handler, which sleeps 1, 2, 5, 10 ... up to 100 ms
-  between tries; on the turn it runs as soon as the other commits. Writers of other processes
-  (a second worker, the CLI, a job) still meet in the busy handler. On PostgreSQL the same
-  function lets at most :data:`PG_WRITERS` writers of a process at a time hold a connection;
+- on SQLite, takes the database's **writers' turn** (:func:`writers_turn`): SQLite has one
+  writer at a time anyway, and a writer that loses ``BEGIN IMMEDIATE`` waits in SQLite's busy
+  handler, which sleeps 1, 2, 5, 10 ... up to 100 ms between tries and so hardly ever finds
+  the lock free while another process's writers follow each other without a gap (a
+  ``pendant users revoke`` beside a service under jog load waited seconds). The turn is a
+  lock within the process and an ``flock`` of the file ``<database>-writers`` across
+  processes, whose waiter the kernel wakes as soon as the holder lets go. On PostgreSQL the
+  same function lets at most :data:`PG_WRITERS` writers of a process at a time hold a
+  connection;
 - ends with :func:`commit`: the operation's ``op.<name>`` audit record when it changed rows no
   row hook recorded (``server.auth.audit.operation``), then the commit; rolled back on any
   error.
@@ -26,6 +29,8 @@ uses the same pieces: :func:`writer`, :func:`writers_turn`, :func:`commit`.
 from __future__ import annotations
 
 import contextlib
+import fcntl
+import os
 import threading
 from collections.abc import Iterator
 from typing import Any
@@ -68,7 +73,46 @@ def writer(make_session: Maker, controller_id: int | None = None) -> Session:
     return db
 
 
-_SQLITE_TURNS: dict[str, threading.Lock] = {}  # database URL -> its writers' turn, per process
+class _SqliteTurn:
+    """The writers' turn of one SQLite database: a lock among this process's threads, then an
+    ``flock`` of ``<database>-writers`` (none for an in-memory database) among processes.
+    The file is opened once per process (a forked child opens its own: a descriptor inherited
+    across ``fork`` shares its lock with the parent's)."""
+
+    def __init__(self, database: str | None) -> None:
+        self.path = (f"{database}-writers" if database and database != ":memory:"
+                     and not database.startswith("file:") else None)
+        self.threads = threading.Lock()
+        self._fd: int | None = None
+        self._pid = 0
+
+    def _file(self) -> int:
+        if self._fd is None or self._pid != os.getpid():
+            self._fd = os.open(self.path, os.O_RDWR | os.O_CREAT | os.O_CLOEXEC, 0o600)
+            self._pid = os.getpid()
+        return self._fd
+
+    @contextlib.contextmanager
+    def held(self, timeout_s: float) -> Iterator[None]:
+        if not self.threads.acquire(timeout=timeout_s):
+            raise DatabaseBusy(timeout_s)
+        try:
+            if self.path is None:
+                yield
+                return
+            fd = self._file()
+            # waits as long as another process's writer's transaction lasts (as SQLite's own
+            # lock would make it wait); this process's other writers wait on ``threads``
+            fcntl.flock(fd, fcntl.LOCK_EX)
+            try:
+                yield
+            finally:
+                fcntl.flock(fd, fcntl.LOCK_UN)
+        finally:
+            self.threads.release()
+
+
+_SQLITE_TURNS: dict[str, _SqliteTurn] = {}  # database URL -> its writers' turn
 _TURNS_LOCK = threading.Lock()
 PG_WRITERS = PG_POOL_SIZE - 3  # a process's PostgreSQL writers at once: 3 connections for reads
 _PG_WRITERS = threading.BoundedSemaphore(PG_WRITERS)
@@ -82,7 +126,9 @@ def writers_turn(db: Session) -> Iterator[None]:
     session's transaction has begun already (it may hold SQLite's write lock, and waiting for a
     turn while holding it would deadlock with the thread whose turn it is).
 
-    SQLite: one writer of the process at a time (the database has one writer anyway).
+    SQLite: one writer at a time among this process's threads and the processes that write
+    the database with pendant (the database has one writer anyway), in the order the kernel
+    wakes them; a writer that is not pendant's still meets these in SQLite's busy handler.
     PostgreSQL: at most :data:`PG_WRITERS` writers of the process at once. A writer holds one
     of the process's pooled connections while it waits for its controller's row lock; without
     a limit, writers queued on one busy controller (behind a long restore) would hold every
@@ -91,20 +137,23 @@ def writers_turn(db: Session) -> Iterator[None]:
         yield
         return
     bind = db.get_bind()
+    # a writer queued behind one that waits for another process (a long restore) gives up
+    # after as long as SQLite's own busy handler would wait, freeing its thread (503)
     if bind.dialect.name == "sqlite":
         key = str(bind.url)
         with _TURNS_LOCK:
-            turn = _SQLITE_TURNS.setdefault(key, threading.Lock())
-    else:
-        turn = _PG_WRITERS
-    # as long as SQLite's own busy handler waits: a writer queued behind one that waits for
-    # another process (a long restore) gives up as SQLite would, freeing its thread
-    if not turn.acquire(timeout=TURN_TIMEOUT_S):
+            turn = _SQLITE_TURNS.get(key)
+            if turn is None:
+                turn = _SQLITE_TURNS[key] = _SqliteTurn(bind.url.database)
+        with turn.held(TURN_TIMEOUT_S):
+            yield
+        return
+    if not _PG_WRITERS.acquire(timeout=TURN_TIMEOUT_S):
         raise DatabaseBusy(TURN_TIMEOUT_S)
     try:
         yield
     finally:
-        turn.release()
+        _PG_WRITERS.release()
 
 
 class DatabaseBusy(Exception):
