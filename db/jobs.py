@@ -35,10 +35,12 @@ MAX_ATTEMPTS = 3  # a job whose worker died this often fails instead of being cl
 
 
 def enqueue(db: Session, kind: str, params: dict[str, Any]) -> Job:
-    """A new queued job; committed, so any worker can see it."""
+    """A new queued job in ``db``'s transaction (flushed: it has its id). The workers see it
+    once the caller commits, with the rest of the operation that queued it: an operation that
+    fails after queueing a job queues nothing."""
     job = Job(kind=kind, params=params, state="queued", progress=0.0, message="queued")
     db.add(job)
-    db.commit()
+    db.flush()
     return job
 
 
@@ -153,20 +155,20 @@ def fail(db: Session, job_id: int, worker: str, status: int, msg: str, loc: tupl
 
 def cancel(db: Session, job_id: int) -> Job:
     """Cancel a job: a queued one at once, a running one by asking its worker (which kills the
-    process running it). A finished job stays as it is."""
+    process running it). A finished job stays as it is. In ``db``'s transaction: the caller
+    commits (with its audit record)."""
     if not 1 <= job_id <= MAX_ID:
         raise NotFound(("job_id",), f"no job {job_id}")
     _begin_immediate(db)
     job = db.scalars(select(Job).where(Job.id == job_id).with_for_update()).first()
     if job is None:
-        db.rollback()
         raise NotFound(("job_id",), f"no job {job_id}")
     if job.state == "queued":
         _finish(job, "cancelled", utcnow())
     elif job.state == "running":
         job.cancel_requested = True
         job.message = "cancel requested"
-    db.commit()
+    db.flush()  # committed by the caller, with its audit record
     return job
 
 

@@ -229,11 +229,30 @@ def test_concurrent_claims_never_take_one_job_twice(db_url):
         sm = client.app.state.sessionmaker
         with sm() as db:
             ids = [jobs.enqueue(db, "analysis", {"recording_id": 1}).id for _ in range(60)]
+            db.commit()
     env = {**os.environ, "PYTHONPATH": str(ROOT)}
     procs = [subprocess.Popen([sys.executable, "-c", CLAIMER, db_url, f"claimer-{k}"],
                               env=env, stdout=subprocess.PIPE, text=True) for k in range(4)]
     claimed = [int(x) for p in procs for x in p.communicate(timeout=120)[0].split()]
     assert sorted(claimed) == ids  # every job once: none lost, none twice
+
+
+def test_an_operation_that_fails_after_queueing_a_job_queues_nothing(db_url):
+    """A job is queued in the transaction of the operation that queues it (one transaction per
+    request): the workers never see the job of an operation that was rolled back."""
+    from sqlalchemy import func, select
+
+    from server.service import transaction
+
+    with make_client(db_url) as client:
+        sm = client.app.state.sessionmaker
+        with pytest.raises(RuntimeError, match="after the job"), \
+                transaction.writing(sm, operation="analyze") as db:
+            assert jobs.enqueue(db, "analysis", {"recording_id": 1}).id >= 1
+            raise RuntimeError("a failure after the job was queued")
+        with sm() as db:
+            assert db.scalar(select(func.count()).select_from(Job)) == 0
+            assert jobs.claim(db, "w") is None
 
 
 def test_a_job_whose_worker_died_is_claimed_again_then_given_up(tmp_path):
@@ -243,6 +262,7 @@ def test_a_job_whose_worker_died_is_claimed_again_then_given_up(tmp_path):
     sm = make_sessionmaker(make_engine(url))
     with sm() as db:
         job_id = jobs.enqueue(db, "analysis", {"recording_id": 1}).id
+        db.commit()
     now = utcnow()
     for attempt in range(1, jobs.MAX_ATTEMPTS + 1):
         with sm() as db:
@@ -272,6 +292,7 @@ def test_a_failure_is_written_even_if_a_lease_renewal_commits_while_it_is(tmp_pa
     sm = make_sessionmaker(engine)
     with sm() as db:
         job_id = jobs.enqueue(db, "analysis", {"recording_id": 1}).id
+        db.commit()
         assert jobs.claim(db, "w").id == job_id
     renewals = []
 
