@@ -52,6 +52,30 @@ def test_calibrate_errors_name_the_field(tmp_path, touches, capsys):
     assert "points.0.joints_deg" in capsys.readouterr().err
 
 
+@pytest.mark.parametrize("rail, argv, line", [
+    ("E4", [], "inputs.rail: must be an object"),
+    ({"axis": "E9", "direction": [0, 1, 0]}, [], "inputs.rail.axis: must be one of E1..E6"),
+    ({"axis": "E1", "direction": [0, 0, 0]}, [], "inputs.rail.direction: must be three finite"),
+    ({"axis": "E1", "direction": [0, 1, 0], "scale": -1}, [], "inputs.rail.scale: must be a "
+                                                              "positive number"),
+    ({"axis": "E1", "direction": [0, 1, 0], "calibrated": "yes"}, [],
+     "inputs.rail.calibrated: must be true or false"),
+    ({"axis": "E1", "direction": [0, 1, 0], "travel": 3}, [], "inputs.rail.travel: unknown"),
+    (None, ["--rail", "E1"], "--rail: must be AXIS:X,Y,Z or AXIS:X,Y,Z:calibrated"),
+    (None, ["--rail", "E1:0,1"], "--rail: must be 3 finite comma-separated numbers"),
+    (None, ["--rail", "E7:0,1,0"], "--rail: must be one of E1..E6"),
+])
+def test_a_bad_rail_names_the_field(tmp_path, touches, capsys, rail, argv, line):
+    """``inputs.rail`` / ``--rail`` of ``pendant calibrate``: one line naming the field."""
+    f = tmp_path / "touch.json"
+    inputs = {} if rail is None else {"rail": rail}
+    f.write_text(json.dumps({"robot": "kuka_kr6_r900_sixx", "inputs": inputs,
+                             "points": [{"joints_deg": q.tolist()} for q in touches]}))
+    assert main(["calibrate", "tool.xyz_4point", str(f), *argv]) == 2
+    err = capsys.readouterr().err
+    assert err.startswith(f"pendant: {line}") and "Traceback" not in err, err
+
+
 def test_export_prints_the_controller_file(tmp_path, capsys):
     assert main(["export", "cell-1", "--format", "kuka", "--db", f"sqlite:///{tmp_path / 'p.db'}"]) == 0
     assert "TOOL_DATA" in capsys.readouterr().out

@@ -156,3 +156,53 @@ def test_an_offset_on_an_uncalibrated_turntable_says_what_it_assumed(client):
     run(client, "ext.root_point", 1, save=True, tool_no=1)
     rep = run(client, "ext.offset", 5, tool_no=1, ext_no=1)
     assert "kinematic_assumed" not in [w["code"] for w in rep["warnings"]]
+
+
+def test_pendant_calibrate_puts_a_file_touched_on_the_rail_in_the_world(cell, tmp_path, capsys):
+    """The plate's touch-ups taken on the rail (E4 at 250, 0 and 100 mm), exported and solved
+    by ``pendant calibrate``: given the rail (``inputs.rail``, as EX_KIN 3 holds it), the
+    frame taught at E4 = 0 within its bound; without it, the frame is off by the travel and the
+    report says which axis it did not place."""
+    import json
+
+    from server.cli.main import main
+
+    at0 = run(cell, "base.3point", 2, 0.0, tool_no=1)
+    url = open_session(cell, "base.3point", 2, tool_no=1)
+    taught = teach(cell, url, rails={0: 250.0, 1: 0.0, 2: 100.0})
+    moved = ok(cell.post(f"{url}/compute"))
+    rail = moved["extras"]["chain"]["rail"]
+    tool = ok(cell.get(f"{C}/tools/1"))
+    points = [{"flange_pose": st["point"]["flange_pose"],
+               "external_axes": st["point"]["external_axes"]}
+              for st in taught["steps"] if st["point"]]
+    assert sorted(p["external_axes"]["E4"] for p in points) == [0.0, 100.0, 250.0]
+
+    def solve(inputs: dict) -> dict:
+        f = tmp_path / "plate.json"
+        f.write_text(json.dumps({"points": points, "inputs": {
+            "tcp_mm": [tool["pose"][k] for k in "xyz"], **inputs}}))
+        assert main(["calibrate", "base.3point", str(f), "--json"]) == 0, capsys.readouterr()
+        return json.loads(capsys.readouterr().out)
+
+    on_rail = solve({"rail": {"axis": "E4", "direction": rail["direction"],
+                              "scale": rail["scale"], "calibrated": True}})
+    assert _pos_err(on_rail, moved) < 1e-6  # the service's own chain
+    assert _pos_err(on_rail, at0) < max(moved["position_bound95_mm"], 0.05)
+    assert "rail_chain" in [w["code"] for w in on_rail["warnings"]]
+    assert on_rail["extras"]["chain"]["rail"]["values_mm"] == [250.0, 0.0, 100.0]
+
+    unplaced = solve({})
+    assert _pos_err(unplaced, at0) > 5.0  # the travel, not placed
+    warning = next(w for w in unplaced["warnings"] if w["code"] == "external_axes_ignored")
+    assert "E4 = 0, 100, 250" in warning["message"] and "--rail E4:" in warning["message"]
+
+    # machine data only: points at different rail positions are refused, naming the point
+    f = tmp_path / "plate.json"
+    assert main(["calibrate", "base.3point", str(f), "--rail",
+                 "E4:" + ",".join(f"{v:.6f}" for v in rail["direction"])]) == 2
+    err = capsys.readouterr().err
+    assert err.startswith("pendant: points.1.external_axes.E4: ") and "not calibrated" in err
+    assert main(["calibrate", "base.3point", str(f), "--rail",
+                 "E4:" + ",".join(f"{v:.9f}" for v in rail["direction"]) + ":calibrated"]) == 0
+    assert "touched at E4 = 0, 100, 250 mm: put in the world" in capsys.readouterr().out

@@ -41,6 +41,7 @@ import threading
 import time
 from collections.abc import Iterator
 from contextlib import contextmanager
+from dataclasses import replace
 from pathlib import Path
 from typing import Any, Sequence, TextIO
 
@@ -93,6 +94,24 @@ def _flange(point: dict[str, Any], k: int, robot_key: str | None) -> np.ndarray:
     except (KeyError, TypeError, ValueError):
         raise CalibrationError(("points", k), "needs joints_deg, flange_pose {x..c}, "
                                "or x, y, z, a, b, c") from None
+
+
+def _rail_option(text: str) -> dict[str, Any]:
+    """``--rail AXIS:X,Y,Z[:calibrated]`` as ``inputs.rail``, checked (CalibrationError naming
+    --rail)."""
+    from server.service.external import rail_from_document
+
+    parts = text.split(":")
+    if len(parts) not in (2, 3) or (len(parts) == 3 and parts[2].strip() != "calibrated"):
+        raise CalibrationError(("--rail",), f"must be AXIS:X,Y,Z or AXIS:X,Y,Z:calibrated "
+                               f"(e.g. E1:0,1,0), got {text!r}")
+    doc = {"axis": parts[0].strip().upper(), "direction": _vec(parts[1], 3, "--rail"),
+           "calibrated": len(parts) == 3}
+    try:
+        rail_from_document(doc)
+    except CalibrationError as err:  # the option is one field: name it
+        raise CalibrationError(("--rail",), err.reason) from None
+    return doc
 
 
 def read_points_file(path: Path) -> tuple[list[dict[str, Any]], dict[str, Any], str | None]:
@@ -152,11 +171,27 @@ def calibrate_file(method: str, path: Path, robot: str | None = None,
     if method.startswith("ext."):
         from server.menus.external import inputs_from_document
         external = inputs_from_document(inputs.get("kinematic"), data)
+    # a robot on a rail: the touch-ups put in the world through it, as the service does
+    # (server.service.external.chain_points); without one, varying axis values are named
+    from server.service.external import (NO_CHAIN, chain_points, rail_from_document,
+                                         unplaced_positions)
+    findings: list = []
+    chain: dict[str, Any] = {}
+    if inputs.get("rail") is not None:
+        data, findings, chain = chain_points(rail_from_document(inputs["rail"]), data, method)
+    elif not method.startswith("ext.") and method not in NO_CHAIN:
+        findings = unplaced_positions(data)
     mi = MethodInputs(pose=pose, beams=beams, tool_diameter_mm=inputs.get("tool_diameter_mm"),
                       external=external, **arr)  # type: ignore[arg-type]
     known = inputs.get("known_mm")
     params = {} if known is None else {"known_points_mm": known}
-    return METHODS[method].solve(data, mi, params)
+    result = METHODS[method].solve(data, mi, params)
+    if not findings and not chain:
+        return result
+    r = result.report
+    extras = {**r.extras, "chain": chain} if chain else r.extras
+    return replace(result, report=replace(r, warnings=tuple(r.warnings) + tuple(findings),
+                                          extras=extras))
 
 
 def format_report(report: ReportOut) -> str:
@@ -277,6 +312,12 @@ def build_parser() -> argparse.ArgumentParser:
                                  "own XYZ)")
     c.add_argument("--reference-tcp", help="X,Y,Z of the reference tool (XYZ Reference)")
     c.add_argument("--fixed-tcp", help="X,Y,Z of the calibrated fixed tool (workpiece menus)")
+    c.add_argument("--rail", metavar="AXIS:X,Y,Z",
+                   help="the robot rides on a rail moved by external axis AXIS (E1..E6) along "
+                        "X,Y,Z in its base: the touch-ups are put in the world through it. "
+                        "Machine data, unless :calibrated follows (AXIS:X,Y,Z:calibrated: the "
+                        "direction comes from a calibration); only a calibrated rail puts "
+                        "points touched at different positions in one frame")
     c.add_argument("--json", action="store_true", help="print the report as JSON")
 
     e = sub.add_parser("export", help="print a controller's tables as a controller file")
@@ -701,6 +742,8 @@ def main(argv: Sequence[str] | None = None) -> int:
                      ("fixed_tcp_mm", args.fixed_tcp))
             overrides = {k: _vec(v, 3, f"--{k.replace('_mm', '').replace('_', '-')}")
                          for k, v in given if v}
+            if args.rail:
+                overrides["rail"] = _rail_option(args.rail)
             result = calibrate_file(args.method, args.file, args.robot, overrides)
             report = ReportOut.from_result(result)
             print(report.model_dump_json(indent=1) if args.json else format_report(report))

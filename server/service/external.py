@@ -324,6 +324,69 @@ def rail_of(db: Session, controller_id: int) -> Rail | None:
     return None
 
 
+def rail_from_document(doc: object, loc: tuple[str, ...] = ("inputs", "rail")) -> Rail:
+    """The rail a file describes (``pendant calibrate``'s ``inputs.rail``): ``{"axis": "E1",
+    "direction": [x, y, z], "scale": 1.0, "calibrated": false, "number": 1}``. ``direction``
+    is the travel in the robot base at 0 (normalised here), ``scale`` mm of travel per unit of
+    the axis value, ``calibrated`` whether the direction and scale come from a calibration
+    (``ext.linear_unit``) rather than machine data, ``number`` its EX_KIN slot (for the report).
+    CalibrationError naming the field otherwise."""
+    if not isinstance(doc, dict):
+        raise CalibrationError(loc, 'must be an object {"axis": "E1", "direction": [x, y, z]}')
+    unknown = sorted(set(doc) - {"axis", "direction", "scale", "calibrated", "number"})
+    if unknown:
+        raise CalibrationError(loc + (unknown[0],), "unknown field; a rail has axis, direction, "
+                               "scale, calibrated, number")
+    axis = doc.get("axis")
+    if axis not in [f"E{i}" for i in range(1, 7)]:
+        raise CalibrationError(loc + ("axis",), f"must be one of E1..E6, got {axis!r}")
+    try:
+        d = np.asarray(doc.get("direction"), dtype=float)
+    except (TypeError, ValueError):
+        d = np.zeros(0)
+    if d.shape != (3,) or not np.all(np.isfinite(d)) or np.linalg.norm(d) < 1e-9:
+        raise CalibrationError(loc + ("direction",), "must be three finite numbers, not all 0 "
+                               f"(the travel in the robot base), got {doc.get('direction')!r}")
+    scale = doc.get("scale", 1.0)
+    if isinstance(scale, bool) or not isinstance(scale, (int, float)) \
+            or not np.isfinite(scale) or scale <= 0:
+        raise CalibrationError(loc + ("scale",), f"must be a positive number (mm per unit of "
+                               f"{axis}), got {scale!r}")
+    calibrated = doc.get("calibrated", False)
+    if not isinstance(calibrated, bool):
+        raise CalibrationError(loc + ("calibrated",), f"must be true or false, got {calibrated!r}")
+    number = doc.get("number", 1)
+    if isinstance(number, bool) or not isinstance(number, int) or not 1 <= number <= EXT_KIN_SLOTS:
+        raise CalibrationError(loc + ("number",), f"must be an EX_KIN number 1..{EXT_KIN_SLOTS}, "
+                               f"got {number!r}")
+    return Rail(number, "", axis, d / np.linalg.norm(d), float(scale), calibrated,
+                "given in the file" if calibrated else None)
+
+
+def unplaced_positions(points: list) -> list:
+    """Findings for points touched with an external axis away from 0 (or at several values)
+    that nothing puts in the world (no rail given to ``pendant calibrate``): the menu solves
+    in the robot base as it stood, which is off by the travel when the axis carries the
+    robot."""
+    from solvers.report import Finding
+
+    values: dict[str, list[float]] = {}
+    for p in points:
+        for axis, v in (p.external_axes or {}).items():
+            values.setdefault(axis, []).append(float(v))
+    out = []
+    for axis, vals in sorted(values.items()):
+        if max(vals) - min(vals) > 1e-6 or max(abs(v) for v in vals) > 1e-9:
+            at = ", ".join(f"{v:g}" for v in sorted(set(vals)))
+            out.append(Finding(
+                "external_axes_ignored", f"the points were touched at {axis} = {at}, and nothing "
+                f"says what {axis} moves: solved in the robot base as it stood at each point. If "
+                f"{axis} carries the robot (a rail), the frame is off by its travel: give the "
+                f'rail (inputs.rail {{"axis": "{axis}", "direction": [x, y, z]}} or --rail '
+                f"{axis}:X,Y,Z)", ("points",)))
+    return out
+
+
 def entry_covariance(db: Session, controller_id: int, table: str,
                      number: int) -> tuple[np.ndarray | None, int | None, str]:
     """The stored covariance (3, 3, mm²) of the position of tool (TCP in the flange) or base
