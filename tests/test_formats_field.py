@@ -264,3 +264,101 @@ def test_the_backup_keeps_the_files_encoding_and_the_cli_exports_its_bytes(clien
     capsysbinary.readouterr()
     assert main(["export", "cell-1", "--format", "kuka", "--db", db_url]) == 0
     assert capsysbinary.readouterr().out == raw
+
+
+# ------------------------------------------------------- FANUC: the controller's SYSFRAME.VA
+
+def test_fanuc_sysframe_from_a_controller_imports_and_comes_back_with_only_the_changed_numbers(
+        client):
+    """A controller's SYSFRAME.VA (CR LF, two motion groups, Uninitialized and zero frames, a
+    hand-spaced line): group 1's tools and user frames become tools and bases, the
+    positioner's frames are named as left out; a no-change export is the file byte for byte,
+    a change rewrites only the numbers of the frame that changed, an Uninitialized tool that
+    gets a frame gets the controller's lines."""
+    raw = (CORPUS / "fanuc_sysframe_crlf.va").read_bytes()
+    text = raw.decode("ascii")
+    r = ok(client.post(f"{C}/import", json={"format": "fanuc", "text": text}))
+    assert [(s["field"], s["line"]) for s in r["skipped"]] == [("$MNUFRAME[2,1]", 38),
+                                                               ("$MNUTOOL[2,1]", 114)]
+    tools = {n: ok(client.get(f"{C}/tools/{n}")) for n in (1, 2, 3)}
+    assert [tools[3]["pose"][k] for k in "xyzabc"] == pytest.approx(
+        [12.5, -1234.567, 310.25, 180.0, 45.0, 0.0], abs=1e-9)  # A = R, B = P, C = W
+    assert tools[1]["kind"] == "tool" and tools[1]["name"] == ""
+    assert not any(tools[2]["pose"][k] for k in "xyzabc")  # Uninitialized: unused
+    base2 = ok(client.get(f"{C}/bases/2"))
+    assert [base2["pose"][k] for k in "xyz"] == pytest.approx([800.125, 600.0, -12.5])
+    assert client.get(f"{C}/export", params={"format": "fanuc"}).content == raw
+
+    put(client, "/tools/1", {"pose": {"x": 2.25}})
+    out = client.get(f"{C}/export", params={"format": "fanuc"}).content.decode("ascii")
+    assert out.count("\r\n") == text.count("\r\n") and "\n" not in out.replace("\r\n", "")
+    diff = [(a, b) for a, b in zip(text.split("\r\n"), out.split("\r\n")) if a != b]
+    assert diff == [("  X:     1.250   Y:    -0.500   Z:   185.000",
+                     "  X:     2.250   Y:    -0.500   Z:   185.000")]
+
+    put(client, "/tools/2", {"pose": {"x": 10.0, "y": 0.0, "z": 99.5, "a": 0.0, "b": 0.0,
+                                      "c": 0.0}})
+    out = client.get(f"{C}/export", params={"format": "fanuc"}).content.decode("ascii")
+    at = out.split("\r\n").index("    [1,2] =")
+    assert out.split("\r\n")[at + 1:at + 4] == [
+        "  Group: 1   Config: N D B, 0, 0, 0",
+        "  X:    10.000   Y:     0.000   Z:    99.500",
+        "  W:     0.000   P:     0.000   R:     0.000"]
+    again = {(e.kind, e.number): e for e in formats.READERS["fanuc"](out).entries}
+    assert again[("tool", 2)].pose.z == pytest.approx(99.5)
+    assert again[("tool", 1)].pose.x == pytest.approx(2.25)
+
+    put(client, "/tools/12", {"pose": {"z": 50.0}})  # a KUKA-kind table has 16 tools
+    r = client.get(f"{C}/export", params={"format": "fanuc"})
+    assert r.status_code == 422, r.text
+    d = r.json()["detail"][0]
+    assert "tool 12" in d["loc"] and "has no $MNUTOOL[1,12] (its table holds tools 1..10)" \
+        in d["msg"], d
+
+
+def test_fanuc_sysframe_angles_are_fixed_xyz_as_scipy_reads_them():
+    """W, P, R of $MNUFRAME are rotations about the fixed X, Y, Z axes (R = Rz(R) Ry(P)
+    Rx(W)): scipy's Rotation 'xyz' (extrinsic) is the judge."""
+    from scipy.spatial.transform import Rotation
+
+    text = (CORPUS / "fanuc_sysframe_crlf.va").read_bytes().decode("ascii")
+    base2 = next(e for e in formats.READERS["fanuc"](text).entries
+                 if e.kind == "base" and e.number == 2)
+    R = Rotation.from_euler("xyz", [0.5, -0.25, 179.5], degrees=True).as_matrix()
+    assert base2.pose.as_matrix()[:3, :3] == pytest.approx(R, abs=1e-12)
+
+
+@pytest.mark.parametrize("edit, loc, reason", [
+    (("X:  1500.000", "X:  15OO.000"), ["file", "line 7", "$MNUFRAME[1,1]"],
+     "expected 'X: <mm>  Y: <mm>  Z: <mm>', got 'X:  15OO.000"),
+    (("  W:     0.000   P:     0.000   R:    90.000\r\n", ""), ["file", "line 5",
+                                                               "$MNUFRAME[1,1]"],
+     "the frame's W, P, R line is missing"),
+    (("Z:   185.000", "Z:   2e7"), ["file", "line 79", "$MNUTOOL[1,1].Z"],
+     "must be within -1e+06..1e+06 mm"),
+    (("    [1,3] = \r\n  Group: 1   Config: N D B, 0, 0, 0\r\n  X:    12.500 Y:   -1234.567"
+      "   Z:   310.250\r\n", "    [1,3] = \r\n"), ["file", "line 83", "$MNUTOOL[1,3]"],
+     "W, P, R before X, Y, Z"),
+    (("    [1,9] = \r\n  Group: 1", "    [1,12] = \r\n  Group: 1"), ["file", "line 34",
+                                                                   "$MNUFRAME[1,12]"],
+     "beyond the table's ARRAY[..,9]"),
+])
+def test_a_bad_sysframe_is_refused_naming_the_line_and_the_frame(client, edit, loc, reason):
+    text = (CORPUS / "fanuc_sysframe_crlf.va").read_bytes().decode("ascii")
+    assert edit[0] in text
+    before = client.get(f"{C}/export", params={"format": "json"}).content
+    r = client.post(f"{C}/import", json={"format": "fanuc", "text": text.replace(edit[0], edit[1], 1)})
+    assert r.status_code == 422, r.text
+    d = r.json()["detail"][0]
+    assert d["loc"][-3:] == loc and reason in d["msg"], d
+    assert client.get(f"{C}/export", params={"format": "json"}).content == before
+
+
+def test_pendant_import_reads_a_va_file_by_its_suffix(client, db_url, tmp_path, capsys):
+    from server.cli.main import main
+
+    f = tmp_path / "SYSFRAME.VA"
+    f.write_bytes((CORPUS / "fanuc_sysframe_crlf.va").read_bytes())
+    assert main(["import", str(f), "--controller", "cell-1", "--db", db_url, "--dry-run"]) == 0
+    out = capsys.readouterr().out
+    assert re.search(r"tool +3: '\(unused\)' -> '' \(tool\)", out) and "-1234.567" in out, out

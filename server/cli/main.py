@@ -336,7 +336,8 @@ def build_parser() -> argparse.ArgumentParser:
     i.add_argument("--controller", required=True, help="controller name (or id)")
     i.add_argument("--format", choices=["kuka", "abb", "fanuc", "ur", "json"],
                    help="default from the file name: .dat kuka, .mod/.modx/.sys abb, "
-                        ".txt/.ls fanuc, .script ur, .json a backup (as pendant restore)")
+                        ".txt/.ls fanuc, .va fanuc (a controller's SYSFRAME.VA), .script ur, "
+                        ".json a backup (as pendant restore)")
     i.add_argument("--dry-run", action="store_true",
                    help="write nothing; print per slot its values before -> after")
     i.add_argument("--slots", help="apply only these slots of the file, e.g. tool3,base1 "
@@ -369,7 +370,8 @@ def _state_defaults(parser: argparse.ArgumentParser) -> None:
 
 
 IMPORT_SUFFIXES = {".dat": "kuka", ".mod": "abb", ".modx": "abb", ".sys": "abb", ".txt": "fanuc",
-                   ".ls": "fanuc", ".script": "ur", ".json": "json"}
+                   ".ls": "fanuc", ".va": "fanuc", ".script": "ur",
+                   ".json": "json"}
 
 
 def import_file(args: argparse.Namespace) -> int:

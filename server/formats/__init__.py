@@ -22,7 +22,8 @@ from server.formats.encoding import (
     decode_file,
     encode_file,
 )
-from server.formats.fanuc import export_fanuc, read_fanuc
+from server.formats.fanuc import export_fanuc, is_controller_listing, read_fanuc
+from server.formats.fanuc_sysframe import patch_sysframe
 from server.formats.kuka import export_kuka, import_kuka, read_kuka
 from server.formats.model import (
     FRAME_KINDS,
@@ -102,7 +103,9 @@ def _regenerating(export: Callable[[Iterable[FrameEntry]], str],
 PATCHERS: dict[str, Callable[[Iterable[FrameEntry], str], str]] = {
     "kuka": _bom_kept(lambda entries, text: export_kuka(entries, template=text)),
     "abb": _bom_kept(lambda entries, text: export_abb(entries, template=text)),
-    "fanuc": _bom_kept(_regenerating(export_fanuc, read_fanuc)),
+    "fanuc": _bom_kept(lambda entries, text: (
+        patch_sysframe(entries, text) if is_controller_listing(text)
+        else _regenerating(export_fanuc, read_fanuc)(entries, text))),
     "ur": _bom_kept(_regenerating(export_ur, read_ur)),
 }
 #: format -> reader of a whole file (text in, ParsedFile out).

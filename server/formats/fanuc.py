@@ -19,6 +19,7 @@ import numpy as np
 from solvers.errors import CalibrationError
 from solvers.frames import Pose, fanuc_from_matrix, matrix_from_fanuc
 
+from server.formats.fanuc_sysframe import is_sysframe, read_sysframe
 from server.service.bounds import check_value
 from server.formats.model import (
     ROBOT_HELD,
@@ -143,6 +144,12 @@ def export_fanuc(entries: Iterable[FrameEntry], group: int = 1) -> str:
 # --------------------------------------------------------------------------- reading
 
 END_LINE = "! end of pendant frames"
+HEADER = "! pendant: FANUC"
+
+
+def is_controller_listing(text: str) -> bool:
+    """True for a controller's ``SYSFRAME.VA`` rather than pendant's own listing."""
+    return not text.startswith(HEADER) and is_sysframe(text)
 _ROLE_KIND = (("coordinated user frame of unit ", "coordinated_base"), ("workpiece", "workpiece"),
               ("fixed tool", "fixed_tool"), ("user frame", "base"), ("tool", "tool"))
 _SECTION = re.compile(r"^\[\*SYSTEM\*\]\$(MNUTOOL|MNUFRAME)\b")
@@ -161,7 +168,8 @@ def _number(text: str, unit: str, line: int, fld: str) -> float:
 
 
 def read_fanuc(text: str) -> ParsedFile:
-    """The frames of pendant's own FANUC listing (:func:`export_fanuc`), whole.
+    """The frames of pendant's own FANUC listing (:func:`export_fanuc`), whole; or of a
+    controller's ``SYSFRAME.VA`` (:func:`server.formats.fanuc_sysframe.read_sysframe`).
 
     Values come from the UTOOL / UFRAME / PAYLOAD table (6 decimals; payload centre in cm
     and inertia in kgf cm s^2, converted back), kinds and units from the ``$MNUTOOL`` /
@@ -177,9 +185,13 @@ def read_fanuc(text: str) -> ParsedFile:
     if not isinstance(text, str):
         raise FormatError(("file",), f"expected text, got {type(text).__name__}")
     lines = text.replace("\r\n", "\n").split("\n")
-    if not lines[0].startswith("! pendant: FANUC"):
-        raise FormatError.at_line(1, "header", "not a pendant FANUC listing (its first line "
-                                  "is '! pendant: FANUC user tool / user frame data ...')")
+    if is_controller_listing(text):
+        return read_sysframe(text)
+    if not lines[0].startswith(HEADER):
+        raise FormatError.at_line(1, "header", "neither a pendant FANUC listing (its first "
+                                  "line is '! pendant: FANUC user tool / user frame data ...') "
+                                  "nor a controller's SYSFRAME.VA (no [*SYSTEM*]$MNUTOOL or "
+                                  "$MNUFRAME in it)")
     end = next((i for i, s in enumerate(lines, 1) if s.rstrip() == END_LINE), None)
     if end is None:
         n = len(lines) - (1 if lines[-1] == "" else 0)

@@ -15,7 +15,11 @@ are committed, this is how they were made.
 - abb_mixed_endings.mod: LF with some CRLF lines, tagged declarations;
 - abb_backup_36_tools.sys: a RobotWare-style system module with 36 tooldata;
 - fanuc_crlf.txt, ur_crlf.script: pendant's own FANUC listing and UR script
-  (tests/data/fanuc_cell7.txt, ur_cell7.script) with CR LF line ends.
+  (tests/data/fanuc_cell7.txt, ur_cell7.script) with CR LF line ends;
+- fanuc_sysframe_crlf.va: a controller's SYSFRAME.VA (the shape of an R-30iB V9 backup): CR LF,
+  other variables around the tables ($MNUFRAMENUM, $MNUTOOLNUM, $MNUJOGFRAME), two motion
+  groups (group 2 a positioner with frames of its own), Uninitialized entries, all-zero
+  frames, "-0.000", a wide value (-1234.567) and a hand-edited line with other spacing.
 """
 
 from pathlib import Path
@@ -127,10 +131,50 @@ def main() -> None:
     backup += ["  PERS wobjdata wobj_station:=[FALSE,TRUE,\"\",[[1500,0,300],[1,0,0,0]],"
                "[[0,0,0],[1,0,0,0]]];", "ENDMODULE", ""]
     write("abb_backup_36_tools.sys", backup, lambda i, s: "\r\n", "cp1252")
+    write("fanuc_sysframe_crlf.va", sysframe(), lambda i, s: "\r\n", "ascii")
     data = HERE.parent
     for src, dst in (("fanuc_cell7.txt", "fanuc_crlf.txt"), ("ur_cell7.script", "ur_crlf.script")):
         lf = (data / src).read_bytes().replace(b"\r\n", b"\n")
         (HERE / dst).write_bytes(lf.replace(b"\n", b"\r\n"))
+
+
+def sysframe() -> list[str]:
+    """A controller's SYSFRAME.VA: tool 1 and 3, user frames 1 and 2 of group 1 set; a
+    positioner (group 2) with a tool and a frame of its own."""
+    def table(var: str, size: int, frames: dict) -> list[str]:
+        out = [f"[*SYSTEM*]{var}  Storage: SHADOW  Access: RW  : ARRAY[2,{size}] OF POSITION"]
+        for g in (1, 2):
+            for n in range(1, size + 1):
+                v = frames.get((g, n))
+                if v == "uninit":
+                    out.append(f"    [{g},{n}] = Uninitialized")
+                    continue
+                v = v or (0.0,) * 6
+                out += [f"    [{g},{n}] = ", f"  Group: {g}   Config: N D B, 0, 0, 0"]
+                if isinstance(v, str):  # a line as typed by hand
+                    out += v.split("|")
+                    continue
+                out += [f"  X: {v[0]:9.3f}   Y: {v[1]:9.3f}   Z: {v[2]:9.3f}",
+                        f"  W: {v[3]:9.3f}   P: {v[4]:9.3f}   R: {v[5]:9.3f}"]
+        return out
+
+    tools = {(1, 1): (1.25, -0.5, 185.0, 0.0, -90.0, 0.0),
+             (1, 2): "uninit",
+             (1, 3): "  X:    12.500 Y:   -1234.567   Z:   310.250|"
+                     "  W:   -0.000   P:    45.000 R:  180.000",
+             (2, 1): (0.0, 0.0, 50.0, 0.0, 0.0, 0.0)}
+    frames = {(1, 1): (1500.0, -250.0, 300.0, 0.0, 0.0, 90.0),
+              (1, 2): (800.125, 600.0, -12.5, 0.5, -0.25, 179.5),
+              (1, 5): "uninit",
+              (2, 1): (0.0, 0.0, 400.0, 0.0, 0.0, 0.0)}
+    return (["[*SYSTEM*]$MNUFRAMENUM  Storage: CMOS  Access: RW  : ARRAY[2] OF BYTE",
+             "    [1] = 2", "    [2] = 0"]
+            + table("$MNUFRAME", 9, frames)
+            + ["[*SYSTEM*]$MNUJOGFRAME  Storage: SHADOW  Access: RW  : ARRAY[2,5] OF POSITION",
+               "    [1,1] = Uninitialized"]
+            + table("$MNUTOOL", 10, tools)
+            + ["[*SYSTEM*]$MNUTOOLNUM  Storage: CMOS  Access: RW  : ARRAY[2] OF BYTE",
+               "    [1] = 1", "    [2] = 1", ""])
 
 
 if __name__ == "__main__":
