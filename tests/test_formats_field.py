@@ -5,6 +5,7 @@ KUKA and ABB files that pendant read wrongly or wrote back changed. The files ar
 from __future__ import annotations
 
 import re
+from dataclasses import replace
 from pathlib import Path
 
 import pytest
@@ -299,8 +300,10 @@ def test_fanuc_sysframe_from_a_controller_imports_and_comes_back_with_only_the_c
     put(client, "/tools/2", {"pose": {"x": 10.0, "y": 0.0, "z": 99.5, "a": 0.0, "b": 0.0,
                                       "c": 0.0}})
     out = client.get(f"{C}/export", params={"format": "fanuc"}).content.decode("ascii")
-    at = out.split("\r\n").index("    [1,2] =")
-    assert out.split("\r\n")[at + 1:at + 4] == [
+    rows = out.split("\r\n")
+    tool_table = next(i for i, row in enumerate(rows) if row.startswith("[*SYSTEM*]$MNUTOOL "))
+    at = rows.index("    [1,2] = ", tool_table)  # as the file prints its other frames
+    assert rows[at + 1:at + 4] == [
         "  Group: 1   Config: N D B, 0, 0, 0",
         "  X:    10.000   Y:     0.000   Z:    99.500",
         "  W:     0.000   P:     0.000   R:     0.000"]
@@ -336,12 +339,19 @@ def test_fanuc_sysframe_angles_are_fixed_xyz_as_scipy_reads_them():
      "the frame's W, P, R line is missing"),
     (("Z:   185.000", "Z:   2e7"), ["file", "line 79", "$MNUTOOL[1,1].Z"],
      "must be within -1e+06..1e+06 mm"),
+    (("Z:   185.000", "Z:    1.#INF"), ["file", "line 79", "$MNUTOOL[1,1]"],
+     "expected 'X: <mm>  Y: <mm>  Z: <mm>', got 'X:     1.250   Y:    -0.500   Z:    1.#INF'"),
+    (("Z:   185.000", "Z:   185.000abc"), ["file", "line 79", "$MNUTOOL[1,1]"],
+     "expected 'X: <mm>  Y: <mm>  Z: <mm>'"),
+    (("    [1,2] = Uninitialized", "    [1,1] = Uninitialized"), ["file", "line 81",
+                                                                 "$MNUTOOL[1,1]"],
+     "listed twice (first at line 77)"),
     (("    [1,3] = \r\n  Group: 1   Config: N D B, 0, 0, 0\r\n  X:    12.500 Y:   -1234.567"
       "   Z:   310.250\r\n", "    [1,3] = \r\n"), ["file", "line 83", "$MNUTOOL[1,3]"],
      "W, P, R before X, Y, Z"),
     (("    [1,9] = \r\n  Group: 1", "    [1,12] = \r\n  Group: 1"), ["file", "line 34",
                                                                    "$MNUFRAME[1,12]"],
-     "beyond the table's ARRAY[..,9]"),
+     "frames are numbered 1..9 (the table's ARRAY[..,9])"),
 ])
 def test_a_bad_sysframe_is_refused_naming_the_line_and_the_frame(client, edit, loc, reason):
     text = (CORPUS / "fanuc_sysframe_crlf.va").read_bytes().decode("ascii")
@@ -362,3 +372,40 @@ def test_pendant_import_reads_a_va_file_by_its_suffix(client, db_url, tmp_path, 
     assert main(["import", str(f), "--controller", "cell-1", "--db", db_url, "--dry-run"]) == 0
     out = capsys.readouterr().out
     assert re.search(r"tool +3: '\(unused\)' -> '' \(tool\)", out) and "-1234.567" in out, out
+
+
+def test_fanuc_sysframe_keeps_w_p_r_that_name_the_same_rotation_otherwise():
+    """Near P = 90 deg many W, P, R name one rotation (W 10 P 90 R 20 is W -10 P 90 R 0): an
+    export with nothing changed, or with only X changed, keeps the file's W, P, R line."""
+    text = (CORPUS / "fanuc_sysframe_crlf.va").read_bytes().decode("ascii")
+    wpr = "  W:     0.000   P:   -90.000   R:     0.000"
+    locked = text.replace(wpr, "  W:    10.000   P:    90.000   R:    20.000")
+    assert locked != text
+    entries = formats.READERS["fanuc"](locked).entries
+    assert formats.PATCHERS["fanuc"](entries, locked) == locked
+    t1 = next(e for e in entries if (e.kind, e.number) == ("tool", 1))
+    moved = [replace(e, pose=replace(e.pose, x=e.pose.x + 1)) if e is t1 else e
+             for e in entries]
+    out = formats.PATCHERS["fanuc"](moved, locked)
+    assert [(a, b) for a, b in zip(locked.split("\r\n"), out.split("\r\n")) if a != b] == [
+        ("  X:     1.250   Y:    -0.500   Z:   185.000", "  X:     2.250   Y:    -0.500   Z:   185.000")]
+
+
+def test_fanuc_sysframe_last_line_uninitialized_and_a_base_on_a_positioner():
+    """An Uninitialized last line without a line end gets its four lines, the last again
+    without one; a base on a positioner has no place in the robot's $MNUFRAME: refused."""
+    text = ("[*SYSTEM*]$MNUTOOL  Storage: SHADOW  Access: RW  : ARRAY[1,10] OF POSITION\n"
+            "    [1,1] = \n  Group: 1   Config: N D B, 0, 0, 0\n"
+            "  X:     1.000   Y:     0.000   Z:   100.000\n"
+            "  W:     0.000   P:     0.000   R:     0.000\n    [1,2] = Uninitialized")
+    (tool,) = formats.READERS["fanuc"](text).entries
+    out = formats.PATCHERS["fanuc"]([tool, replace(tool, number=2)], text)
+    assert out.endswith("\n    [1,2] = \n  Group: 1   Config: N D B, 0, 0, 0\n"
+                        "  X:     1.000   Y:     0.000   Z:   100.000\n"
+                        "  W:     0.000   P:     0.000   R:     0.000"), out
+    frames = (CORPUS / "fanuc_sysframe_crlf.va").read_bytes().decode("ascii")
+    entries = formats.READERS["fanuc"](frames).entries
+    base = next(e for e in entries if e.kind == "base")
+    with pytest.raises(FormatError, match="a base on the external axis unit POS1"):
+        formats.PATCHERS["fanuc"]([replace(base, kind="coordinated_base", mech_unit="POS1")
+                                   if e is base else e for e in entries], frames)

@@ -148,8 +148,9 @@ HEADER = "! pendant: FANUC"
 
 
 def is_controller_listing(text: str) -> bool:
-    """True for a controller's ``SYSFRAME.VA`` rather than pendant's own listing."""
-    return not text.startswith(HEADER) and is_sysframe(text)
+    """True for a controller's ``SYSFRAME.VA`` rather than pendant's own listing (which has
+    its header and end line, wherever a hand may have moved them)."""
+    return HEADER not in text and END_LINE not in text and is_sysframe(text)
 _ROLE_KIND = (("coordinated user frame of unit ", "coordinated_base"), ("workpiece", "workpiece"),
               ("fixed tool", "fixed_tool"), ("user frame", "base"), ("tool", "tool"))
 _SECTION = re.compile(r"^\[\*SYSTEM\*\]\$(MNUTOOL|MNUFRAME)\b")
@@ -187,7 +188,11 @@ def read_fanuc(text: str) -> ParsedFile:
     lines = text.replace("\r\n", "\n").split("\n")
     if is_controller_listing(text):
         return read_sysframe(text)
-    if not lines[0].startswith(HEADER):
+    at = next((i for i, s in enumerate(lines, 1) if s.startswith(HEADER)), None)
+    if at is not None and at > 1:
+        raise FormatError.at_line(1, "header", f"a pendant FANUC listing begins with its header "
+                                  f"line ('{HEADER} ...'); here it is line {at}")
+    if at is None:
         raise FormatError.at_line(1, "header", "neither a pendant FANUC listing (its first "
                                   "line is '! pendant: FANUC user tool / user frame data ...') "
                                   "nor a controller's SYSFRAME.VA (no [*SYSTEM*]$MNUTOOL or "

@@ -28,6 +28,8 @@ import re
 from collections.abc import Iterable
 from dataclasses import dataclass
 
+import numpy as np
+
 from server.formats.model import (
     FormatError,
     FrameEntry,
@@ -45,8 +47,9 @@ __all__ = ["is_sysframe", "patch_sysframe", "read_sysframe"]
 GROUP = 1  # the robot's motion group
 _VAR = re.compile(r"^\s*\[\*SYSTEM\*\]\$([A-Z0-9_]+)\b(.*)$")
 _ARRAY = re.compile(r"ARRAY\[\s*(\d+)\s*,\s*(\d+)\s*\]\s+OF\s+POSITION", re.I)
-_INDEX = re.compile(r"^\s*\[\s*(\d+)\s*,\s*(\d+)\s*\]\s*=\s*(.*?)\s*$")
-_NUM = r"[-+]?(?:\d+\.?\d*|\.\d+)(?:[eE][-+]?\d+)?"
+_INDEX = re.compile(r"^\s*\[\s*(\d+)\s*,\s*(\d+)\s*\]\s*=(.*)$")
+# a number, and nothing that could continue one after it (1.#INF, 185.000abc, 12,5, 1.5-3)
+_NUM = r"[-+]?(?:\d+(?:\.\d*)?|\.\d+)(?:[eE][-+]?\d+)?(?![\w.#,+-])"
 _TRIPLE = {ax: re.compile(rf"\b({a}:\s*)({_NUM})\s+({b}:\s*)({_NUM})\s+({c}:\s*)({_NUM})")
            for ax, (a, b, c) in (("XYZ", "XYZ"), ("WPR", "WPR"))}
 _TABLES = {"MNUTOOL": "tool", "MNUFRAME": "base"}
@@ -80,6 +83,7 @@ class _Slot:
 def _scan(lines: list[str]) -> tuple[list[_Slot], dict[str, int]]:
     """The entries of both tables and each table's declared size (``ARRAY[g, n]``)."""
     slots: list[_Slot] = []
+    seen: dict[tuple[str, int, int], int] = {}
     sizes: dict[str, int] = {}
     table: str | None = None
     slot: _Slot | None = None
@@ -109,8 +113,17 @@ def _scan(lines: list[str]) -> tuple[list[_Slot], dict[str, int]]:
             rest = ix.group(3).strip().strip("'").strip()
             slot.uninitialized = rest.lower().startswith("uninit")
             if not 1 <= slot.number <= sizes[table]:
-                raise FormatError.at_line(n, slot.field, f"beyond the table's "
-                                          f"ARRAY[..,{sizes[table]}]")
+                raise FormatError.at_line(n, slot.field, f"frames are numbered 1.."
+                                          f"{sizes[table]} (the table's ARRAY[..,{sizes[table]}])")
+            if rest.startswith("!"):  # pendant's own listing marks its roles so
+                raise FormatError.at_line(n, slot.field, "a pendant listing's role comment in "
+                                          "a controller's SYSFRAME.VA: is the file pendant's "
+                                          "listing without its first line?")
+            key = (slot.kind, slot.group, slot.number)
+            if key in seen:
+                raise FormatError.at_line(n, slot.field, f"listed twice (first at line "
+                                          f"{seen[key]})")
+            seen[key] = n
             slots.append(slot)
             continue
         if slot is None or slot.uninitialized:
@@ -218,14 +231,25 @@ def patch_sysframe(entries: Iterable[FrameEntry], text: str) -> str:
     else (other variables, other groups, spacing, line endings) is kept byte for byte. With no
     change, the text itself.
 
+    A frame counts as changed when its X, Y, Z as printed or its rotation changed: W, P, R
+    that name the same rotation in other numbers (near P = ±90, or W = 360) stay as they are.
+
     Raises FormatError naming the slot when an entry has no place in the file (a tool beyond
-    its ``ARRAY[.., n]``); names, loads and Remote TCP kinds are not in this file."""
+    its ``ARRAY[.., n]``, a base on a positioner); names, loads and Remote TCP kinds are not in
+    this file."""
+    entries = canonical_order(list(entries))
+    if entries == read_sysframe(text).entries:
+        return text
     lines, ends = _lines(text)
     slots, sizes = _scan(lines)
     mine = {(s.kind, s.number): s for s in slots if s.group == GROUP}
-    want: dict[tuple[str, int], list[float]] = {}
+    want: dict[tuple[str, int], FrameEntry] = {}
     for e in entries:
         kind = "tool" if family_of(e.kind) == "robot_held" else "base"
+        if e.kind == "coordinated_base":
+            raise FormatError((f"base {e.number}",), f"a base on the external axis unit "
+                              f"{e.mech_unit or '(none)'}: SYSFRAME.VA holds the robot's user "
+                              f"frames ($MNUFRAME[{GROUP},n]) only")
         if (kind, e.number) not in mine:
             size = sizes.get(kind)
             raise FormatError((f"{kind} {e.number}",), (
@@ -234,27 +258,41 @@ def patch_sysframe(entries: Iterable[FrameEntry], text: str) -> str:
                  f" (it lists no {_LABEL[kind]})")
                 + f": move the frame to a {kind} the controller has, or clear {kind} "
                   f"{e.number}"))
-        want[(kind, e.number)] = [float(v) for v in fanuc_from_matrix(e.pose.as_matrix())]
+        want[(kind, e.number)] = e
     common = max(("\n", "\r\n", "\r"), key=ends.count)
+    after_index = next((lines[s.line - 1].split("=", 1)[1] for s in slots
+                        if not s.uninitialized), " ")  # what this file prints after "[g,n] ="
     inserts: dict[int, list[str]] = {}  # 0-based line index -> lines after it
     for key, s in mine.items():
-        now = want.get(key, [0.0] * 6)
+        e = want.get(key)
         was = s.values if (s.values is not None and not s.uninitialized) else [0.0] * 6
+        if e is None:
+            now = [0.0] * 6
+        else:
+            now = [float(v) for v in fanuc_from_matrix(e.pose.as_matrix())]
+            if any(was) and np.allclose(matrix_from_fanuc(was)[:3, :3],
+                                        e.pose.as_matrix()[:3, :3], rtol=0, atol=1e-9):
+                now[3:] = was[3:]  # the same rotation: its numbers as the file has them
         if [_fmt(v) for v in now] == [_fmt(v) for v in was]:
             continue
         if s.uninitialized:
             i = s.line - 1
-            lines[i] = lines[i][:lines[i].index("=") + 1]
+            lines[i] = lines[i][:lines[i].index("=") + 1] + after_index
             x, y, z, w, p, r = (f"{_fmt(v):>9}" for v in now)
-            inserts[i] = [f"  Group: {GROUP}   Config: N D B, 0, 0, 0",
-                          f"  X: {x}   Y: {y}   Z: {z}", f"  W: {w}   P: {p}   R: {r}"]
+            added = [f"  Group: {GROUP}   Config: N D B, 0, 0, 0",
+                     f"  X: {x}   Y: {y}   Z: {z}", f"  W: {w}   P: {p}   R: {r}"]
+            if not ends[i]:  # the file's last line, without a line end: so are the added
+                ends[i] = common
+                inserts[i] = [line + common for line in added[:-1]] + [added[-1]]
+            else:
+                inserts[i] = [line + ends[i] for line in added]
             continue
         assert s.xyz_line is not None and s.wpr_line is not None
-        lines[s.xyz_line - 1] = _rewrite(lines[s.xyz_line - 1], "XYZ", now[:3])
-        lines[s.wpr_line - 1] = _rewrite(lines[s.wpr_line - 1], "WPR", now[3:])
+        for at, axes, part in ((s.xyz_line, "XYZ", slice(0, 3)), (s.wpr_line, "WPR", slice(3, 6))):
+            if [_fmt(v) for v in now[part]] != [_fmt(v) for v in was[part]]:
+                lines[at - 1] = _rewrite(lines[at - 1], axes, now[part])
     out = []
     for i, (line, end) in enumerate(zip(lines, ends)):
         out.append(line + end)
-        for extra in inserts.get(i, []):
-            out.append(extra + (ends[i] or common))
+        out += inserts.get(i, [])
     return "".join(out)
