@@ -61,6 +61,10 @@ def test_calibrate_errors_name_the_field(tmp_path, touches, capsys):
     ({"axis": "E1", "direction": [0, 1, 0], "calibrated": "yes"}, [],
      "inputs.rail.calibrated: must be true or false"),
     ({"axis": "E1", "direction": [0, 1, 0], "travel": 3}, [], "inputs.rail.travel: unknown"),
+    ({"axis": "E1", "direction": [10 ** 400, 0, 0]}, [], "inputs.rail.direction: must be three"),
+    ({"axis": "E1", "direction": ["0", "1", "0"]}, [], "inputs.rail.direction: must be three"),
+    ({"axis": "E1", "direction": [0, 1, 0], "scale": 10 ** 400}, [],
+     "inputs.rail.scale: must be a positive number"),
     (None, ["--rail", "E1"], "--rail: must be AXIS:X,Y,Z or AXIS:X,Y,Z:calibrated"),
     (None, ["--rail", "E1:0,1"], "--rail: must be 3 finite comma-separated numbers"),
     (None, ["--rail", "E7:0,1,0"], "--rail: must be one of E1..E6"),
@@ -72,6 +76,27 @@ def test_a_bad_rail_names_the_field(tmp_path, touches, capsys, rail, argv, line)
     f.write_text(json.dumps({"robot": "kuka_kr6_r900_sixx", "inputs": inputs,
                              "points": [{"joints_deg": q.tolist()} for q in touches]}))
     assert main(["calibrate", "tool.xyz_4point", str(f), *argv]) == 2
+    err = capsys.readouterr().err
+    assert err.startswith(f"pendant: {line}") and "Traceback" not in err, err
+
+
+@pytest.mark.parametrize("axes, line", [
+    ({"E1": "abc"}, "points.1.external_axes.E1: must be a finite number"),
+    ({"E1": None}, "points.1.external_axes.E1: must be a finite number"),
+    ({"E1": 1e300}, "points.1.external_axes.E1: must be a finite number"),
+    ([1, 2], "points.1.external_axes: must be an object"),
+    ({"E9": 1.0}, "points.1.external_axes.E9: external axes are E1..E6"),
+])
+def test_bad_external_axes_in_a_file_name_the_point(tmp_path, touches, capsys, axes, line):
+    """A touch-up's ``external_axes`` in a ``pendant calibrate`` file: one line naming the
+    point and the axis, never a traceback."""
+    f = tmp_path / "touch.json"
+    points = [{"joints_deg": q.tolist(), "external_axes": {"E1": 0.0}} for q in touches]
+    points[1]["external_axes"] = axes
+    f.write_text(json.dumps({"robot": "kuka_kr6_r900_sixx", "points": points,
+                             "inputs": {"rail": {"axis": "E1", "direction": [0, 1, 0],
+                                                 "calibrated": True}}}))
+    assert main(["calibrate", "tool.xyz_4point", str(f)]) == 2
     err = capsys.readouterr().err
     assert err.startswith(f"pendant: {line}") and "Traceback" not in err, err
 

@@ -173,6 +173,34 @@ def test_another_process_gets_its_turn_between_a_busy_processs_writes(db_url):
     assert max(waits) < 1.0, waits
 
 
+def test_a_writer_whose_turn_another_process_keeps_gives_up_with_503(db_url, monkeypatch):
+    """Another pendant process holds the writers' turn and does not let go (a command stopped
+    with Ctrl-Z mid-write): a touch-up waits for it as long as for SQLite's lock, then
+    answers 503 'busy', and is not left hanging; once the turn is free, it lands."""
+    if not db_url.startswith("sqlite"):
+        pytest.skip("the turn across processes is SQLite's (PostgreSQL locks the controller's row)")
+    monkeypatch.setattr(transaction, "TURN_TIMEOUT_S", 0.5)
+    with make_client(db_url) as client:
+        url = open_session(client, "tool.xyz_4point", 1)
+        holder = subprocess.Popen([sys.executable, "-c", (
+            "import fcntl, os, sys, time\n"
+            "fd = os.open(sys.argv[1], os.O_RDONLY | os.O_CREAT)\n"
+            "fcntl.flock(fd, fcntl.LOCK_EX)\n"
+            "print('holding', flush=True)\n"
+            "sys.stdin.read()\n"), client.app.state.engine.url.database + "-writers"],
+            stdin=subprocess.PIPE, stdout=subprocess.PIPE, text=True)
+        try:
+            assert holder.stdout.readline().strip() == "holding"
+            t0 = time.monotonic()
+            r = client.post(f"{url}/touch-up", json={"step": 0})
+            waited_s = time.monotonic() - t0
+            assert r.status_code == 503 and r.json()["detail"][0]["type"] == "busy", r.text
+            assert waited_s < 3.0, waited_s
+        finally:
+            holder.communicate("", timeout=30)
+        assert client.post(f"{url}/touch-up", json={"step": 0}).status_code == 200
+
+
 def test_writers_queued_behind_a_locked_database_give_up_with_503(db_url, monkeypatch):
     """Another process holds SQLite's write lock past the busy timeout (a long restore): the
     writer waiting for it and those queued behind it for their turn each answer 503 'busy'

@@ -158,9 +158,12 @@ def calibrate_file(method: str, path: Path, robot: str | None = None,
     points, inputs, file_robot = read_points_file(path)
     inputs.update(overrides or {})
     robot = robot or file_robot
+    from server.service.external import check_external_axes
+
     data = [TaughtData(_flange(p, k, robot), p.get("beam"), p.get("edge"),
                        None if p.get("velocity_mm_s") is None else tuple(p["velocity_mm_s"]),
-                       external_axes=p.get("external_axes"))
+                       external_axes=check_external_axes(p.get("external_axes"),
+                                                         ("points", k, "external_axes")))
             for k, p in enumerate(points)]
     arr = {k: None if inputs.get(k) is None else np.asarray(inputs[k], dtype=float)
            for k in ("tcp_mm", "reference_tcp_mm", "fixed_tcp_mm", "known_mm")}

@@ -9,6 +9,7 @@ event. No math here: the frames come from the solvers (``solvers.external``) and
 
 from __future__ import annotations
 
+import math
 from dataclasses import dataclass
 from typing import Any
 
@@ -340,18 +341,17 @@ def rail_from_document(doc: object, loc: tuple[str, ...] = ("inputs", "rail")) -
     axis = doc.get("axis")
     if axis not in [f"E{i}" for i in range(1, 7)]:
         raise CalibrationError(loc + ("axis",), f"must be one of E1..E6, got {axis!r}")
-    try:
-        d = np.asarray(doc.get("direction"), dtype=float)
-    except (TypeError, ValueError):
-        d = np.zeros(0)
-    if d.shape != (3,) or not np.all(np.isfinite(d)) or np.linalg.norm(d) < 1e-9:
+    given = doc.get("direction")
+    d = (np.array([_finite(v) for v in given])
+         if isinstance(given, list) and len(given) == 3 else np.full(3, np.nan))
+    if not np.all(np.isfinite(d)) or not np.any(d):
         raise CalibrationError(loc + ("direction",), "must be three finite numbers, not all 0 "
-                               f"(the travel in the robot base), got {doc.get('direction')!r}")
-    scale = doc.get("scale", 1.0)
-    if isinstance(scale, bool) or not isinstance(scale, (int, float)) \
-            or not np.isfinite(scale) or scale <= 0:
-        raise CalibrationError(loc + ("scale",), f"must be a positive number (mm per unit of "
-                               f"{axis}), got {scale!r}")
+                               f"(the travel in the robot base), got {given!r}")
+    d = d / np.max(np.abs(d))  # then its norm cannot overflow
+    scale = _finite(doc.get("scale", 1.0))
+    if not scale > 0 or scale > 1e6:
+        raise CalibrationError(loc + ("scale",), f"must be a positive number up to 1e6 (mm per "
+                               f"unit of {axis}), got {doc.get('scale')!r}")
     calibrated = doc.get("calibrated", False)
     if not isinstance(calibrated, bool):
         raise CalibrationError(loc + ("calibrated",), f"must be true or false, got {calibrated!r}")
@@ -361,6 +361,37 @@ def rail_from_document(doc: object, loc: tuple[str, ...] = ("inputs", "rail")) -
                                f"got {number!r}")
     return Rail(number, "", axis, d / np.linalg.norm(d), float(scale), calibrated,
                 "given in the file" if calibrated else None)
+
+
+def _finite(v: object) -> float:
+    """``v`` as a float if it is a finite JSON number (not a bool, not a string), else NaN."""
+    if isinstance(v, bool) or not isinstance(v, (int, float)):
+        return float("nan")
+    try:
+        f = float(v)
+    except OverflowError:  # an int beyond a float
+        return float("nan")
+    return f if math.isfinite(f) else float("nan")
+
+
+def check_external_axes(values: object, loc: tuple) -> dict[str, float] | None:
+    """A touch-up's external axis values from a file: ``{"E1": number, ...}`` (E1..E6,
+    finite numbers within the bounds of a position, mm or deg), or None; CalibrationError
+    naming the field otherwise."""
+    if values is None:
+        return None
+    if not isinstance(values, dict):
+        raise CalibrationError(loc, f'must be an object {{"E1": value, ...}}, got {values!r}')
+    out = {}
+    for key, v in values.items():
+        if key not in [f"E{i}" for i in range(1, 7)]:
+            raise CalibrationError(loc + (str(key),), "external axes are E1..E6")
+        f = _finite(v)
+        if not abs(f) <= 1e6:
+            raise CalibrationError(loc + (key,), f"must be a finite number (deg, or mm for a "
+                                   f"rail) within ±1e6, got {v!r}")
+        out[key] = f
+    return out
 
 
 def unplaced_positions(points: list) -> list:

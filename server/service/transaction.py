@@ -30,8 +30,10 @@ from __future__ import annotations
 
 import contextlib
 import fcntl
+import logging
 import os
 import threading
+import time
 from collections.abc import Iterator
 from typing import Any
 
@@ -46,6 +48,7 @@ LOCK_ON_BEGIN = "pendant_lock_controller"  # Session.info: the controller to loc
 WRITER = "pendant_writer"  # Session.info: a writer's session (BEGIN IMMEDIATE)
 
 Maker = sessionmaker[Session]
+log = logging.getLogger("pendant.transaction")
 
 
 def _lock_at_begin(db: Session, _transaction: object, connection: Any) -> None:
@@ -75,43 +78,94 @@ def writer(make_session: Maker, controller_id: int | None = None) -> Session:
 
 class _SqliteTurn:
     """The writers' turn of one SQLite database: a lock among this process's threads, then an
-    ``flock`` of ``<database>-writers`` (none for an in-memory database) among processes.
-    The file is opened once per process (a forked child opens its own: a descriptor inherited
-    across ``fork`` shares its lock with the parent's)."""
+    ``flock`` of ``<database>-writers`` among processes (none for an in-memory database, nor
+    where the file cannot be made: then writers of other processes meet in SQLite's busy
+    handler, as before).
+
+    Each turn opens the file anew: an ``flock`` belongs to an open file description, so
+    neither a descriptor inherited across ``fork`` nor a wait given up (below) can hold or
+    release another turn's lock. A turn that finds the file locked waits in the kernel, which
+    wakes it as soon as the holder is done; after ``timeout_s`` in all it gives up with
+    :class:`DatabaseBusy` (a 503), and the waiting thread it leaves behind releases the lock
+    the moment it gets it. The file is opened for reading only (``flock`` needs no more), so
+    one made by a ``pendant`` command run as root does not lock the service out of it."""
 
     def __init__(self, database: str | None) -> None:
-        self.path = (f"{database}-writers" if database and database != ":memory:"
-                     and not database.startswith("file:") else None)
+        self.path = (os.path.abspath(f"{database}-writers") if database
+                     and database != ":memory:" and not database.startswith("file:") else None)
         self.threads = threading.Lock()
-        self._fd: int | None = None
-        self._pid = 0
 
-    def _file(self) -> int:
-        if self._fd is None or self._pid != os.getpid():
-            self._fd = os.open(self.path, os.O_RDWR | os.O_CREAT | os.O_CLOEXEC, 0o600)
-            self._pid = os.getpid()
-        return self._fd
+    def _open(self) -> int | None:
+        """A new descriptor of the lock file, None if it cannot be had (logged once)."""
+        assert self.path is not None
+        try:
+            return os.open(self.path, os.O_RDONLY | os.O_CREAT | os.O_CLOEXEC, 0o644)
+        except OSError as err:
+            if self.path not in _UNLOCKABLE:
+                _UNLOCKABLE.add(self.path)
+                log.warning("writers of other processes take turns in SQLite's busy handler: "
+                            "cannot open %s (%s)", self.path, err.strerror)
+            return None
+
+    @staticmethod
+    def _lock(fd: int, timeout_s: float) -> bool:
+        """True once ``fd`` is locked, within ``timeout_s``; False if not, and then ``fd`` is
+        closed (at once, or by the waiting thread once the lock it waits for is its)."""
+        try:
+            fcntl.flock(fd, fcntl.LOCK_EX | fcntl.LOCK_NB)
+            return True
+        except BlockingIOError:
+            pass
+        except OSError:
+            os.close(fd)
+            return False
+        done, guard = threading.Event(), threading.Lock()
+        state = {"abandoned": False, "locked": False}
+
+        def wait() -> None:
+            try:
+                fcntl.flock(fd, fcntl.LOCK_EX)
+                locked = True
+            except OSError:
+                locked = False
+            with guard:
+                state["locked"] = locked
+                if state["abandoned"]:
+                    os.close(fd)  # and the lock it just got with it
+                    return
+                done.set()
+
+        threading.Thread(target=wait, name="writers-turn-wait", daemon=True).start()
+        done.wait(timeout_s)
+        with guard:
+            if not done.is_set():
+                state["abandoned"] = True
+                return False
+        if not state["locked"]:
+            os.close(fd)
+        return bool(state["locked"])
 
     @contextlib.contextmanager
     def held(self, timeout_s: float) -> Iterator[None]:
+        deadline = time.monotonic() + timeout_s
         if not self.threads.acquire(timeout=timeout_s):
             raise DatabaseBusy(timeout_s)
         try:
-            if self.path is None:
+            fd = None if self.path is None else self._open()
+            if fd is None:
                 yield
                 return
-            fd = self._file()
-            # waits as long as another process's writer's transaction lasts (as SQLite's own
-            # lock would make it wait); this process's other writers wait on ``threads``
-            fcntl.flock(fd, fcntl.LOCK_EX)
+            if not self._lock(fd, max(0.0, deadline - time.monotonic())):
+                raise DatabaseBusy(timeout_s)
             try:
                 yield
             finally:
-                fcntl.flock(fd, fcntl.LOCK_UN)
+                os.close(fd)  # and with it the lock
         finally:
             self.threads.release()
 
 
+_UNLOCKABLE: set[str] = set()  # lock files that could not be opened (warned once each)
 _SQLITE_TURNS: dict[str, _SqliteTurn] = {}  # database URL -> its writers' turn
 _TURNS_LOCK = threading.Lock()
 PG_WRITERS = PG_POOL_SIZE - 3  # a process's PostgreSQL writers at once: 3 connections for reads
