@@ -403,11 +403,12 @@ def import_file(args: argparse.Namespace) -> int:
     maker = app.state.sessionmaker
     with maker() as db:
         cid = crud.find_controller(db, args.controller).id
+    parsed = parse_file(fmt, text)  # before the write: the writers' turn is not held meanwhile
     # a dry run writes nothing: a reader's session; else the write every face runs
     with (maker() if args.dry_run
           else transaction.writing(maker, cid, operation="import_tables")) as db:
-        result = apply_import(db, crud.get_controller(db, cid), fmt, text,
-                              parse_file(fmt, text), args.dry_run, encoding, slots)
+        result = apply_import(db, crud.get_controller(db, cid), fmt, text, parsed,
+                              args.dry_run, encoding, slots)
     for c in result.slots:
         if not c.changed:
             continue
