@@ -173,6 +173,40 @@ def test_another_process_gets_its_turn_between_a_busy_processs_writes(db_url):
     assert max(waits) < 1.0, waits
 
 
+def test_a_job_workers_claims_get_their_turn_between_a_busy_processs_writes(db_url):
+    """The job worker's writes (a claim here; progress, lease, result) take the same turn: beside
+    a service whose writers follow each other, a claim waits for about one write (in SQLite's
+    busy handler it waited seconds, and could wait out the busy timeout)."""
+    if not db_url.startswith("sqlite"):
+        pytest.skip("SQLite's database-wide write lock; PostgreSQL locks the controller's row")
+    from db import jobs
+    from server.jobs.worker import job_write
+
+    maker = db_session.make_sessionmaker(db_session.make_engine(db_url))
+    with maker() as db:
+        for _ in range(5):
+            jobs.enqueue(db, "analysis", {"recording_id": 1})
+        db.commit()
+    root = Path(__file__).resolve().parent.parent
+    busy = subprocess.Popen([sys.executable, "-c", BACK_TO_BACK, db_url], text=True,
+                            stdin=subprocess.PIPE, stdout=subprocess.PIPE,
+                            env={**os.environ, "PYTHONPATH": str(root)})
+    waits, claimed = [], []
+    try:
+        assert busy.stdout.readline().strip() == "writing"
+        for _ in range(5):
+            time.sleep(0.2)  # the service's writers have the lock in turn again
+            t0 = time.monotonic()
+            with job_write(maker) as db:
+                claimed.append(jobs.claim(db, "worker-1").id)
+            waits.append(time.monotonic() - t0)
+        out, _ = busy.communicate("", timeout=60)
+    finally:
+        busy.kill()
+    assert int(out) > 50 and len(set(claimed)) == 5
+    assert max(waits) < 1.0, waits
+
+
 def test_a_writer_whose_turn_another_process_keeps_gives_up_with_503(db_url, monkeypatch):
     """Another pendant process holds the writers' turn and does not let go (a command stopped
     with Ctrl-Z mid-write): a touch-up waits for it as long as for SQLite's lock, then

@@ -16,12 +16,14 @@ supervisors on several hosts share one PostgreSQL queue (``SKIP LOCKED``).
 
 from __future__ import annotations
 
+import contextlib
 import logging
 import multiprocessing
 import os
 import signal
 import socket
 import time
+from collections.abc import Iterator
 from dataclasses import dataclass, field
 from typing import Any
 
@@ -29,7 +31,8 @@ from sqlalchemy.orm import Session, sessionmaker
 
 from db import jobs
 from db.crud import NotFound, StateConflict
-from db.session import make_engine, make_sessionmaker, write_session
+from db.session import make_engine, make_sessionmaker
+from server.service import transaction
 
 log = logging.getLogger("pendant.worker")
 
@@ -87,6 +90,17 @@ def _error_of(exc: BaseException) -> dict[str, Any]:
                        "internal")
 
 
+@contextlib.contextmanager
+def job_write(sm: sessionmaker[Session]) -> Iterator[Session]:
+    """A write of the job machinery (claim, progress, lease, the result, the end) as every
+    write runs: a writer's session in the writers' turn
+    (:func:`server.service.transaction.writers_turn`). In SQLite's busy handler alone, a job
+    worker's write could wait out the busy timeout behind a busy service's writers."""
+    db = transaction.writer(sm)
+    with db, transaction.writers_turn(db):
+        yield db
+
+
 def run_job(sm: sessionmaker[Session], job_id: int, kind: str, params: dict[str, Any],
             worker: str) -> str:
     """Run one claimed job to its end in this process; returns the final state.
@@ -96,14 +110,14 @@ def run_job(sm: sessionmaker[Session], job_id: int, kind: str, params: dict[str,
     from server.jobs.kinds import KINDS
 
     def progress(fraction: float, message: str) -> None:
-        with sm() as db:
+        with job_write(sm) as db:
             jobs.report_progress(db, job_id, worker, fraction, message)
 
     try:
         if kind not in KINDS:
             raise ValueError(f"unknown job kind {kind!r}")
         apply = KINDS[kind](sm, params, progress)
-        with write_session(sm) as db:  # BEGIN IMMEDIATE on SQLite: the writer's transaction
+        with job_write(sm) as db:  # BEGIN IMMEDIATE on SQLite: the writer's transaction
             result = apply(db)
             if jobs.finish(db, job_id, worker, "done", result=result):
                 return "done"
@@ -112,8 +126,7 @@ def run_job(sm: sessionmaker[Session], job_id: int, kind: str, params: dict[str,
         if not out_of_memory(exc) and _error_of(exc)["status"] == 500:
             log.exception("job %s (%s) failed", job_id, kind)
         exc.__traceback__ = None  # its frames hold the job's data: free it before reporting
-        with sm() as db:
-            db.rollback()
+        with job_write(sm) as db:
             jobs.finish(db, job_id, worker, "failed", error=_error_of(exc))
         return "failed"
 
@@ -125,7 +138,7 @@ def drain(sm: sessionmaker[Session], worker: str = "inline") -> int:
     """
     n = 0
     while True:
-        with sm() as db:
+        with job_write(sm) as db:
             job = jobs.claim(db, worker)
             if job is None:
                 return n
@@ -227,7 +240,7 @@ class Pool:
         """Claim and start jobs while a process is free; True if one was started."""
         started = False
         while len(self.running) < self.processes and not self.stopping:
-            with self.sm() as db:
+            with job_write(self.sm) as db:
                 job = jobs.claim(db, self.name)
                 if job is None:
                     break
@@ -259,11 +272,11 @@ class Pool:
                     500, f"the job's process died ({why}); see the worker log", (), "worker"))
 
     def _end(self, job_id: int, state: str, error: dict[str, Any] | None = None) -> None:
-        with self.sm() as db:
+        with job_write(self.sm) as db:
             jobs.finish(db, job_id, self.name, state, error=error)
 
     def _renew(self) -> None:
-        with self.sm() as db:
+        with job_write(self.sm) as db:
             asked = jobs.renew(db, list(self.running), self.name)
         for job_id in asked:
             r = self.running.get(job_id)
@@ -288,7 +301,7 @@ class Pool:
             r.process.kill()
             r.process.join()
         if self.running:
-            with self.sm() as db:
+            with job_write(self.sm) as db:
                 jobs.release(db, list(self.running), self.name)
         self.running.clear()
         self.engine.dispose()

@@ -99,7 +99,9 @@ class _SqliteTurn:
         """A new descriptor of the lock file, None if it cannot be had (logged once)."""
         assert self.path is not None
         try:
-            return os.open(self.path, os.O_RDONLY | os.O_CREAT | os.O_CLOEXEC, 0o644)
+            fd = os.open(self.path, os.O_RDONLY | os.O_CREAT | os.O_CLOEXEC, 0o644)
+            _LOCK_FDS.add(fd)
+            return fd
         except OSError as err:
             if self.path not in _UNLOCKABLE:
                 _UNLOCKABLE.add(self.path)
@@ -117,7 +119,7 @@ class _SqliteTurn:
         except BlockingIOError:
             pass
         except OSError:
-            os.close(fd)
+            _close(fd)
             return False
         done, guard = threading.Event(), threading.Lock()
         state = {"abandoned": False, "locked": False}
@@ -131,7 +133,7 @@ class _SqliteTurn:
             with guard:
                 state["locked"] = locked
                 if state["abandoned"]:
-                    os.close(fd)  # and the lock it just got with it
+                    _close(fd)  # and the lock it just got with it
                     return
                 done.set()
 
@@ -142,7 +144,7 @@ class _SqliteTurn:
                 state["abandoned"] = True
                 return False
         if not state["locked"]:
-            os.close(fd)
+            _close(fd)
         return bool(state["locked"])
 
     @contextlib.contextmanager
@@ -160,14 +162,37 @@ class _SqliteTurn:
             try:
                 yield
             finally:
-                os.close(fd)  # and with it the lock
+                _close(fd)  # and with it the lock
         finally:
             self.threads.release()
 
 
 _UNLOCKABLE: set[str] = set()  # lock files that could not be opened (warned once each)
+_LOCK_FDS: set[int] = set()  # this process's open descriptors of lock files
+
+
+def _close(fd: int) -> None:
+    _LOCK_FDS.discard(fd)
+    os.close(fd)
+
+
+def _after_fork_in_child() -> None:
+    """A forked child (a job's process) starts with no turn: its copies of the parent's lock
+    descriptors would keep a lock the parent lets go held for as long as the child runs, and
+    a thread lock the parent held at the fork would stay held for good."""
+    for fd in list(_LOCK_FDS):
+        _LOCK_FDS.discard(fd)
+        try:
+            os.close(fd)
+        except OSError:
+            pass
+    global _TURNS_LOCK
+    _TURNS_LOCK = threading.Lock()
+    for turn in _SQLITE_TURNS.values():
+        turn.threads = threading.Lock()
 _SQLITE_TURNS: dict[str, _SqliteTurn] = {}  # database URL -> its writers' turn
 _TURNS_LOCK = threading.Lock()
+os.register_at_fork(after_in_child=_after_fork_in_child)
 PG_WRITERS = PG_POOL_SIZE - 3  # a process's PostgreSQL writers at once: 3 connections for reads
 _PG_WRITERS = threading.BoundedSemaphore(PG_WRITERS)
 TURN_TIMEOUT_S = BUSY_TIMEOUT_MS / 1000  # a writer waits this long for its turn, then 503
