@@ -35,7 +35,7 @@ from starlette.concurrency import run_in_threadpool
 from starlette.types import ASGIApp, Message, Receive, Scope, Send
 
 from db.models import IdempotencyKey, utcnow
-from db.session import write_session
+from server.service import transaction
 
 HEADER = "idempotency-key"
 KEEP = timedelta(hours=24)
@@ -135,7 +135,10 @@ def claim(db: Session, request: Request) -> None:
 
 
 def _store(maker: Any, key: str, status: int, headers: dict[str, str], body: bytes) -> None:
-    with write_session(maker) as db:
+    """Keep the answer of the request that claimed ``key``: a write of its own, after the
+    answer was sent, in the writers' turn as every write."""
+    db = transaction.writer(maker)
+    with db, transaction.writers_turn(db):
         db.execute(update(IdempotencyKey).where(IdempotencyKey.key == key)
                    .values(status=status, headers=headers, body=body))
         db.commit()
