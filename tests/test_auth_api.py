@@ -236,6 +236,41 @@ def test_idle_login_drops_to_operator(db_url):
         assert ok(c.get("/auth/me"))["role"] == "Expert"
 
 
+def test_a_command_keeps_its_login_awake_while_another_writer_commits(db_url, monkeypatch):
+    """Another process commits a write between the guard's read of the browser login and its
+    note of the command: the command still answers (noted in the reading transaction, SQLite
+    refused the note at once, 'database is locked', and the command got a 503)."""
+    import sqlite3
+
+    from server.auth import guard, tokens
+
+    if not db_url.startswith("sqlite"):
+        pytest.skip("SQLite's snapshot upgrade; PostgreSQL's transactions write after reading")
+    with make_client(db_url, token=None) as c:
+        csrf = {"X-CSRF-Token": login(c, ADMIN_TOKEN)}
+        read_login = tokens.web_actor
+
+        def and_another_writer_commits(*args, **kwargs):  # noqa: ANN002, ANN003, ANN202
+            actor = read_login(*args, **kwargs)
+            other = sqlite3.connect(c.app.state.engine.url.database, isolation_level=None)
+            other.execute("UPDATE controller SET name = name")
+            other.close()
+            return actor
+
+        monkeypatch.setattr(tokens, "web_actor", and_another_writer_commits)
+        monkeypatch.setattr(guard, "TOUCH_EVERY_S", 0.0)
+        idle_for(c, 30)
+        r = c.put(f"{C}/tools/1", json={"name": "x"}, headers={**csrf, "If-Match": "*"})
+        assert r.status_code == 200, r.text
+        from sqlalchemy import select
+
+        from db.auth_models import WebSession
+
+        with c.app.state.sessionmaker() as db:
+            seen = db.scalar(select(WebSession.last_seen_at))
+        assert datetime.now(timezone.utc) - seen.replace(tzinfo=timezone.utc) < timedelta(seconds=10)
+
+
 def test_login_with_a_bad_token_is_401(client):
     r = anonymous(client).post("/auth/login", json={"token": "pdt_wrong"})
     assert r.status_code == 401 and r.json()["detail"][0]["loc"] == ["body", "token"]

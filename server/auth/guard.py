@@ -19,12 +19,17 @@ import hmac
 import uuid
 from datetime import timedelta
 
+from typing import Any
+
 from fastapi import HTTPException, Request
+from sqlalchemy import update
 from starlette.concurrency import run_in_threadpool
 
+from db.auth_models import WebSession
 from db.models import utcnow
 from server.auth import audit, tokens
 from server.auth.permissions import PERMISSIONS, PUBLIC, SIGNED_IN, required
+from server.service import transaction
 
 SESSION_COOKIE = "pendant_session"
 CSRF_COOKIE = "pendant_csrf"
@@ -60,6 +65,7 @@ def _cookie_actor(request: Request, cookie: str) -> tokens.Actor:
     """The actor of the browser login's cookie; raises 401 on an ended one, 403 on a command
     without the login's CSRF token."""
     settings = request.app.state.settings
+    awake = None  # the login a command keeps awake (reads do not)
     with request.app.state.sessionmaker() as db:
         found_web = tokens.web_session(db, cookie)
         if found_web is None:
@@ -72,11 +78,22 @@ def _cookie_actor(request: Request, cookie: str) -> tokens.Actor:
             if not hmac.compare_digest(sent.encode(), ws.csrf_token.encode()):
                 raise _refuse(403, ("header", CSRF_HEADER), "a command from the browser needs "
                               "the login's CSRF token (cross-site request refused)", "csrf")
-            now = utcnow()
-            if not actor.idle and now - ws.last_seen_at > timedelta(seconds=TOUCH_EVERY_S):
-                ws.last_seen_at = now  # a command keeps the login awake; reads do not
-                db.commit()
-        return actor
+            if not actor.idle and utcnow() - ws.last_seen_at > timedelta(seconds=TOUCH_EVERY_S):
+                awake = ws.id
+    if awake is not None:
+        _keep_awake(request.app.state.sessionmaker, awake)
+    return actor
+
+
+def _keep_awake(maker: Any, web_session_id: int) -> None:
+    """Note a browser login's command (its idle timeout starts again): a write of its own, in
+    the writers' turn. Written in the reading transaction above, it failed at once on SQLite
+    ("database is locked", a 503) whenever another writer committed between the read and it."""
+    db = transaction.writer(maker)
+    with db, transaction.writers_turn(db):
+        db.execute(update(WebSession).where(WebSession.id == web_session_id)
+                   .values(last_seen_at=utcnow()))
+        db.commit()
 
 
 _VERIFYING: dict[tuple[asyncio.AbstractEventLoop, str, int], asyncio.Task] = {}
