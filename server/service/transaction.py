@@ -13,7 +13,8 @@ Every operation that changes rows runs in one transaction that
   the lock free while another process's writers follow each other without a gap (a
   ``pendant users revoke`` beside a service under jog load waited seconds). The turn is a
   lock within the process and an ``flock`` of the file ``<database>-writers`` across
-  processes, whose waiter the kernel wakes as soon as the holder lets go. On PostgreSQL the
+  processes, whose waiter the kernel wakes as soon as the holder lets go; a writer gives up
+  after :data:`TURN_TIMEOUT_S` (a 503), as long as SQLite's busy handler waits. On PostgreSQL the
   same function lets at most :data:`PG_WRITERS` writers of a process at a time hold a
   connection;
 - ends with :func:`commit`: the operation's ``op.<name>`` audit record when it changed rows no
