@@ -209,6 +209,36 @@ def test_operator_user_reads_but_cannot_write(cell: dict) -> None:
         running.stop()
 
 
+def test_a_write_its_user_may_make_is_answered_as_done_without_read_permission(cell: dict) -> None:
+    """A site role that may select frames (robot:jog) and commit them (frames:commit) but not
+    read them: its $ACT_TOOL and TOOL_DATA writes are applied and answered as done, with what
+    they wrote, as REST answers a PUT (the answer was a refusal 'needs frames:read' after the
+    write had committed)."""
+    from server.auth import tokens
+
+    rest = cell["rest"]
+    with rest.app.state.sessionmaker() as db:
+        tokens.add_role(db, "Setter", ["robot:jog", "frames:commit"])
+        tokens.add_user(db, "setter", "Setter")
+        db.commit()
+    port = free_port()
+    running = serve_in_thread(KvpFace(rest.app.state.sessionmaker, "setter"), "127.0.0.1", port)
+    try:
+        with socket.create_connection(("127.0.0.1", port), timeout=10) as s:
+            s.sendall(raw(port, 1, 1, b"$ACT_TOOL", b"5"))
+            assert answer_of(s) == (1, "5", True)
+            s.sendall(raw(port, 2, 1, b"TOOL_DATA[7]", b"{X 12.5}"))
+            msg_id, text, good = answer_of(s)
+            assert (msg_id, good) == (2, True) and text.startswith("{FRAME: X 12.5"), text
+            s.sendall(raw(port, 3, 0, b"TOOL_DATA[7]"))  # a read still needs frames:read
+            msg_id, text, good = answer_of(s)
+            assert (msg_id, good) == (3, False) and "frames:read" in text
+        assert ok(rest.get(f"{C}/robot"))["active_tool_no"] == 5
+        assert ok(rest.get(f"{C}/tools/7"))["pose"]["x"] == 12.5
+    finally:
+        running.stop()
+
+
 def test_only_allowed_clients_are_served(cell: dict) -> None:
     face = KvpFace(None, "cellpc", allowed=("10.1.2.3",))  # type: ignore[arg-type]
     assert face.allows("127.0.0.1") and face.allows("::1") and face.allows("10.1.2.3")

@@ -90,8 +90,11 @@ class Face:
     who: Callable[[], ops.Caller]  # the configured user as the database has it now
 
 
-def read(face: Face, name: str) -> str:
-    """The value of ``name`` as a KRC4 prints it; KvpError for one pendant does not serve."""
+def read(face: Face, name: str, after_write: bool = False) -> str:
+    """The value of ``name`` as a KRC4 prints it; KvpError for one pendant does not serve.
+    ``after_write``: the answer to a write that committed, which needs no read permission
+    (REST's PUT answers with what it wrote too; a refusal after the commit would tell the
+    client its write failed)."""
     var = name.strip().upper()
     m = _INDEXED.match(var)
     who = face.who()
@@ -99,7 +102,7 @@ def read(face: Face, name: str) -> str:
     if m:
         array, n = m.group(1), int(m.group(2))
         table = "tool" if array in ("TOOL_DATA", "LOAD_DATA", "TOOL_NAME") else "base"
-        s = _slot(face, who, table, n, var)
+        s = _slot(face, who, table, n, var, for_write=after_write)
         if array.endswith("_DATA") and array != "LOAD_DATA":
             return frame(s.entry.pose if s.entry else None)
         if array == "LOAD_DATA":
@@ -111,7 +114,8 @@ def read(face: Face, name: str) -> str:
     if var == "$OV_PRO":
         ops.robot(face.maker, who, cid)  # the read permission
         return "100"
-    state = ops.robot(face.maker, who, cid)
+    state = (ops.robot_state(face.maker, cid) if after_write
+             else ops.robot(face.maker, who, cid))
     if var == "$ACT_TOOL":
         return str(state.active_tool_no)
     if var == "$ACT_BASE":
@@ -138,12 +142,13 @@ def read(face: Face, name: str) -> str:
     return frame(s.entry.pose if s.entry else None)
 
 
-def _slot(face: Face, who: ops.Caller, table: str, n: int, var: str) -> ops.Slot:
+def _slot(face: Face, who: ops.Caller, table: str, n: int, var: str,
+          for_write: bool = False) -> ops.Slot:
     from db import crud
 
     if not 1 <= n <= crud.SLOTS[table]:
         raise KvpError(f"{var}: index {n} out of range 1..{crud.SLOTS[table]}")
-    return ops.slot(face.maker, who, face.controller_id, table, n)
+    return ops.slot(face.maker, who, face.controller_id, table, n, for_write=for_write)
 
 
 def write(face: Face, name: str, value: str) -> str:
@@ -155,7 +160,7 @@ def write(face: Face, name: str, value: str) -> str:
     if m:
         array, n = m.group(1), int(m.group(2))
         table = "tool" if array in ("TOOL_DATA", "LOAD_DATA", "TOOL_NAME") else "base"
-        s = _slot(face, who, table, n, var)
+        s = _slot(face, who, table, n, var, for_write=True)
         clear = False
         if array in ("TOOL_DATA", "BASE_DATA"):
             p = _pose_write(value, s.entry.pose if s.entry else None, var)
@@ -175,7 +180,7 @@ def write(face: Face, name: str, value: str) -> str:
         else:
             body = EntryIn(name=_name_write(value, var))
         ops.commit_slot(face.maker, who, cid, table, n, body, clear_load=clear)
-        return read(face, name)
+        return read(face, name, after_write=True)
     if var in ("$ACT_TOOL", "$ACT_BASE"):
         if not re.fullmatch(r"\s*\d+\s*", value):
             raise KvpError(f"{var}: expected an INT slot number, got {value[:40]!r}")
@@ -184,7 +189,7 @@ def write(face: Face, name: str, value: str) -> str:
             ops.set_active(face.maker, who, cid, tool_no=n)
         else:
             ops.set_active(face.maker, who, cid, base_no=n)
-        return read(face, name)
+        return read(face, name, after_write=True)
     if var in SYSTEM:
         raise KvpError(f"{var}: write-protected (pendant moves the arm and selects frames "
                        "through $ACT_TOOL, $ACT_BASE and its REST API)")

@@ -141,8 +141,12 @@ def slots(maker: Maker, caller_: Caller, cid: int, table: str | None = None) -> 
                 for e in crud.list_entries(db, cid, table)]
 
 
-def slot(maker: Maker, caller_: Caller, cid: int, table: str, number: int) -> Slot:
-    caller_.require(READ)
+def slot(maker: Maker, caller_: Caller, cid: int, table: str, number: int,
+         for_write: bool = False) -> Slot:
+    """Slot ``number`` of ``table``; ``for_write``: read by a write, to merge the components
+    it gives with the others, which needs no read permission (REST's PUT merges so too)."""
+    if not for_write:
+        caller_.require(READ)
     with maker() as db:
         e = crud.get_entry(db, cid, table, number)
         used = controller_files.is_used(e)
@@ -172,6 +176,11 @@ class RobotState:
 def robot(maker: Maker, caller_: Caller, cid: int) -> RobotState:
     """The emulated arm as ``GET /controllers/{id}/robot`` shows it."""
     caller_.require(READ)
+    return robot_state(maker, cid)
+
+
+def robot_state(maker: Maker, cid: int) -> RobotState:
+    """The arm's state without a permission check: the answer of a write that committed."""
     with maker() as db:
         c = crud.get_controller(db, cid)
         rob = robot_of(c)
@@ -230,7 +239,7 @@ def set_active(maker: Maker, caller_: Caller, cid: int, tool_no: int | None = No
             raise CalibrationError((loc,), f"must be 0..{crud.SLOTS[table]}, got {n}")
     with transaction.writing(maker, cid, operation="set_active", who=caller_.who()) as db:
         robot_service.set_active(db, cid, tool_no, base_no)
-    return robot(maker, caller_, cid)
+    return robot_state(maker, cid)  # the write's own answer, as REST's PUT answers it
 
 
 def import_file(maker: Maker, caller_: Caller, cid: int, fmt: str, text: str) -> int:
