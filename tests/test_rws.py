@@ -102,7 +102,7 @@ def test_operator_cannot_set_tooldata(cell: dict) -> None:
 
 def test_wrong_digest_is_401(cell: dict) -> None:
     """A wrong password: 401 with a Digest challenge, as RWS answers; the client raises."""
-    with pytest.raises(rws.ABBException, match="wrong digest") as err:
+    with pytest.raises(rws.ABBException, match="wrong user name or password") as err:
         client(cell, "expert", "wrong").get_rapid_variable("tool1")
     assert err.value.code < 0
     r = requests.get(f"{cell['url']}/rw/panel/ctrlstate?json=1",
@@ -110,6 +110,30 @@ def test_wrong_digest_is_401(cell: dict) -> None:
     assert r.status_code == 401
     assert r.headers["WWW-Authenticate"].startswith('Digest realm="validusers"')
     assert requests.get(f"{cell['url']}/rw/panel/ctrlstate?json=1").status_code == 401
+
+
+def test_digest_tells_no_user_apart_and_never_answers_500(cell: dict) -> None:
+    """An unknown user and a known one with a wrong password get the same 401; Digest
+    parameters with non-ASCII characters (no login needed to send them) get a 401, not a 500
+    with a traceback in the log."""
+    def message(user: str, password: str) -> str:
+        r = requests.get(f"{cell['url']}/rw/panel/ctrlstate?json=1",
+                         auth=requests.auth.HTTPDigestAuth(user, password))
+        assert r.status_code == 401
+        return r.text
+
+    assert message("nobody-here", "x") == message("expert", "wrong")
+    r = requests.get(f"{cell['url']}/rw/panel/ctrlstate?json=1")
+    nonce = r.headers["WWW-Authenticate"].split('nonce="')[1].split('"')[0]
+    t = nonce.split(".")[0]
+    for forged in (f'nonce="{t}.\u00e9\u00e9", response="{"0" * 32}"',
+                   f'nonce="{nonce}", response="\u00e9\u00e9\u00e9", qop=auth, nc=00000001, '
+                   'cnonce="abc"'):
+        header = (f'Digest username="expert", realm="validusers", uri="/rw/panel/ctrlstate", '
+                  + forged).encode("utf-8")
+        r = requests.get(f"{cell['url']}/rw/panel/ctrlstate?json=1",
+                         headers={"Authorization": header})
+        assert r.status_code == 401, (forged, r.status_code, r.text[:200])
 
 
 def test_jointtarget_and_robtarget_follow_a_rest_jog(cell: dict) -> None:
@@ -180,7 +204,7 @@ def test_rws_password_cli_stores_only_the_ha1(cell: dict, tmp_path) -> None:
     assert r.returncode == 0, r.stderr
     assert ops.rws_ha1(cell["maker"], "cli-user") == digest.ha1("cli-user", "new-secret")
     assert client(cell, "cli-user", "new-secret").get_operation_mode() == "MANR"
-    with pytest.raises(rws.ABBException, match="wrong digest"):
+    with pytest.raises(rws.ABBException, match="wrong user name or password"):
         client(cell, "cli-user", "first-secret").get_operation_mode()
     r = subprocess.run([sys.executable, "-m", "server.cli", "users", "rws-password", "nobody",
                         "--db", db_url], input="x\n", check=False, capture_output=True, text=True, timeout=120)

@@ -45,7 +45,7 @@ def nonce_age_s(nonce: str, now: float | None = None) -> float | None:
     """Seconds since this process made ``nonce``; None if it did not make it."""
     t, _, mac = nonce.partition(".")
     good = hmac.new(_KEY, t.encode(), hashlib.sha256).hexdigest()[:32]
-    if not t.isdigit() or not hmac.compare_digest(mac, good):
+    if not (t.isascii() and t.isdigit()) or not hmac.compare_digest(mac.encode(), good.encode()):
         return None
     return (now if now is not None else time.time()) - int(t)
 
@@ -104,9 +104,9 @@ def verify(params: dict[str, str], method: str, ha1_of, seen: Seen) -> Verdict:
         return Verdict(None, "unknown nonce", stale=True)
     if age > NONCE_TTL_S or age < -5:
         return Verdict(None, "nonce expired", stale=True)
-    stored = ha1_of(params["username"])
-    if not stored:
-        return Verdict(None, "unknown user or no RWS secret (pendant users rws-password)")
+    # one answer and the same work for an unknown user and a wrong password: neither the
+    # message nor the time tells which user names exist
+    stored = ha1_of(params["username"]) or md5(f"{secrets.token_hex(16)}:{REALM}:")
     ha2 = md5(f"{method}:{params['uri']}")
     qop = params.get("qop")
     if qop:
@@ -115,8 +115,9 @@ def verify(params: dict[str, str], method: str, ha1_of, seen: Seen) -> Verdict:
         want = md5(f"{stored}:{params['nonce']}:{params['nc']}:{params['cnonce']}:auth:{ha2}")
     else:
         want = md5(f"{stored}:{params['nonce']}:{ha2}")
-    if not hmac.compare_digest(want, params["response"].lower()):
-        return Verdict(None, "wrong digest (user name or password)")
+    if not hmac.compare_digest(want.encode(), params["response"].lower().encode()):
+        return Verdict(None, "wrong user name or password (or no RWS secret set: pendant "
+                             "users rws-password)")
     if not seen.first_use((params["nonce"], params.get("cnonce", ""), params.get("nc", ""))):
         return Verdict(None, "nonce count used before (a replay)", stale=True)
     return Verdict(params["username"], "ok")
