@@ -239,6 +239,46 @@ def test_a_write_its_user_may_make_is_answered_as_done_without_read_permission(c
         running.stop()
 
 
+def test_a_long_refusal_does_not_put_the_client_out_of_step(cell: dict) -> None:
+    """py-openshowvar reads an answer in one recv(256): a refusal naming a long unknown
+    variable (and the variables pendant serves) was ~270 bytes, and the client's next reads
+    returned the tail of it, then $OV_PRO's value for $ACT_TOOL. Refusals fit now; each
+    read gets its own value."""
+    rest = cell["rest"]
+    c = connect(cell)
+    try:
+        assert c.read("NO_SUCH_VARIABLE_" + "X" * 80, debug=False) is None
+        assert c.read("$OV_PRO", debug=False) == b"100"
+        active = ok(rest.get(f"{C}/robot"))["active_tool_no"]
+        assert c.read("$ACT_TOOL", debug=False) == str(active).encode()
+        assert c.read("TOOL_DATA[1]", debug=False).startswith(b"{FRAME: X ")
+        name = "\u00e9" * 200  # a refusal cut between characters, never inside one
+        with socket.create_connection(("127.0.0.1", cell["port"]), timeout=10) as s:
+            s.sendall(raw(cell["port"], 9, 0, name.encode()))
+            msg_id, text, good = answer_of(s)
+            assert (msg_id, good) == (9, False) and text.endswith("...") and len(text.encode()) <= 240
+    finally:
+        c.close()
+
+
+def test_connections_held_open_and_silent_lock_no_client_out(cell: dict, monkeypatch) -> None:
+    """As many silent connections as the face takes: a new client is still served (the one
+    idle longest is closed for it); they used to hold every place for the idle timeout."""
+    monkeypatch.setattr(kvp, "MAX_CONNECTIONS", 4)
+    silent = [socket.create_connection(("127.0.0.1", cell["port"]), timeout=10)
+              for _ in range(4)]
+    try:
+        time.sleep(0.3)  # the face has taken them all
+        c = connect(cell)
+        assert c.read("$OV_PRO", debug=False) == b"100"
+        c.close()
+        silent[0].settimeout(10)
+        assert silent[0].recv(1) == b""  # the one idle longest made room
+    finally:
+        for s in silent:
+            s.close()
+
+
 def test_only_allowed_clients_are_served(cell: dict) -> None:
     face = KvpFace(None, "cellpc", allowed=("10.1.2.3",))  # type: ignore[arg-type]
     assert face.allows("127.0.0.1") and face.allows("::1") and face.allows("10.1.2.3")

@@ -21,6 +21,7 @@ import asyncio
 import ipaddress
 import logging
 import struct
+import time
 from dataclasses import dataclass, field
 from typing import TYPE_CHECKING
 
@@ -39,9 +40,23 @@ READ, WRITE = 0, 1
 LOOPBACK = ("127.0.0.1", "::1", "localhost")
 
 
+MAX_REFUSAL = 240  # bytes of a refusal's text: the whole answer stays within the 256 bytes
+# clients read in one recv (py-openshowvar's recv(256)); a longer one puts them out of step,
+# and their next read returns this one's tail as another variable's value
+
+
+def _cut(text: str, limit: int) -> bytes:
+    """``text`` in UTF-8, at most ``limit`` bytes, cut between characters (marked "...")."""
+    data = text.encode("utf-8")
+    if len(data) <= limit:
+        return data
+    return data[:limit - 3].decode("utf-8", errors="ignore").encode("utf-8") + b"..."
+
+
 def pack(msg_id: int, mode: int, value: str, ok: bool) -> bytes:
-    """An answer: the value (UTF-8, cut to what fits) and the status."""
-    data = value.encode("utf-8")[:MAX_CONTENT]
+    """An answer: the value (UTF-8, cut to what fits: a refusal to :data:`MAX_REFUSAL`
+    bytes) and the status."""
+    data = _cut(value, MAX_CONTENT if ok else MAX_REFUSAL)
     body = struct.pack("!BH", mode, len(data)) + data + b"\x00\x01" + (b"\x01" if ok else b"\x00")
     return struct.pack("!HH", msg_id, len(body)) + body
 
@@ -94,6 +109,8 @@ class KvpFace:
     allowed: tuple[str, ...] = ()  # client addresses served besides loopback
     server: asyncio.AbstractServer | None = field(default=None, init=False)
     connections: int = field(default=0, init=False)
+    # the connections waiting for their next message, and since when
+    waiting: dict[asyncio.StreamWriter, float] = field(default_factory=dict, init=False)
 
     def who(self, client: str | None) -> ops.Caller:
         if not self.auth:
@@ -133,10 +150,22 @@ class KvpFace:
     async def handle(self, reader: asyncio.StreamReader, writer: asyncio.StreamWriter) -> None:
         peer = writer.get_extra_info("peername")
         client = peer[0] if peer else None
-        if not self.allows(client) or self.connections >= MAX_CONNECTIONS:
-            log.warning("kvp: refused a connection from %s", client)
+        if not self.allows(client):
+            log.warning("kvp: refused a connection from %s (not an allowed client)", client)
             writer.close()
             return
+        if self.connections >= MAX_CONNECTIONS:
+            # full: the connection idle longest makes room (connections held open and silent
+            # must not lock every other client out); if every one is mid-message, refused
+            idle = min(self.waiting, key=self.waiting.__getitem__, default=None)
+            if idle is None:
+                log.warning("kvp: refused a connection from %s (%d connections, each in a "
+                            "message)", client, self.connections)
+                writer.close()
+                return
+            log.warning("kvp: closed the connection idle longest (%.0f s) for one from %s",
+                        time.monotonic() - self.waiting.pop(idle), client)
+            idle.close()
         self.connections += 1
         try:
             await self._serve(reader, writer, client)
@@ -151,7 +180,11 @@ class KvpFace:
     async def _serve(self, reader: asyncio.StreamReader, writer: asyncio.StreamWriter,
                      client: str | None) -> None:
         while True:
-            first = await asyncio.wait_for(reader.readexactly(1), IDLE_TIMEOUT_S)
+            self.waiting[writer] = time.monotonic()
+            try:
+                first = await asyncio.wait_for(reader.readexactly(1), IDLE_TIMEOUT_S)
+            finally:
+                self.waiting.pop(writer, None)
             head = first + await asyncio.wait_for(reader.readexactly(3), FRAME_TIMEOUT_S)
             msg_id, length = struct.unpack("!HH", head)
             if length > MAX_CONTENT:
