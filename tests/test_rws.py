@@ -270,6 +270,34 @@ def test_subscription_sees_a_rest_edit(cell: dict) -> None:
         sub.close()
 
 
+def test_a_chunked_body_is_refused_once_it_passes_the_limit(cell: dict) -> None:
+    """A chunked body (no Content-Length) is refused with 413 as soon as it passes 64 KiB:
+    the face does not wait for it, nor keep it, whole (200 MiB took 300 MB of memory)."""
+    import hashlib
+    import socket
+
+    def md5(text: str) -> str:
+        return hashlib.md5(text.encode()).hexdigest()  # noqa: S324 -- HTTP Digest is MD5
+
+    uri = "/rw/rapid/symbol/data/RAPID/T_ROB1/tool1?action=set"
+    challenge = requests.get(f"{cell['url']}{uri}").headers["WWW-Authenticate"]
+    nonce = challenge.split('nonce="')[1].split('"')[0]
+    ha1 = md5(f"expert:validusers:{PASSWORD['expert']}")
+    response = md5(f"{ha1}:{nonce}:00000001:c0ffee:auth:{md5('POST:' + uri)}")
+    host, port = cell["url"].removeprefix("http://").split(":")
+    with socket.create_connection((host, int(port)), timeout=10) as s:
+        s.sendall((f"POST {uri} HTTP/1.1\r\nHost: {host}\r\nTransfer-Encoding: chunked\r\n"
+                   "Content-Type: application/x-www-form-urlencoded\r\n"
+                   f'Authorization: Digest username="expert", realm="validusers", '
+                   f'nonce="{nonce}", uri="{uri}", qop=auth, nc=00000001, cnonce="c0ffee", '
+                   f'response="{response}"\r\n\r\n').encode())
+        chunk = b"a" * 16384
+        for _ in range(6):  # 96 KiB, and the body never ends
+            s.sendall(b"%x\r\n" % len(chunk) + chunk + b"\r\n")
+        head = s.recv(4096)
+    assert head.startswith(b"HTTP/1.1 413"), head[:200]
+
+
 def test_oversize_and_stalled_requests_do_not_stall_the_face(cell: dict) -> None:
     """A body beyond 64 KiB is refused in RWS's error shape; a client that sends half a
     request holds up no one else."""

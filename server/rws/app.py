@@ -210,10 +210,21 @@ async def call(fn, *args: Any, **kw: Any) -> Any:
         raise RwsError(400, E_VALUE, f"{loc}: {err.reason}") from None
 
 
+async def body_of(request: Request, what: str = "the body") -> bytes:
+    """The request's body, read up to :data:`MAX_BODY` bytes: a longer one is refused (413)
+    as soon as it is seen, a chunked one too, never read whole into memory first."""
+    chunks, size = [], 0
+    async for chunk in request.stream():
+        size += len(chunk)
+        if size > MAX_BODY:
+            raise RwsError(413, E_LARGE, f"{what} has more than {MAX_BODY} bytes")
+        chunks.append(chunk)
+    request._body = b"".join(chunks)  # as Request.body() keeps it: a second read gets it again
+    return request._body
+
+
 async def form(request: Request) -> dict[str, str]:
-    body = await request.body()
-    if len(body) > MAX_BODY:
-        raise RwsError(413, E_LARGE, f"the body has {len(body)} bytes; at most {MAX_BODY}")
+    body = await body_of(request)
     try:
         parsed = parse_qs(body.decode("utf-8"), keep_blank_values=True, strict_parsing=False)
     except UnicodeDecodeError:
@@ -434,9 +445,7 @@ async def fileservice(face: RwsFace, request: Request, who: ops.Caller) -> Respo
             raise RwsError(404, E_NOT_FOUND, f"no file {path!r}; pendant serves {HOME}/{name}")
         return Response(text.encode("utf-8"), media_type="text/plain; charset=utf-8")
     if request.method == "PUT":
-        body = await request.body()
-        if len(body) > MAX_BODY:
-            raise RwsError(413, E_LARGE, f"the file has {len(body)} bytes; at most {MAX_BODY}")
+        body = await body_of(request, "the file")
         try:
             new = body.decode("utf-8")
         except UnicodeDecodeError:
@@ -452,7 +461,7 @@ async def fileservice(face: RwsFace, request: Request, who: ops.Caller) -> Respo
 
 async def subscribe(face: RwsFace, request: Request, who: ops.Caller) -> Response:
     fields = await form(request)
-    resources = parse_qs((await request.body()).decode("utf-8")).get("resources", [])
+    resources = parse_qs((await body_of(request)).decode("utf-8")).get("resources", [])
     paths = []
     for r in resources:
         res = fields.get(r, "")
