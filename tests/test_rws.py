@@ -270,6 +270,28 @@ def test_subscription_sees_a_rest_edit(cell: dict) -> None:
         sub.close()
 
 
+def test_another_sites_form_and_a_foreign_host_are_refused(cell: dict) -> None:
+    """A browser that keeps Digest credentials for the robot's address sends them with any
+    page's form: a command with another site's Origin is refused (403) and writes nothing, as
+    on REST; a client that sends no Origin (requests, RobotStudio) is served. With the
+    service's host names (pendant serve passes them), a foreign Host is refused (400)."""
+    from starlette.testclient import TestClient
+
+    url = f"{cell['url']}/rw/rapid/symbol/data/RAPID/T_ROB1/tool4?action=set&json=1"
+    auth = requests.auth.HTTPDigestAuth("expert", PASSWORD["expert"])
+    before = ok(cell["rest"].get(f"/controllers/{cell['cid']}/tools/4"))
+    r = requests.post(url, data={"value": TOOL}, auth=auth,
+                      headers={"Origin": "http://evil.example"})
+    assert r.status_code == 403, r.text
+    assert ok(cell["rest"].get(f"/controllers/{cell['cid']}/tools/4")) == before
+    assert requests.post(url, data={"value": TOOL}, auth=auth).status_code == 204
+    app = create_rws_app(RwsFace(cell["maker"]), ("localhost", "127.0.0.1"))
+    with TestClient(app, base_url="http://evil.example") as foreign:
+        assert foreign.get("/rw/panel/ctrlstate?json=1").status_code == 400
+    with TestClient(app, base_url="http://127.0.0.1:8610") as own:
+        assert own.get("/rw/panel/ctrlstate?json=1").status_code == 401  # served: log in
+
+
 def test_a_chunked_body_is_refused_once_it_passes_the_limit(cell: dict) -> None:
     """A chunked body (no Content-Length) is refused with 413 as soon as it passes 64 KiB:
     the face does not wait for it, nor keep it, whole (200 MiB took 300 MB of memory)."""

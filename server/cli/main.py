@@ -696,7 +696,8 @@ def serve(args: argparse.Namespace) -> int:
     face = (start_beside(args.host, args.opcua_port, settings.db_url, auth=settings.auth,
                          pki=args.opcua_pki) if args.opcua_port else None)
     try:
-        controller_faces = start_faces(args, application.state.sessionmaker, settings.auth)
+        controller_faces = start_faces(args, application.state.sessionmaker, settings.auth,
+                                       settings.allowed_hosts)
     except BaseException:
         for child in (workers, face):
             if child is not None:

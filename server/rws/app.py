@@ -38,9 +38,11 @@ from starlette.concurrency import run_in_threadpool
 from starlette.requests import Request
 from starlette.responses import JSONResponse, PlainTextResponse, Response
 from starlette.routing import Route, WebSocketRoute
+from starlette.types import ASGIApp
 from starlette.websockets import WebSocket, WebSocketDisconnect
 
 from db import crud
+from server.auth.web import SiteGuard
 from server.formats import abb
 from server.rws import digest, ops, rapid
 from server.api.schemas import EntryIn
@@ -553,8 +555,12 @@ async def _ws_caller(face: RwsFace, ws: WebSocket) -> ops.Caller:
         return who
 
 
-def create_rws_app(face: RwsFace) -> Starlette:
-    """The Starlette app of the face."""
+def create_rws_app(face: RwsFace, allowed_hosts: tuple[str, ...] = ("*",)) -> ASGIApp:
+    """The ASGI app of the face, behind the REST service's site guard
+    (:class:`server.auth.web.SiteGuard`): a command from another site's page is refused
+    (403: a browser that keeps Digest credentials for the robot's address would send them
+    with any page's form), and so is a ``Host`` not in ``allowed_hosts`` (400: DNS
+    rebinding), as on REST."""
     def r(path: str, handler, methods: list[str]) -> Route:
         return Route(path, guarded(face, handler), methods=methods)
 
@@ -580,4 +586,6 @@ def create_rws_app(face: RwsFace) -> Starlette:
                "(docs/rws.md)")
         return error(request, RwsError(status, E_NOT_OFFERED, msg))
 
-    return Starlette(routes=routes, exception_handlers={404: not_found, 405: not_found})
+    return SiteGuard(Starlette(routes=routes, exception_handlers={404: not_found,
+                                                                  405: not_found}),
+                     allowed_hosts)

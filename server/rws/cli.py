@@ -31,15 +31,18 @@ def add_face_arguments(s: argparse.ArgumentParser) -> None:
                    help="a client address KVP serves besides loopback (repeat)")
 
 
-def start_faces(args: argparse.Namespace, maker: Any, auth: bool) -> list[Any]:
-    """Start the faces asked for; each a :class:`server.rws.service.Running`."""
+def start_faces(args: argparse.Namespace, maker: Any, auth: bool,
+                allowed_hosts: tuple[str, ...] = ("*",)) -> list[Any]:
+    """Start the faces asked for; each a :class:`server.rws.service.Running`. RWS answers
+    the ``Host`` names REST answers (``allowed_hosts``)."""
     started: list[Any] = []
     try:
         if args.rws_port:
             from server.rws.app import RwsFace, create_rws_app
             from server.rws.service import serve_asgi
 
-            started.append(serve_asgi(create_rws_app(RwsFace(maker, args.rws_controller, auth)),
+            started.append(serve_asgi(create_rws_app(RwsFace(maker, args.rws_controller, auth),
+                                                     allowed_hosts),
                                       args.host, args.rws_port, "rws"))
         if args.kvp_port:
             from server.kvp.server import KvpFace, serve_in_thread
