@@ -162,6 +162,13 @@ def test_bad_input_gets_the_protocols_error(cell: dict) -> None:
         assert "out of range" in answer_of(s)[1]
         s.sendall(raw(cell["port"], 12, 0, b"$OV_PRO"))
         assert answer_of(s) == (12, "100", True)
+        # digits of other scripts are not KRL's (Python's \\d and float() take them)
+        s.sendall(raw(cell["port"], 13, 0, "TOOL_DATA[\u0663]".encode()))
+        assert "not a variable pendant serves" in answer_of(s)[1]
+        s.sendall(raw(cell["port"], 14, 1, b"$ACT_TOOL", "\u0663".encode()))
+        assert "expected an INT slot number" in answer_of(s)[1]
+        s.sendall(raw(cell["port"], 15, 1, b"TOOL_DATA[5]", "{X \u0663}".encode()))
+        assert answer_of(s)[2] is False
     assert ok(cell["rest"].get(f"{C}/tools/5")) == before
 
 

@@ -250,7 +250,7 @@ def export_abb(entries: Iterable[FrameEntry], module_name: str = "CalibData",
 
 # --------------------------------------------------------------------------- import
 
-_NUM = r"[+-]?(?:\d+\.?\d*|\.\d+)(?:[eE][+-]?\d+)?"
+_NUM = r"[+-]?(?:[0-9]+(?:\.[0-9]*)?|\.[0-9]+)(?:[eE][+-]?[0-9]+)?"  # ASCII digits; linear
 _TOKEN = re.compile(r'\s*(?:(\[)|(\])|(,)|(' + _NUM + r')(?![\w.])|("[^"]*")|([A-Za-z_]\w*)|(\S))')
 _DECL = re.compile(
     r"\b(?:(?:LOCAL|TASK)\s+)*(PERS|CONST|VAR)\s+(tooldata|wobjdata|loaddata)\s+"

@@ -224,7 +224,7 @@ def export_kuka(entries: Iterable[FrameEntry], tool_slots: int = 16, base_slots:
 
 # --------------------------------------------------------------------------- reading
 
-_NUM = r"[+-]?(?:\d+\.?\d*|\.\d+)(?:[eE][+-]?\d+)?"
+_NUM = r"[+-]?(?:[0-9]+(?:\.[0-9]*)?|\.[0-9]+)(?:[eE][+-]?[0-9]+)?"  # ASCII digits; linear
 _DECL = re.compile(
     r"^\s*(?:DECL\s+)?(?:GLOBAL\s+)?\w+\s+(" + "|".join(_ARRAYS)
     + r")\s*\[\s*(\d+)\s*(?:,\s*(\d*)\s*)?\]\s*$", re.IGNORECASE)

@@ -24,7 +24,7 @@ from solvers.frames import Pose, kuka_from_matrix
 
 FRAME_KEYS = ("X", "Y", "Z", "A", "B", "C")
 UNITS = {"X": "mm", "Y": "mm", "Z": "mm", "A": "deg", "B": "deg", "C": "deg"}
-_INDEXED = re.compile(r"^\$?(TOOL_DATA|BASE_DATA|LOAD_DATA|TOOL_NAME|BASE_NAME)\[\s*(\d+)\s*(,\s*)?\]$")
+_INDEXED = re.compile(r"^\$?(TOOL_DATA|BASE_DATA|LOAD_DATA|TOOL_NAME|BASE_NAME)\[\s*([0-9]+)\s*(,\s*)?\]$")
 _PREFIX = re.compile(r"\{\s*[A-Z_0-9]+\s*:", re.IGNORECASE)  # {FRAME: ... -> {...
 SYSTEM = ("$TOOL", "$BASE", "$ACT_TOOL", "$ACT_BASE", "$AXIS_ACT", "$POS_ACT", "$OV_PRO")
 
@@ -182,7 +182,7 @@ def write(face: Face, name: str, value: str) -> str:
         ops.commit_slot(face.maker, who, cid, table, n, body, clear_load=clear)
         return read(face, name, after_write=True)
     if var in ("$ACT_TOOL", "$ACT_BASE"):
-        if not re.fullmatch(r"\s*\d+\s*", value):
+        if not re.fullmatch(r"\s*[0-9]+\s*", value):
             raise KvpError(f"{var}: expected an INT slot number, got {value[:40]!r}")
         n = int(value)
         if var == "$ACT_TOOL":
