@@ -137,8 +137,7 @@ def claim(db: Session, request: Request) -> None:
 def _store(maker: Any, key: str, status: int, headers: dict[str, str], body: bytes) -> None:
     """Keep the answer of the request that claimed ``key``: a write of its own, after the
     answer was sent, in the writers' turn as every write."""
-    db = transaction.writer(maker)
-    with db, transaction.writers_turn(db):
+    with transaction.writer_in_turn(maker) as db:
         db.execute(update(IdempotencyKey).where(IdempotencyKey.key == key)
                    .values(status=status, headers=headers, body=body))
         db.commit()

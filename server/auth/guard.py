@@ -18,7 +18,6 @@ import asyncio
 import hmac
 import uuid
 from datetime import timedelta
-
 from typing import Any
 
 from fastapi import HTTPException, Request
@@ -89,8 +88,7 @@ def _keep_awake(maker: Any, web_session_id: int) -> None:
     """Note a browser login's command (its idle timeout starts again): a write of its own, in
     the writers' turn. Written in the reading transaction above, it failed at once on SQLite
     ("database is locked", a 503) whenever another writer committed between the read and it."""
-    db = transaction.writer(maker)
-    with db, transaction.writers_turn(db):
+    with transaction.writer_in_turn(maker) as db:
         db.execute(update(WebSession).where(WebSession.id == web_session_id)
                    .values(last_seen_at=utcnow()))
         db.commit()

@@ -16,14 +16,12 @@ supervisors on several hosts share one PostgreSQL queue (``SKIP LOCKED``).
 
 from __future__ import annotations
 
-import contextlib
 import logging
 import multiprocessing
 import os
 import signal
 import socket
 import time
-from collections.abc import Iterator
 from dataclasses import dataclass, field
 from typing import Any
 
@@ -90,15 +88,10 @@ def _error_of(exc: BaseException) -> dict[str, Any]:
                        "internal")
 
 
-@contextlib.contextmanager
-def job_write(sm: sessionmaker[Session]) -> Iterator[Session]:
-    """A write of the job machinery (claim, progress, lease, the result, the end) as every
-    write runs: a writer's session in the writers' turn
-    (:func:`server.service.transaction.writers_turn`). In SQLite's busy handler alone, a job
-    worker's write could wait out the busy timeout behind a busy service's writers."""
-    db = transaction.writer(sm)
-    with db, transaction.writers_turn(db):
-        yield db
+# the job machinery's writes (claim, progress, lease, the result, the end) take the writers'
+# turn as every write does: in SQLite's busy handler alone, a job worker's write could wait out
+# the busy timeout behind a busy service's writers
+job_write = transaction.writer_in_turn
 
 
 def run_job(sm: sessionmaker[Session], job_id: int, kind: str, params: dict[str, Any],

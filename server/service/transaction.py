@@ -191,6 +191,8 @@ def _after_fork_in_child() -> None:
     _TURNS_LOCK = threading.Lock()
     for turn in _SQLITE_TURNS.values():
         turn.threads = threading.Lock()
+
+
 _SQLITE_TURNS: dict[str, _SqliteTurn] = {}  # database URL -> its writers' turn
 _TURNS_LOCK = threading.Lock()
 os.register_at_fork(after_in_child=_after_fork_in_child)
@@ -253,6 +255,16 @@ def commit(db: Session, operation: str, **ids: int | None) -> None:
 
 
 @contextlib.contextmanager
+def writer_in_turn(make_session: Maker, controller_id: int | None = None) -> Iterator[Session]:
+    """A writer's session (:func:`writer`) in the writers' turn (:func:`writers_turn`); the
+    caller commits. :func:`writing` adds the operation's audit record; the writes that are no
+    operation (a job's claim and lease, an Idempotency-Key's stored answer, a browser login's
+    last command) use this alone."""
+    with writer(make_session, controller_id) as db, writers_turn(db):
+        yield db
+
+
+@contextlib.contextmanager
 def writing(make_session: Maker, controller_id: int | None = None, *, operation: str,
             who: dict[str, Any] | None = None, **ids: int | None) -> Iterator[Session]:
     """One write, whichever face: a writer's session (:func:`writer`, ``controller_id``'s row
@@ -263,7 +275,7 @@ def writing(make_session: Maker, controller_id: int | None = None, *, operation:
     ``with writing(maker, cid, operation="commit_frame", who=caller) as db: edit_slot(db, ...)``
     """
     acting = audit.acting_as(who) if who is not None else contextlib.nullcontext()
-    with acting, writer(make_session, controller_id) as db, writers_turn(db):
+    with acting, writer_in_turn(make_session, controller_id) as db:
         try:
             yield db
             commit(db, operation, controller_id=controller_id, **ids)
