@@ -165,6 +165,7 @@ class JogIn(In):
 
 
 ExtAxis = Literal["E1", "E2", "E3", "E4", "E5", "E6"]
+EXT_AXIS_LIMIT = 1e4  # a recorded external axis value, deg (a rail: mm), within ± this
 
 
 class ExternalAxesIn(In):
@@ -436,7 +437,8 @@ class TouchUpIn(In):
     step: int | None = Field(None, ge=0, strict=True)
     joints_deg: list[Deg] | None = Field(None, min_length=1, max_length=7)
     flange_pose: PoseIn | None = None
-    external_axes: dict[ExtAxis, Annotated[float, Field(ge=-1e4, le=1e4)]] | None = Field(
+    external_axes: dict[ExtAxis, Annotated[float, Field(ge=-EXT_AXIS_LIMIT,
+                                                        le=EXT_AXIS_LIMIT)]] | None = Field(
         None, description="with joints_deg / flange_pose: the external axis values recorded "
                           "with them (deg; a rail in mm)")
 

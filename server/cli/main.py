@@ -57,6 +57,8 @@ from server.menus.methods import MethodInputs, TaughtData
 from server.opcua.cli import add_opcua_commands, start_beside
 from server.rws.cli import add_face_arguments, start_faces
 from server.api.schemas import ReportOut
+from server.service.external import (NO_CHAIN, chain_points, check_external_axes,
+                                     rail_from_document, unplaced_positions)
 from server.settings import ENV_PARENT_PID, parent_pid
 from solvers.errors import CalibrationError
 from solvers.frames import Pose
@@ -99,8 +101,6 @@ def _flange(point: dict[str, Any], k: int, robot_key: str | None) -> np.ndarray:
 def _rail_option(text: str) -> dict[str, Any]:
     """``--rail AXIS:X,Y,Z[:calibrated]`` as ``inputs.rail``, checked (CalibrationError naming
     --rail)."""
-    from server.service.external import rail_from_document
-
     parts = text.split(":")
     if len(parts) not in (2, 3) or (len(parts) == 3 and parts[2].strip() != "calibrated"):
         raise CalibrationError(("--rail",), f"must be AXIS:X,Y,Z or AXIS:X,Y,Z:calibrated "
@@ -158,8 +158,6 @@ def calibrate_file(method: str, path: Path, robot: str | None = None,
     points, inputs, file_robot = read_points_file(path)
     inputs.update(overrides or {})
     robot = robot or file_robot
-    from server.service.external import check_external_axes
-
     data = [TaughtData(_flange(p, k, robot), p.get("beam"), p.get("edge"),
                        None if p.get("velocity_mm_s") is None else tuple(p["velocity_mm_s"]),
                        external_axes=check_external_axes(p.get("external_axes"),
@@ -176,8 +174,6 @@ def calibrate_file(method: str, path: Path, robot: str | None = None,
         external = inputs_from_document(inputs.get("kinematic"), data)
     # a robot on a rail: the touch-ups put in the world through it, as the service does
     # (server.service.external.chain_points); without one, varying axis values are named
-    from server.service.external import (NO_CHAIN, chain_points, rail_from_document,
-                                         unplaced_positions)
     findings: list = []
     chain: dict[str, Any] = {}
     if inputs.get("rail") is not None:

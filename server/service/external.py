@@ -11,7 +11,7 @@ from __future__ import annotations
 
 import math
 from dataclasses import dataclass
-from typing import Any
+from typing import Any, get_args
 
 import numpy as np
 from sqlalchemy import select
@@ -22,6 +22,7 @@ from db.models import (EXT_KIN_SLOTS, CalibSession, Controller, EntryHistory, Ex
                        utcnow)
 from db.outbox import emit
 from emulator import external as ext_emu
+from server.api.schemas import EXT_AXIS_LIMIT, ExtAxis
 from server.auth import audit
 from solvers.errors import CalibrationError
 from solvers.frames import Pose
@@ -339,7 +340,7 @@ def rail_from_document(doc: object, loc: tuple[str, ...] = ("inputs", "rail")) -
         raise CalibrationError(loc + (unknown[0],), "unknown field; a rail has axis, direction, "
                                "scale, calibrated, number")
     axis = doc.get("axis")
-    if axis not in [f"E{i}" for i in range(1, 7)]:
+    if axis not in get_args(ExtAxis):
         raise CalibrationError(loc + ("axis",), f"must be one of E1..E6, got {axis!r}")
     given = doc.get("direction")
     d = (np.array([_finite(v) for v in given])
@@ -375,21 +376,21 @@ def _finite(v: object) -> float:
 
 
 def check_external_axes(values: object, loc: tuple) -> dict[str, float] | None:
-    """A touch-up's external axis values from a file: ``{"E1": number, ...}`` (E1..E6,
-    finite numbers within the bounds of a position, mm or deg), or None; CalibrationError
-    naming the field otherwise."""
+    """A touch-up's external axis values from a file: ``{"E1": number, ...}`` (E1..E6, finite
+    numbers within the bounds REST's touch-up takes, :data:`EXT_AXIS_LIMIT`), or None;
+    CalibrationError naming the field otherwise."""
     if values is None:
         return None
     if not isinstance(values, dict):
         raise CalibrationError(loc, f'must be an object {{"E1": value, ...}}, got {values!r}')
     out = {}
     for key, v in values.items():
-        if key not in [f"E{i}" for i in range(1, 7)]:
+        if key not in get_args(ExtAxis):
             raise CalibrationError(loc + (str(key),), "external axes are E1..E6")
         f = _finite(v)
-        if not abs(f) <= 1e6:
+        if not abs(f) <= EXT_AXIS_LIMIT:
             raise CalibrationError(loc + (key,), f"must be a finite number (deg, or mm for a "
-                                   f"rail) within ±1e6, got {v!r}")
+                                   f"rail) within ±{EXT_AXIS_LIMIT:g}, got {v!r}")
         out[key] = f
     return out
 
