@@ -103,9 +103,8 @@ def _regenerating(export: Callable[[Iterable[FrameEntry]], str],
 PATCHERS: dict[str, Callable[[Iterable[FrameEntry], str], str]] = {
     "kuka": _bom_kept(lambda entries, text: export_kuka(entries, template=text)),
     "abb": _bom_kept(lambda entries, text: export_abb(entries, template=text)),
-    "fanuc": _bom_kept(lambda entries, text: (
-        patch_sysframe(entries, text) if is_controller_listing(text)
-        else _regenerating(export_fanuc, read_fanuc)(entries, text))),
+    "fanuc": _bom_kept(lambda entries, text, listing=_regenerating(export_fanuc, read_fanuc): (
+        patch_sysframe(entries, text) if is_controller_listing(text) else listing(entries, text))),
     "ur": _bom_kept(_regenerating(export_ur, read_ur)),
 }
 #: format -> reader of a whole file (text in, ParsedFile out).

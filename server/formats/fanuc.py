@@ -151,6 +151,8 @@ def is_controller_listing(text: str) -> bool:
     """True for a controller's ``SYSFRAME.VA`` rather than pendant's own listing (which has
     its header and end line, wherever a hand may have moved them)."""
     return HEADER not in text and END_LINE not in text and is_sysframe(text)
+
+
 _ROLE_KIND = (("coordinated user frame of unit ", "coordinated_base"), ("workpiece", "workpiece"),
               ("fixed tool", "fixed_tool"), ("user frame", "base"), ("tool", "tool"))
 _SECTION = re.compile(r"^\[\*SYSTEM\*\]\$(MNUTOOL|MNUFRAME)\b")

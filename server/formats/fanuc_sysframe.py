@@ -129,17 +129,16 @@ def _scan(lines: list[str]) -> tuple[list[_Slot], dict[str, int]]:
         if slot is None or slot.uninitialized:
             continue
         for axes, attr in (("XYZ", "xyz_line"), ("WPR", "wpr_line")):
+            units = "mm" if axes == "XYZ" else "deg"
             m = _TRIPLE[axes].search(raw)
             if m is None:
                 if raw.strip().startswith(f"{axes[0]}:"):
-                    units = "mm" if axes == "XYZ" else "deg"
                     raise FormatError.at_line(n, slot.field, "expected '" + "  ".join(
                         f"{a}: <{units}>" for a in axes) + f"', got {raw.strip()!r}")
                 continue
             if getattr(slot, attr) is not None:
                 raise FormatError.at_line(n, slot.field, f"a second {', '.join(axes)} line")
             setattr(slot, attr, n)
-            units = "mm" if axes == "XYZ" else "deg"
             got = []
             for k, ax in enumerate(axes):
                 text = m.group(2 * k + 2)
@@ -177,8 +176,11 @@ def read_sysframe(text: str) -> ParsedFile:
         server/service/bounds.py, a frame without its X, Y, Z / W, P, R lines, an index
         beyond the table's declared size.
     """
-    lines, _ = _lines(text)
-    slots, _sizes = _scan(lines)
+    return _parsed(_scan(_lines(text)[0])[0])
+
+
+def _parsed(slots: list[_Slot]) -> ParsedFile:
+    """What :func:`read_sysframe` answers, from the scanned entries."""
     entries: list[FrameEntry] = []
     skipped: list[Skipped] = []
     unused: list[tuple[str, int]] = []
@@ -238,10 +240,10 @@ def patch_sysframe(entries: Iterable[FrameEntry], text: str) -> str:
     its ``ARRAY[.., n]``, a base on a positioner); names, loads and Remote TCP kinds are not in
     this file."""
     entries = canonical_order(list(entries))
-    if entries == read_sysframe(text).entries:
-        return text
     lines, ends = _lines(text)
     slots, sizes = _scan(lines)
+    if entries == _parsed(slots).entries:
+        return text
     mine = {(s.kind, s.number): s for s in slots if s.group == GROUP}
     want: dict[tuple[str, int], FrameEntry] = {}
     for e in entries:

@@ -221,17 +221,21 @@ async def body_of(request: Request, what: str = "the body") -> bytes:
         if size > MAX_BODY:
             raise RwsError(413, E_LARGE, f"{what} has more than {MAX_BODY} bytes")
         chunks.append(chunk)
-    request._body = b"".join(chunks)  # as Request.body() keeps it: a second read gets it again
-    return request._body
+    return b"".join(chunks)
+
+
+async def form_values(request: Request) -> dict[str, list[str]]:
+    """Every value of each field of the request's form, read once."""
+    body = await body_of(request)
+    try:
+        return parse_qs(body.decode("utf-8"), keep_blank_values=True, strict_parsing=False)
+    except UnicodeDecodeError:
+        raise RwsError(400, E_VALUE, "the form is not UTF-8") from None
 
 
 async def form(request: Request) -> dict[str, str]:
-    body = await body_of(request)
-    try:
-        parsed = parse_qs(body.decode("utf-8"), keep_blank_values=True, strict_parsing=False)
-    except UnicodeDecodeError:
-        raise RwsError(400, E_VALUE, "the form is not UTF-8") from None
-    return {k: v[-1] for k, v in parsed.items()}
+    """The request's form, the last value of each field."""
+    return {k: v[-1] for k, v in (await form_values(request)).items()}
 
 
 # ----------------------------------------------------------------------------- symbols
@@ -462,8 +466,9 @@ async def fileservice(face: RwsFace, request: Request, who: ops.Caller) -> Respo
 # ------------------------------------------------------------------------ subscriptions
 
 async def subscribe(face: RwsFace, request: Request, who: ops.Caller) -> Response:
-    fields = await form(request)
-    resources = parse_qs((await body_of(request)).decode("utf-8")).get("resources", [])
+    values = await form_values(request)
+    fields = {k: v[-1] for k, v in values.items()}
+    resources = [r for r in values.get("resources", []) if r]
     paths = []
     for r in resources:
         res = fields.get(r, "")
