@@ -18,11 +18,13 @@ import time
 from pathlib import Path
 
 import pytest
+from fastapi import APIRouter, FastAPI
 from sqlalchemy import text
 from sqlalchemy.exc import TimeoutError as PoolTimeout
 from api_helpers import C, make_client, open_session
 
 from db import session as db_session
+from server.api import deps
 from server.service import transaction
 
 
@@ -110,6 +112,50 @@ def test_reads_answer_while_more_writers_wait_than_a_pool_has_threads(client):
         for t in writers:
             t.join(60)
     assert codes == [200] * 50, sorted(set(codes))
+
+
+def test_a_mes_poll_answers_on_sqlite_while_every_reader_thread_is_busy(client):
+    """The reads a MES polls every second (a controller, a slot, a session, the robot, a job)
+    are quick reads: on SQLite they are answered on the event loop, so they answer while
+    every thread of the readers' pool works on something long (40 exports at once); a read
+    that may take long waits for a thread."""
+    if client.app.state.engine.dialect.name != "sqlite":
+        pytest.skip("on PostgreSQL every read waits for the network, in a thread")
+    url = open_session(client, "tool.xyz_4point", 1)
+    release = threading.Event()
+    busy = [deps.READERS.submit(release.wait, 30) for _ in range(deps.READER_THREADS)]
+    try:
+        for path in (C, f"{C}/tools/1", f"{C}/bases/1", f"{C}/robot", url):
+            answers: list = []
+            reader = threading.Thread(target=lambda p=path: answers.append(client.get(p)))
+            reader.start()
+            reader.join(10)
+            assert answers and answers[0].status_code == 200, path
+            assert answers[0].headers["ETag"], path
+        slow: list = []
+        reader = threading.Thread(target=lambda: slow.append(client.get(f"{C}/tools")))
+        reader.start()
+        reader.join(0.5)
+        assert slow == []  # a list of slots is not a quick read: it waits for a thread
+    finally:
+        release.set()
+    reader.join(10)
+    assert slow[0].status_code == 200
+    for f in busy:
+        f.result(10)
+
+
+def test_only_a_read_can_be_a_quick_read():
+    """A route that writes cannot be marked a quick read: it would write on the event loop."""
+    router = APIRouter()
+
+    @router.post("/x")
+    @deps.quick_read
+    def write_something() -> dict:
+        return {}
+
+    with pytest.raises(TypeError, match="quick_read is for reads"):
+        deps.add_routes(FastAPI(), router)
 
 
 BACK_TO_BACK = """

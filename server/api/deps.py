@@ -10,7 +10,9 @@ The transaction lives in the route's worker thread, never on the event loop. ``S
 (:func:`get_session`) only makes the session (no statement yet); every route taking one is a
 sync route wrapped by :func:`one_thread`, which in one worker thread takes the turn, claims
 the request's Idempotency-Key, runs the route, commits (or rolls back) and closes the session,
-so the write lock is held only while the route works.
+so the write lock is held only while the route works. One exception: a :func:`quick_read` (a
+few rows by key, what a MES polls) runs on the event loop on SQLite, where a read waits for
+no lock and no network.
 
 The load this serves: a plant of a few hundred cells, a person touching up every few seconds,
 ~100 writes/s at worst plus MES reads (``benchmarks/plant.py``, README "Measured").
@@ -75,7 +77,8 @@ def _audited_commit(db: Session, operation: str, params: dict[str, Any]) -> None
 # that writers hold while they queue for the database's write lock (SQLite: one writer at a
 # time across every process; at 100 touch-ups/s from two workers the writers queued there took
 # all 40 threads of a shared pool and the reads behind them waited seconds)
-READERS = ThreadPoolExecutor(max_workers=40, thread_name_prefix="read")  # anyio's default 40
+READER_THREADS = 40  # anyio's default
+READERS = ThreadPoolExecutor(max_workers=READER_THREADS, thread_name_prefix="read")
 WRITERS = ThreadPoolExecutor(max_workers=40, thread_name_prefix="write")
 
 
@@ -94,16 +97,39 @@ async def in_worker_thread(pool: ThreadPoolExecutor, fn: Callable[..., Any], *ar
     return await asyncio.get_running_loop().run_in_executor(pool, ctx.run, fn, *args)
 
 
+def quick_read(endpoint: Callable[..., Any]) -> Callable[..., Any]:
+    """Mark the GET route ``endpoint`` a quick read: it reads a few rows by key and computes
+    little (a controller, a slot, a session, the robot's state, a job: what a MES polls every
+    second). On SQLite :func:`one_thread` runs it on the event loop rather than in a worker
+    thread: a read there waits for no lock (WAL) and no network, and the hop to a thread and
+    back cost more than the read. Each hop hands the GIL between threads, and a thread that
+    wants it back while another computes waits up to the switch interval (5 ms): at 1000
+    reads/s beside 100 touch-ups/s, 864 reads/s were answered with the hop and the touch-ups'
+    p99 grew to 10 s; 990-996/s and 120-180 ms without (``benchmarks/plant.py``, README
+    "Measured"). A read that may take long (a file export, an analysis, a history) stays in a
+    thread, where the loop keeps answering while it works; so does every read on PostgreSQL,
+    which waits for the network."""
+    endpoint.quick_read = True  # type: ignore[attr-defined]
+    return endpoint
+
+
+def on_the_loop(request: Request) -> bool:
+    """Whether a :func:`quick_read` of ``request`` runs on the event loop (SQLite)."""
+    return request.app.state.engine.dialect.name == "sqlite"
+
+
 def one_thread(endpoint: Callable[..., Any]) -> Callable[..., Any]:
     """``endpoint`` (a sync route) run in a worker thread (:func:`in_worker_thread`); when it
     takes a session, that thread is the transaction's: this process's writers' turn
     (:func:`server.service.transaction.writers_turn`), the Idempotency-Key claimed, the route,
-    the audited commit, or the rollback if anything raised; then the session is closed.
+    the audited commit, or the rollback if anything raised; then the session is closed. A
+    :func:`quick_read` on SQLite does the same on the event loop.
     Async routes are returned unchanged."""
     if inspect.iscoroutinefunction(endpoint) or getattr(endpoint, "_one_thread", False):
         return endpoint
+    quick = getattr(endpoint, "quick_read", False)
 
-    def in_thread(request: Request, args: tuple, kwargs: dict[str, Any]) -> Any:
+    def in_transaction(request: Request, args: tuple, kwargs: dict[str, Any]) -> Any:
         db = next((v for v in kwargs.values() if isinstance(v, Session)), None)
         if db is None:
             return endpoint(*args, **kwargs)
@@ -135,8 +161,11 @@ def one_thread(endpoint: Callable[..., Any]) -> Callable[..., Any]:
     @functools.wraps(endpoint)
     async def run(*args: Any, **kwargs: Any) -> Any:
         request = kwargs[own] if own else kwargs.pop(REQUEST_PARAM)
-        pool = READERS if request.method in READ_METHODS else WRITERS
-        return await in_worker_thread(pool, in_thread, request, args, kwargs)
+        if request.method in READ_METHODS:
+            if quick and on_the_loop(request):
+                return in_transaction(request, args, kwargs)
+            return await in_worker_thread(READERS, in_transaction, request, args, kwargs)
+        return await in_worker_thread(WRITERS, in_transaction, request, args, kwargs)
 
     run.__signature__ = sig.replace(parameters=params)  # type: ignore[attr-defined]
     run._one_thread = True  # type: ignore[attr-defined]
@@ -169,5 +198,7 @@ def add_routes(app: FastAPI, router: Any) -> None:
     for route in router.routes:
         if not isinstance(route, APIRoute):  # a websocket or a mount would skip the app's auth
             raise TypeError(f"add_routes serves HTTP routes only, got {route!r}")
+        if getattr(route.endpoint, "quick_read", False) and not route.methods <= {"GET", "HEAD"}:
+            raise TypeError(f"quick_read is for reads, {route.path} answers {route.methods}")
         app.router.add_api_route(route.path, one_thread(route.endpoint),
                                  **{k: getattr(route, k) for k in ROUTE_FIELDS})

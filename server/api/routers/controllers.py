@@ -7,7 +7,7 @@ from fastapi import APIRouter, Response
 from db import crud
 from db.models import Controller
 from emulator import THERMAL_WARMUP_S, imperfections_document, imperfections_from_document
-from server.api.deps import SessionDep
+from server.api.deps import SessionDep, quick_read
 from server.api.preconditions import IfMatch, etag, set_etag
 from server.api.schemas import (CellOut, ClockIn, ClockOut, ControllerIn, ControllerOut, PhysicsIn,
                                 PhysicsOut)
@@ -42,6 +42,7 @@ def create_controller(body: ControllerIn, db: SessionDep) -> ControllerOut:
 
 
 @router.get("/{controller_id}")
+@quick_read
 def get_controller(controller_id: int, db: SessionDep, response: Response) -> ControllerOut:
     """The controller; its ``ETag`` (bumped by every motion and setting) goes with a later
     write as ``If-Match``."""

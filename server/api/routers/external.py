@@ -15,7 +15,7 @@ from emulator import external as ext_emu
 from server.service import controllers
 from server.service import external as ext
 from server.service import slots
-from server.api.deps import SessionDep
+from server.api.deps import SessionDep, quick_read
 from server.api.preconditions import IfMatch, set_etag
 from server.api.schemas import (ExternalErrorsIn, ExtHistoryOut, ExtSlotIn, ExtSlotOut,
                             ProvenanceOut, PoseOut)
@@ -46,6 +46,7 @@ def list_slots(controller_id: int, db: SessionDep) -> list[ExtSlotOut]:
 
 
 @router.get(SLOTS + "/{number}", summary="One external kinematic")
+@quick_read
 def get_slot(controller_id: int, number: int, db: SessionDep, response: Response) -> ExtSlotOut:
     """The slot; its ``ETag`` is what a later edit or restore sends as ``If-Match``."""
     e = ext.get_slot(db, controller_id, number)

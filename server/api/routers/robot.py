@@ -11,7 +11,7 @@ import emulator
 from db import crud
 from db.models import Controller
 from emulator import external as ext_emu
-from server.api.deps import SessionDep
+from server.api.deps import SessionDep, quick_read
 from server.api.preconditions import IfMatch, set_etag
 from server.api.schemas import (ActiveIn, ApproachIn, ExternalAxesIn, JogIn, JointsIn, PoseOut,
                                 RobotStateOut)
@@ -42,6 +42,7 @@ def _answer(db: SessionDep, c: Controller, response: Response) -> RobotStateOut:
 
 
 @router.get("")
+@quick_read
 def get_robot(controller_id: int, db: SessionDep, response: Response) -> RobotStateOut:
     """Joints, limits, active tool/base, flange pose (world) and TCP pose (active base); the
     ``ETag`` is the controller's version."""

@@ -12,7 +12,7 @@ import numpy as np
 from fastapi import APIRouter, Body, Query, Response
 
 from db import crud
-from server.api.deps import SessionDep
+from server.api.deps import SessionDep, quick_read
 from server.api.preconditions import IfMatch, set_etag
 from server.api.routers.common import entry_out, session_out, step_out
 from server.api.routers.external import ext_slot_out
@@ -63,6 +63,7 @@ def list_sessions(controller_id: int, db: SessionDep,
 
 
 @router.get(PREFIX + "/{session_id}")
+@quick_read
 def get_session(controller_id: int, session_id: int, db: SessionDep,
                 response: Response) -> SessionOut:
     """The steps with their prompts, which are filled, and the report once computed. Its

@@ -6,7 +6,7 @@ from fastapi import APIRouter, Response
 
 from db import crud
 from db.models import EntryHistory
-from server.api.deps import SessionDep
+from server.api.deps import SessionDep, quick_read
 from server.api.preconditions import IfMatch, etag, set_etag
 from server.api.routers.common import entry_out
 from server.api.schemas import EntryIn, EntryKind, EntryOut, HistoryOut
@@ -30,6 +30,7 @@ def table_router(table: str, path: str, tag: str) -> APIRouter:
         return [entry_out(e) for e in crud.list_entries(db, controller_id, table, kind)]
 
     @router.get("/{number}", name=f"get_{table}", summary=f"One {label} slot")
+    @quick_read
     def get_slot(controller_id: int, number: int, db: SessionDep, response: Response) -> EntryOut:
         """The slot; its ``ETag`` is what a later edit sends as ``If-Match``."""
         e = crud.get_entry(db, controller_id, table, number)
