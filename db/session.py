@@ -68,6 +68,18 @@ def make_engine(url: str) -> Engine:
     return engine
 
 
+def open_pool(engine: Engine) -> None:
+    """PostgreSQL: open the process's :data:`PG_POOL_SIZE` connections now. A service process
+    does it at start, not in its first busy second, where each new connection (a backend
+    forked, a SCRAM login) held requests up while the load had already begun. SQLite: nothing
+    (a connection is a file opened)."""
+    if engine.dialect.name != "postgresql":
+        return
+    connections = [engine.connect() for _ in range(PG_POOL_SIZE)]
+    for c in connections:
+        c.close()  # back to the pool, which keeps PG_POOL_SIZE
+
+
 def make_sessionmaker(engine: Engine) -> sessionmaker[Session]:
     return sessionmaker(bind=engine, expire_on_commit=False)
 

@@ -349,9 +349,9 @@ def test_a_touch_up_is_one_transaction_with_its_clock(client):
 
 
 def test_a_service_process_freezes_its_start_out_of_the_garbage_collectors_walks(db_url):
-    """``server.api.app:app`` (uvicorn's worker) and ``pendant serve`` set ``freeze_gc``: the app's
+    """``server.api.app:app`` (uvicorn's worker) and ``pendant serve`` set ``service_process``: the app's
     start-up objects go to the collector's permanent generation, so a full collection does
-    not walk them (80-170 ms per collection otherwise). An app of a test (no ``freeze_gc``)
+    not walk them (80-170 ms per collection otherwise). An app of a test (no ``service_process``)
     freezes nothing: what it leaves must stay collectable."""
     from api_helpers import app_settings
     from fastapi.testclient import TestClient
@@ -362,9 +362,36 @@ def test_a_service_process_freezes_its_start_out_of_the_garbage_collectors_walks
     with make_client(db_url) as c:
         assert c.get(f"{C}/tools/1").status_code == 200 and gc.get_freeze_count() == 0
     app = create_app(app_settings(db_url))
-    app.state.freeze_gc = True
+    app.state.service_process = True
     try:
         with TestClient(app):
             assert gc.get_freeze_count() > 10_000
+    finally:
+        gc.unfreeze()
+
+
+def test_a_service_process_on_postgresql_starts_with_its_connections_open(db_url):
+    """A service process opens its PostgreSQL connections as it starts, not in its first busy
+    second (each a backend forked and a login while requests wait); an app of a test opens
+    none it does not use."""
+    if not db_url.startswith("postgresql"):
+        pytest.skip("a SQLite connection is a file opened")
+    from api_helpers import app_settings
+    from fastapi.testclient import TestClient
+
+    from server.api.app import create_app
+
+    def opened(app) -> int:  # noqa: ANN001
+        pool = app.state.engine.pool
+        return pool.checkedin() + pool.checkedout()
+
+    app = create_app(app_settings(db_url))
+    with TestClient(app):
+        assert opened(app) < db_session.PG_POOL_SIZE
+    app = create_app(app_settings(db_url))
+    app.state.service_process = True
+    try:
+        with TestClient(app):
+            assert opened(app) == db_session.PG_POOL_SIZE
     finally:
         gc.unfreeze()

@@ -22,7 +22,7 @@ from starlette.exceptions import HTTPException as StarletteHTTPException
 
 from db import crud
 from db.session import (current_revision, make_engine, make_sessionmaker, migration_lock,
-                        schema_status, upgrade, write_session)
+                        open_pool, schema_status, upgrade, write_session)
 from emulator import DEMO_ROBOT, home_joints
 from server import __version__
 from server.api import deps
@@ -80,7 +80,7 @@ def freeze_garbage() -> None:
     the app, SQLAlchemy, pydantic, NumPy and SciPy make that 80-170 ms, during which the worker
     answers nothing (it was the p99 of touch-ups: ``benchmarks/README.md``). Frozen
     (``gc.freeze``), a collection walks only what was made since. For a service process once
-    it has started (``app.state.freeze_gc``), not for the many apps of a test run: what they
+    it has started (``app.state.service_process``), not for the many apps of a test run: what they
     leave behind would never be collected."""
     gc.collect()
     gc.freeze()
@@ -133,8 +133,10 @@ def event_dispatcher(app: FastAPI) -> Dispatcher:
 @asynccontextmanager
 async def lifespan(app: FastAPI) -> AsyncIterator[None]:
     """Deliver events while the service runs; close the DB pool at the end. A service process
-    (``app.state.freeze_gc``) starts with :func:`freeze_garbage`."""
-    if getattr(app.state, "freeze_gc", False):
+    (``app.state.service_process``) starts with its database connections open
+    (:func:`db.session.open_pool`) and :func:`freeze_garbage`."""
+    if getattr(app.state, "service_process", False):
+        open_pool(app.state.engine)
         freeze_garbage()
     dispatcher = event_dispatcher(app) if app.state.settings.dispatch_events else None
     if dispatcher is not None:
@@ -228,6 +230,6 @@ def __getattr__(name: str) -> FastAPI:
     if name == "app":
         global app
         app = create_app()
-        app.state.freeze_gc = True  # a service process (uvicorn's worker)
+        app.state.service_process = True  # a service process (uvicorn's worker)
         return app
     raise AttributeError(name)

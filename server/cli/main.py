@@ -701,7 +701,7 @@ def serve(args: argparse.Namespace) -> int:
         raise
     try:
         if args.workers == 1:
-            application.state.freeze_gc = True  # a service process (server.api.app.lifespan)
+            application.state.service_process = True  # a service process (server.api.app.lifespan)
             _serve(application, args.host, args.port, **proxy_options(args))
         else:
             # each worker builds server.api.app:app from the environment (server.settings)
