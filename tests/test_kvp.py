@@ -246,6 +246,56 @@ def test_a_write_its_user_may_make_is_answered_as_done_without_read_permission(c
         running.stop()
 
 
+def test_a_partial_write_keeps_a_change_another_face_made_meanwhile(cell: dict, monkeypatch) -> None:
+    """``TOOL_DATA[9] := {X 5.0}`` keeps Y..C as they are. A person's REST edit of Y committed
+    between the face's read of the slot and its write is kept (the write carried the version
+    it merged with, and merged again); it was overwritten with the old Y."""
+    from server.rws import ops
+
+    rest = cell["rest"]
+    ok(edit_slot(rest, f"{C}/tools/9", {"pose": {"x": 1.0, "y": 2.0, "z": 3.0}}))
+    real_slot, edits = ops.slot, []
+
+    def slot_then_a_person_edits(*args, **kwargs):  # noqa: ANN002, ANN003, ANN202
+        read = real_slot(*args, **kwargs)
+        if not edits:  # once: between this read and the face's write
+            edits.append(ok(edit_slot(rest, f"{C}/tools/9", {"pose": {"y": 222.0}})))
+        return read
+
+    monkeypatch.setattr(ops, "slot", slot_then_a_person_edits)
+    c = connect(cell)
+    try:
+        back = c.write("TOOL_DATA[9]", "{X 5.0}", debug=False)
+    finally:
+        c.close()
+    assert edits and back.startswith(b"{FRAME: X 5.0, Y 222.0, Z 3.0"), back
+    pose = ok(rest.get(f"{C}/tools/9"))["pose"]
+    assert (pose["x"], pose["y"], pose["z"]) == (5.0, 222.0, 3.0)
+
+
+def test_a_partial_write_that_keeps_meeting_other_writers_is_refused_whole(cell: dict,
+                                                                           monkeypatch) -> None:
+    """Another writer changes the slot between every read and write: after three merges the
+    write is refused naming the variable, and nothing of it is written."""
+    from server.rws import ops
+
+    rest = cell["rest"]
+    ok(edit_slot(rest, f"{C}/tools/10", {"pose": {"x": 1.0}}))
+    real_slot, edits = ops.slot, []
+
+    def slot_then_another_edit(*args, **kwargs):  # noqa: ANN002, ANN003, ANN202
+        read = real_slot(*args, **kwargs)
+        edits.append(ok(edit_slot(rest, f"{C}/tools/10", {"pose": {"y": float(len(edits))}})))
+        return read
+
+    monkeypatch.setattr(ops, "slot", slot_then_another_edit)
+    with socket.create_connection(("127.0.0.1", cell["port"]), timeout=10) as s:
+        s.sendall(raw(cell["port"], 4, 1, b"TOOL_DATA[10]", b"{X 5.0}"))
+        msg_id, text, good = answer_of(s)
+    assert (msg_id, good) == (4, False) and text.startswith("TOOL_DATA[10]: changed by another"), text
+    assert len(edits) == 3 and ok(rest.get(f"{C}/tools/10"))["pose"]["x"] == 1.0
+
+
 def test_a_long_refusal_does_not_put_the_client_out_of_step(cell: dict) -> None:
     """py-openshowvar reads an answer in one recv(256): a refusal naming a long unknown
     variable (and the variables pendant serves) was ~270 bytes, and the client's next reads

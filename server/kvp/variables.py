@@ -142,13 +142,42 @@ def read(face: Face, name: str, after_write: bool = False) -> str:
     return frame(s.entry.pose if s.entry else None)
 
 
-def _slot(face: Face, who: ops.Caller, table: str, n: int, var: str,
-          for_write: bool = False) -> ops.Slot:
+def _check_index(table: str, n: int, var: str) -> None:
     from db import crud
 
     if not 1 <= n <= crud.SLOTS[table]:
         raise KvpError(f"{var}: index {n} out of range 1..{crud.SLOTS[table]}")
+
+
+def _slot(face: Face, who: ops.Caller, table: str, n: int, var: str,
+          for_write: bool = False) -> ops.Slot:
+    _check_index(table, n, var)
     return ops.slot(face.maker, who, face.controller_id, table, n, for_write=for_write)
+
+
+MERGE_TRIES = 3  # a partial frame merged again when another writer changed the slot meanwhile
+
+
+def _write_frame(face: Face, who: ops.Caller, table: str, n: int, var: str, value: str) -> None:
+    """``TOOL_DATA[n]`` / ``BASE_DATA[n]`` := ``value``; a partial aggregate (``{X 12.5}``)
+    keeps the components it does not name, as a KRL assignment keeps them.
+
+    The merge is made with the slot as read, and the write carries the version it read (the
+    If-Match REST's PUT takes): a change another face or person committed between the two is
+    not overwritten with the old components; the merge is made again on the new frame, up to
+    :data:`MERGE_TRIES` times, then refused."""
+    for _ in range(MERGE_TRIES):
+        s = _slot(face, who, table, n, var, for_write=True)
+        p = _pose_write(value, s.entry.pose if s.entry else None, var)
+        body = EntryIn(pose={k.lower(): v for k, v in zip(FRAME_KEYS, p.as_array())})
+        try:
+            ops.commit_slot(face.maker, who, face.controller_id, table, n, body,
+                            expected_version=s.version)
+            return
+        except ops.Stale:
+            continue
+    raise KvpError(f"{var}: changed by another writer {MERGE_TRIES} times while this write "
+                   "merged with it; nothing written, send it again")
 
 
 def write(face: Face, name: str, value: str) -> str:
@@ -160,12 +189,12 @@ def write(face: Face, name: str, value: str) -> str:
     if m:
         array, n = m.group(1), int(m.group(2))
         table = "tool" if array in ("TOOL_DATA", "LOAD_DATA", "TOOL_NAME") else "base"
-        s = _slot(face, who, table, n, var, for_write=True)
-        clear = False
         if array in ("TOOL_DATA", "BASE_DATA"):
-            p = _pose_write(value, s.entry.pose if s.entry else None, var)
-            body = EntryIn(pose={k.lower(): v for k, v in zip(FRAME_KEYS, p.as_array())})
-        elif array == "LOAD_DATA":
+            _write_frame(face, who, table, n, var, value)
+            return read(face, name, after_write=True)
+        _check_index(table, n, var)
+        clear = False
+        if array == "LOAD_DATA":
             try:
                 ld = kuka.parse_load(_PREFIX.sub("{", value.strip()), 1, var)
             except FormatError as err:
