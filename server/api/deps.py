@@ -12,7 +12,7 @@ sync route wrapped by :func:`one_thread`, which in one worker thread takes the t
 the request's Idempotency-Key, runs the route, commits (or rolls back) and closes the session,
 so the write lock is held only while the route works. One exception: a :func:`quick_read` (a
 few rows by key, what a MES polls) runs on the event loop on SQLite, where a read waits for
-no lock and no network.
+no writer and no network.
 
 The load this serves: a plant of a few hundred cells, a person touching up every few seconds,
 ~100 writes/s at worst plus MES reads (``benchmarks/plant.py``, README "Measured").
@@ -101,7 +101,7 @@ def quick_read(endpoint: Callable[..., Any]) -> Callable[..., Any]:
     """Mark the GET route ``endpoint`` a quick read: it reads a few rows by key and computes
     little (a controller, a slot, a session, the robot's state, a job: what a MES polls every
     second). On SQLite :func:`one_thread` runs it on the event loop rather than in a worker
-    thread: a read there waits for no lock (WAL) and no network, and the hop to a thread and
+    thread: a read there waits for no writer (WAL) and no network, and the hop to a thread and
     back cost more than the read. Each hop hands the GIL between threads, and a thread that
     wants it back while another computes waits up to the switch interval (5 ms): at 1000
     reads/s beside 100 touch-ups/s, 864 reads/s were answered with the hop and the touch-ups'
