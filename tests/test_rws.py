@@ -334,3 +334,99 @@ def test_oversize_and_stalled_requests_do_not_stall_the_face(cell: dict) -> None
         half.sendall(b"POST /rw/rapid/symbol/data/RAPID/T_ROB1/tool1?action=set HTTP/1.1\r\n"
                      b"Host: x\r\nContent-Length: 100\r\n\r\nvalue=")
         assert client(cell).get_operation_mode() == "MANR"
+
+
+def _subscribe(tc, auth) -> str:  # noqa: ANN001
+    """POST /subscription of tool4's value as abb-robot-client sends it; the socket's number."""
+    r = tc.post("/subscription", auth=auth, data={
+        "resources": ["1"], "1": "/rw/rapid/symbol/data/RAPID/T_ROB1/tool4;value", "1-p": "1"})
+    assert r.status_code == 201, r.text
+    return r.headers["Location"].rsplit("/", 1)[1]
+
+
+def _socket_headers(tc, **extra: str) -> dict[str, str]:  # noqa: ANN001
+    """A browser's handshake to the face: its Host and the login's ABBCX cookie (Starlette's
+    test client sends neither on a WebSocket by itself)."""
+    return {"Host": "127.0.0.1:8610", "Cookie": f"ABBCX={tc.cookies['ABBCX']}", **extra}
+
+
+def test_another_sites_page_cannot_open_a_subscription_socket(cell: dict) -> None:
+    """A browser opens any site's WebSocket with the robot's cookies (the ABBCX login) and lets
+    that page read what comes: a socket opened with another site's Origin, or to a Host not
+    served, is refused before it opens; from the face's own page it opens."""
+    import httpx
+    from starlette.testclient import TestClient
+    from starlette.websockets import WebSocketDisconnect
+
+    app = create_rws_app(RwsFace(cell["maker"]), ("127.0.0.1",))
+    auth = httpx.DigestAuth("expert", PASSWORD["expert"])
+    proto = ["robapi2_subscription"]
+    with TestClient(app, base_url="http://127.0.0.1:8610") as tc:
+        n = _subscribe(tc, auth)  # the login's ABBCX cookie is kept by the client
+        for origin in ("http://evil.example", "null"):
+            with pytest.raises(WebSocketDisconnect) as refused:
+                with tc.websocket_connect(f"/poll/{n}", subprotocols=proto,
+                                          headers=_socket_headers(tc, Origin=origin)):
+                    pass
+            assert refused.value.code == 1008
+        with pytest.raises(WebSocketDisconnect):
+            with tc.websocket_connect(f"/poll/{n}", subprotocols=proto,
+                                      headers=_socket_headers(tc, Host="evil.example")):
+                pass
+        with tc.websocket_connect(f"/poll/{n}", subprotocols=proto, headers=_socket_headers(
+                tc, Origin="http://127.0.0.1:8610")) as ws:
+            assert ws.accepted_subprotocol == "robapi2_subscription"
+            with pytest.raises(WebSocketDisconnect):  # one socket per subscription
+                with tc.websocket_connect(f"/poll/{n}", subprotocols=proto,
+                                          headers=_socket_headers(tc)):
+                    pass
+
+
+def test_subscriptions_never_opened_do_not_pile_up(cell: dict, monkeypatch) -> None:
+    """A client that subscribes and never opens the socket: a user holds a bounded number of
+    subscriptions (429 past it, naming the limit), and one not opened in time is dropped."""
+    import httpx
+    from starlette.testclient import TestClient
+
+    from server.rws import app as rws_app
+
+    monkeypatch.setattr(rws_app, "SUBS_PER_USER", 3)
+    face = RwsFace(cell["maker"])
+    auth = httpx.DigestAuth("expert", PASSWORD["expert"])
+    with TestClient(create_rws_app(face), base_url="http://127.0.0.1:8610") as tc:
+        for _ in range(3):
+            _subscribe(tc, auth)
+        r = tc.post("/subscription?json=1", auth=auth, data={
+            "resources": ["1"], "1": "/rw/rapid/symbol/data/RAPID/T_ROB1/tool4;value"})
+        assert r.status_code == 429 and "at most 3" in r.text, r.text
+        assert len(face.subscriptions) == 3
+        monkeypatch.setattr(rws_app, "SUB_OPEN_WITHIN_S", 0.0)  # the three are now too old
+        _subscribe(tc, auth)
+        assert len(face.subscriptions) == 1
+
+
+def test_a_login_cookie_unused_too_long_opens_no_socket(cell: dict, monkeypatch) -> None:
+    """The ABBCX cookie of a login is forgotten once unused for SESSION_IDLE_S: a copy of it
+    opens no subscription socket afterwards (it worked for as long as the service ran)."""
+    import httpx
+    from starlette.testclient import TestClient
+    from starlette.websockets import WebSocketDisconnect
+
+    from server.rws import app as rws_app
+
+    auth = httpx.DigestAuth("expert", PASSWORD["expert"])
+    with TestClient(create_rws_app(RwsFace(cell["maker"])), base_url="http://127.0.0.1:8610") as tc:
+        r = tc.post("/subscription", auth=auth, data={
+            "resources": ["1"], "1": "/rw/rapid/symbol/data/RAPID/T_ROB1/tool4;value"})
+        assert r.status_code == 201 and "max-age=1800" in r.headers["set-cookie"].lower()
+        n = r.headers["Location"].rsplit("/", 1)[1]
+        with tc.websocket_connect(f"/poll/{n}", subprotocols=["robapi2_subscription"],
+                                  headers=_socket_headers(tc)) as ws:
+            assert ws.accepted_subprotocol == "robapi2_subscription"  # the login is live
+        n = _subscribe(tc, auth)
+        monkeypatch.setattr(rws_app, "SESSION_IDLE_S", -1.0)  # every login now unused too long
+        with pytest.raises(WebSocketDisconnect) as refused:
+            with tc.websocket_connect(f"/poll/{n}", subprotocols=["robapi2_subscription"],
+                                      headers=_socket_headers(tc)):
+                pass
+        assert refused.value.code == 1008

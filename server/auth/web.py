@@ -50,25 +50,32 @@ class SiteGuard:
         self.origins = {o.rstrip("/").lower() for o in cors_origins}
 
     async def __call__(self, scope: Scope, receive: Receive, send: Send) -> None:
-        if scope["type"] != "http":
+        if scope["type"] not in ("http", "websocket"):
             await self.app(scope, receive, send)
             return
         headers = {k.decode("latin-1").lower(): v.decode("latin-1")
                    for k, v in scope.get("headers", [])}
         host = headers.get("host", "")
-        if "*" not in self.hosts and host_name(host) not in self.hosts:
+        origin = headers.get("origin")
+        if scope["type"] == "websocket":
+            # a browser opens another site's WebSocket with this site's cookies (RWS's ABBCX
+            # login) and lets its page read the answers: a socket opened from another
+            # site's page is refused (the handshake answers 403), as a command is
+            if not self._host_allowed(host) or (
+                    origin is not None and not self._own_or_allowed(origin, scope, host)):
+                await send({"type": "websocket.close", "code": 1008})
+                return
+            await self.app(scope, receive, send)
+            return
+        if not self._host_allowed(host):
             await _deny(send, 400, ["header", "host"], f"host {host!r} is not served here; "
                         "allowed: " + ", ".join(sorted(self.hosts)) + " (--allow-host)")
             return
-        origin = headers.get("origin")
-        if scope["method"] not in SAFE_METHODS and origin is not None:
-            o = origin.rstrip("/").lower()
-            own = {f"{scope.get('scheme', 'http')}://{host.lower()}"}
-            parts = urlsplit(o)
-            if (o not in own and o not in self.origins) or parts.scheme not in ("http", "https"):
-                await _deny(send, 403, ["header", "origin"], f"a command from {origin} is "
-                            "refused: another site's page may not change anything here")
-                return
+        if (scope["method"] not in SAFE_METHODS and origin is not None
+                and not self._own_or_allowed(origin, scope, host)):
+            await _deny(send, 403, ["header", "origin"], f"a command from {origin} is "
+                        "refused: another site's page may not change anything here")
+            return
         path = scope.get("path", "")
         csp = not path.startswith(NO_CSP)
         rid = headers.get("x-request-id", "")
@@ -84,6 +91,18 @@ class SiteGuard:
             await send(message)
 
         await self.app(scope, receive, send_with_headers)
+
+
+    def _host_allowed(self, host: str) -> bool:
+        return "*" in self.hosts or host_name(host) in self.hosts
+
+    def _own_or_allowed(self, origin: str, scope: Scope, host: str) -> bool:
+        """Whether ``origin`` is this site (scheme and Host) or one --cors-origin allows."""
+        o = origin.rstrip("/").lower()
+        scheme = {"ws": "http", "wss": "https"}.get(scope.get("scheme", "http"),
+                                                     scope.get("scheme", "http"))
+        own = {f"{scheme}://{host.lower()}"}
+        return (o in own or o in self.origins) and urlsplit(o).scheme in ("http", "https")
 
 
 async def _deny(send: Send, status: int, loc: list[str], msg: str) -> None:

@@ -26,6 +26,8 @@ import asyncio
 import html
 import logging
 import secrets
+import time
+from collections import OrderedDict
 from dataclasses import dataclass, field
 from typing import Any
 from urllib.parse import parse_qs, urlparse
@@ -52,6 +54,10 @@ from solvers.frames import abb_from_matrix, invert
 log = logging.getLogger("pendant.rws")
 MAX_BODY = 64 * 1024  # bytes of a form or a file a client may send
 POLL_S = 0.2  # how often a subscription looks for changed values
+SESSION_IDLE_S = 30 * 60  # an ABBCX login unused this long is forgotten (pendant's choice)
+SESSIONS_MAX = 10_000  # ABBCX logins kept at once; the least recently used goes first
+SUB_OPEN_WITHIN_S = 60.0  # a subscription whose WebSocket was not opened by then is dropped
+SUBS_PER_USER = 64  # subscriptions a user holds at once (opened or waiting to be)
 EXTAX_NONE = "9E+09"  # RAPID's "no external axis"
 HOME = "$HOME"
 
@@ -72,6 +78,16 @@ class RwsError(Exception):
 
 
 @dataclass
+class Subscription:
+    """A ``POST /subscription``'s symbols, for its owner's WebSocket ``/poll/<n>``."""
+
+    owner: str
+    paths: list[str]
+    made: float = field(default_factory=time.monotonic)
+    opened: bool = False
+
+
+@dataclass
 class RwsFace:
     """The face's settings and the subscriptions it holds."""
 
@@ -79,13 +95,56 @@ class RwsFace:
     controller: str | int | None = None  # name or id; None: the lowest-id ABB controller
     auth: bool = True
     seen: digest.Seen = field(default_factory=digest.Seen)
-    sessions: dict[str, str] = field(default_factory=dict)  # ABBCX cookie -> user
-    subscriptions: dict[int, list[str]] = field(default_factory=dict)  # id -> symbol paths
-    sub_owner: dict[int, str] = field(default_factory=dict)
+    # ABBCX cookie -> (user, when last used), least recently used first
+    sessions: OrderedDict[str, tuple[str, float]] = field(default_factory=OrderedDict)
+    subscriptions: dict[int, Subscription] = field(default_factory=dict)
     next_sub: int = 1
 
     def controller_id(self) -> int:
         return ops.controller_id(self.make_session, self.controller, "abb")
+
+    def login(self, cookie: str | None, user: str) -> str | None:
+        """The ABBCX login ``cookie`` of ``user`` marked used; a new cookie to set when it is
+        not that user's live login (None: keep it)."""
+        now = time.monotonic()
+        if cookie is not None and self.session_user(cookie, now) == user:
+            self.sessions[cookie] = (user, now)
+            self.sessions.move_to_end(cookie)
+            return None
+        cookie = secrets.token_urlsafe(24)
+        self.sessions[cookie] = (user, now)
+        while len(self.sessions) > SESSIONS_MAX:
+            self.sessions.popitem(last=False)
+        return cookie
+
+    def session_user(self, cookie: str, now: float | None = None) -> str | None:
+        """The user of a live ABBCX login; a login unused for :data:`SESSION_IDLE_S` is
+        forgotten (a cookie copied off a PC does not open subscriptions for ever)."""
+        found = self.sessions.get(cookie)
+        if found is None:
+            return None
+        if (now if now is not None else time.monotonic()) - found[1] > SESSION_IDLE_S:
+            self.sessions.pop(cookie, None)
+            return None
+        return found[0]
+
+    def add_subscription(self, owner: str, paths: list[str]) -> int:
+        """A new subscription's number. Subscriptions whose socket was not opened within
+        :data:`SUB_OPEN_WITHIN_S` are dropped first; a user holds at most
+        :data:`SUBS_PER_USER` (a client that subscribes and never opens one filled memory)."""
+        now = time.monotonic()
+        for n in [n for n, sub in self.subscriptions.items()
+                  if not sub.opened and now - sub.made > SUB_OPEN_WITHIN_S]:
+            del self.subscriptions[n]
+        held = sum(1 for sub in self.subscriptions.values() if sub.owner == owner)
+        if held >= SUBS_PER_USER:
+            raise RwsError(429, E_NOT_OFFERED, f"{owner} holds {held} subscriptions, at most "
+                           f"{SUBS_PER_USER}: close one (or open its socket within "
+                           f"{SUB_OPEN_WITHIN_S:g} s of subscribing)")
+        n = self.next_sub
+        self.next_sub += 1
+        self.subscriptions[n] = Subscription(owner, paths)
+        return n
 
 
 # ----------------------------------------------------------------------------- answers
@@ -182,13 +241,10 @@ def guarded(face: RwsFace, handler):
             if err.http == 401:
                 headers = {"WWW-Authenticate": digest.challenge(isinstance(err, _Stale))}
             return error(request, err, headers)
-        cookie = request.cookies.get("ABBCX")
-        if cookie is None or face.sessions.get(cookie) != who.name:
-            cookie = secrets.token_urlsafe(24)
-            face.sessions[cookie] = who.name
-            while len(face.sessions) > 10_000:
-                face.sessions.pop(next(iter(face.sessions)))
-            response.set_cookie("ABBCX", cookie, httponly=True, samesite="strict")
+        cookie = face.login(request.cookies.get("ABBCX"), who.name)
+        if cookie is not None:
+            response.set_cookie("ABBCX", cookie, httponly=True, samesite="strict",
+                                max_age=SESSION_IDLE_S)
         return response
     return endpoint
 
@@ -484,10 +540,7 @@ async def subscribe(face: RwsFace, request: Request, who: ops.Caller) -> Respons
         paths.append(sym_path)
     if not paths:
         raise RwsError(400, E_VALUE, "resources: none given")
-    sub_id = face.next_sub
-    face.next_sub += 1
-    face.subscriptions[sub_id] = paths
-    face.sub_owner[sub_id] = who.name
+    sub_id = face.add_subscription(who.name, paths)
     ws = str(request.base_url).replace("http:", "ws:").rstrip("/") + f"/poll/{sub_id}"
     body = ('<?xml version="1.0" encoding="utf-8"?><html xmlns="http://www.w3.org/1999/xhtml">'
             f'<head><title>poll</title></head><body><div class="state"><a href="{ws}" '
@@ -506,15 +559,16 @@ def _event(sym: rapid.Symbol) -> str:
 
 async def poll(face: RwsFace, ws: WebSocket) -> None:
     sub_id = int(ws.path_params["sub"])
-    paths = face.subscriptions.get(sub_id)
+    sub = face.subscriptions.get(sub_id)
     try:
         who = await _ws_caller(face, ws)
     except RwsError:
         await ws.close(code=1008)
         return
-    if paths is None or face.sub_owner.get(sub_id) != who.name:
+    if sub is None or sub.owner != who.name or sub.opened:  # one socket per subscription
         await ws.close(code=1008)
         return
+    sub.opened, paths = True, sub.paths
     await ws.accept(subprotocol="robapi2_subscription")
     last: dict[str, str] = {}
     try:
@@ -542,7 +596,6 @@ async def poll(face: RwsFace, ws: WebSocket) -> None:
         pass
     finally:
         face.subscriptions.pop(sub_id, None)
-        face.sub_owner.pop(sub_id, None)
 
 
 async def _ws_caller(face: RwsFace, ws: WebSocket) -> ops.Caller:
@@ -552,7 +605,7 @@ async def _ws_caller(face: RwsFace, ws: WebSocket) -> ops.Caller:
     try:
         return await authenticate(face, ws, "GET")
     except RwsError:
-        name = face.sessions.get(ws.cookies.get("ABBCX", ""))
+        name = face.session_user(ws.cookies.get("ABBCX", ""))
         who = None if name is None else await run_in_threadpool(
             ops.caller, face.make_session, name, "rws", _client(ws))
         if who is None:
