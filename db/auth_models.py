@@ -14,7 +14,7 @@ from typing import Any
 from sqlalchemy import JSON, ForeignKey, String
 from sqlalchemy.orm import Mapped, mapped_column
 
-from db.models import Base, utcnow
+from db.models import NO_ID_REUSE, Base, utcnow
 
 
 class Role(Base):
@@ -31,6 +31,7 @@ class User(Base):
     """A person (or a cell computer) with one role; revoked users keep their audit records."""
 
     __tablename__ = "auth_user"
+    __table_args__ = NO_ID_REUSE
 
     id: Mapped[int] = mapped_column(primary_key=True)
     name: Mapped[str] = mapped_column(String(64), unique=True)
@@ -46,6 +47,7 @@ class ApiToken(Base):
     """A bearer token of a user: its SHA-256, expiry, revocation."""
 
     __tablename__ = "auth_token"
+    __table_args__ = NO_ID_REUSE
 
     id: Mapped[int] = mapped_column(primary_key=True)
     user_id: Mapped[int] = mapped_column(ForeignKey("auth_user.id", ondelete="CASCADE"),
@@ -61,6 +63,7 @@ class WebSession(Base):
     """A browser login: the cookie's SHA-256, its CSRF token, the last request (idle timeout)."""
 
     __tablename__ = "auth_web_session"
+    __table_args__ = NO_ID_REUSE
 
     id: Mapped[int] = mapped_column(primary_key=True)
     user_id: Mapped[int] = mapped_column(ForeignKey("auth_user.id", ondelete="CASCADE"),
@@ -77,6 +80,7 @@ class AuditRecord(Base):
     """One change: who, when, from where, what, before -> after. Append-only, no foreign key."""
 
     __tablename__ = "audit_record"
+    __table_args__ = NO_ID_REUSE
 
     id: Mapped[int] = mapped_column(primary_key=True)
     at: Mapped[datetime] = mapped_column(default=utcnow, index=True)

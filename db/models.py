@@ -49,6 +49,14 @@ def _session_fk(ondelete: str) -> ForeignKey:
     return ForeignKey("calib_session.id", ondelete=ondelete)
 
 
+# SQLite gives a new row the largest id + 1, so deleting the newest controller (session, job,
+# webhook, event, ...) handed its id to the next one made: an ETag, an audit query, an MES
+# subscription or a webhook consumer's event id kept for the old row then named the new one.
+# With AUTOINCREMENT SQLite never gives an id twice (revision 0012); PostgreSQL's sequences
+# never did. Every table whose primary key is an integer id has it.
+NO_ID_REUSE = {"sqlite_autoincrement": True}
+
+
 class Base(DeclarativeBase):
     metadata = MetaData(naming_convention=NAMING_CONVENTION)
     # float -> DOUBLE as the migrations have it (SQLAlchemy 2.1's default; 2.0 would say FLOAT)
@@ -77,6 +85,7 @@ class Controller(Base):
     """An emulated robot controller: its arm, its emulated cell and the pendant's state."""
 
     __tablename__ = "controller"
+    __table_args__ = NO_ID_REUSE
 
     id: Mapped[int] = mapped_column(primary_key=True)
     name: Mapped[str] = mapped_column(String(64), unique=True)
@@ -115,7 +124,7 @@ class FrameEntry(PoseColumns, Base):
     """
 
     __tablename__ = "frame_entry"
-    __table_args__ = (UniqueConstraint("controller_id", "entry_table", "number"),)
+    __table_args__ = (UniqueConstraint("controller_id", "entry_table", "number"), NO_ID_REUSE)
 
     id: Mapped[int] = mapped_column(primary_key=True)
     controller_id: Mapped[int] = mapped_column(_controller_fk(), index=True)
@@ -152,6 +161,7 @@ class EntryHistory(Base):
     """One change of a table slot: the slot before and after (snapshots), why, when."""
 
     __tablename__ = "entry_history"
+    __table_args__ = NO_ID_REUSE
 
     id: Mapped[int] = mapped_column(primary_key=True)
     controller_id: Mapped[int] = mapped_column(_controller_fk(), index=True)
@@ -173,6 +183,7 @@ class CalibSession(Base):
     """
 
     __tablename__ = "calib_session"
+    __table_args__ = NO_ID_REUSE
 
     id: Mapped[int] = mapped_column(primary_key=True)
     controller_id: Mapped[int] = mapped_column(_controller_fk(), index=True)
@@ -220,7 +231,7 @@ class TaughtPoint(PoseColumns, Base):
     """A touch-up: the flange pose (columns) of one step, its joints, or a beam trigger."""
 
     __tablename__ = "taught_point"
-    __table_args__ = (UniqueConstraint("session_id", "step"),)
+    __table_args__ = (UniqueConstraint("session_id", "step"), NO_ID_REUSE)
 
     id: Mapped[int] = mapped_column(primary_key=True)
     session_id: Mapped[int] = mapped_column(_session_fk("CASCADE"), index=True)
@@ -258,7 +269,7 @@ class ExternalKinematic(PoseColumns, Base):
     """
 
     __tablename__ = "external_kinematic"
-    __table_args__ = (UniqueConstraint("controller_id", "number"),)
+    __table_args__ = (UniqueConstraint("controller_id", "number"), NO_ID_REUSE)
 
     id: Mapped[int] = mapped_column(primary_key=True)
     controller_id: Mapped[int] = mapped_column(_controller_fk(), index=True)
@@ -295,6 +306,7 @@ class StoredDocument(Base):
     """
 
     __tablename__ = "stored_document"
+    __table_args__ = NO_ID_REUSE
 
     id: Mapped[int] = mapped_column(primary_key=True)
     collection: Mapped[str] = mapped_column(String(16), index=True)
@@ -310,7 +322,7 @@ class ControllerFile(Base):
     """
 
     __tablename__ = "controller_file"
-    __table_args__ = (UniqueConstraint("controller_id", "format"),)
+    __table_args__ = (UniqueConstraint("controller_id", "format"), NO_ID_REUSE)
 
     id: Mapped[int] = mapped_column(primary_key=True)
     controller_id: Mapped[int] = mapped_column(_controller_fk(), index=True)
@@ -352,6 +364,7 @@ class Job(Base):
     """
 
     __tablename__ = "job"
+    __table_args__ = NO_ID_REUSE
 
     id: Mapped[int] = mapped_column(primary_key=True)
     kind: Mapped[str] = mapped_column(String(32))  # analysis | restore
@@ -379,6 +392,7 @@ class Event(Base):
     """
 
     __tablename__ = "event"
+    __table_args__ = NO_ID_REUSE
 
     id: Mapped[int] = mapped_column(primary_key=True)
     kind: Mapped[str] = mapped_column(String(32), index=True)
@@ -393,6 +407,7 @@ class Webhook(Base):
     HMAC-SHA256 under ``secret``."""
 
     __tablename__ = "webhook"
+    __table_args__ = NO_ID_REUSE
 
     id: Mapped[int] = mapped_column(primary_key=True)
     url: Mapped[str] = mapped_column(String(2048))
@@ -410,6 +425,7 @@ class Delivery(Base):
     """
 
     __tablename__ = "delivery"
+    __table_args__ = NO_ID_REUSE
 
     id: Mapped[int] = mapped_column(primary_key=True)
     event_id: Mapped[int] = mapped_column(ForeignKey("event.id", ondelete="CASCADE"), index=True)

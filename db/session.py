@@ -172,11 +172,32 @@ def migration_lock(engine: Engine) -> Iterator[None]:
 
 
 def run_migrations(engine: Engine) -> None:
-    """Bring the schema to the newest Alembic revision (``alembic upgrade head``), unlocked."""
+    """Bring the schema to the newest Alembic revision (``alembic upgrade head``), unlocked.
+
+    SQLite: with foreign keys off for the run, then checked. A revision that SQLite cannot
+    ALTER makes a table anew, copies its rows, drops the old table and renames the new one
+    (Alembic's batch mode, SQLite's own 12-step procedure); with foreign keys on, that DROP
+    deletes every row referring to the table by cascade. SQLite ignores the pragma inside a
+    transaction: it is set on the connection before the migration's transaction begins, and
+    put back after. A dangling reference found at the end rolls the whole upgrade back."""
     cfg = alembic_config(_url(engine))
-    with engine.begin() as connection:
-        cfg.attributes["connection"] = connection
-        command.upgrade(cfg, "head")
+    sqlite = engine.dialect.name == "sqlite"
+    with engine.connect() as connection:
+        raw = connection.connection.driver_connection if sqlite else None
+        if raw is not None:
+            raw.execute("PRAGMA foreign_keys=OFF")  # autocommit: outside any transaction
+        try:
+            with connection.begin():
+                cfg.attributes["connection"] = connection
+                command.upgrade(cfg, "head")
+                if raw is not None:
+                    dangling = connection.exec_driver_sql("PRAGMA foreign_key_check").fetchall()
+                    if dangling:
+                        raise RuntimeError(f"the migration left rows referring to rows that are "
+                                           f"gone (table, rowid, parent): {dangling[:5]}")
+        finally:
+            if raw is not None:
+                raw.execute("PRAGMA foreign_keys=ON")
 
 
 def upgrade(engine: Engine) -> tuple[str | None, str]:
