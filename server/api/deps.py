@@ -99,16 +99,17 @@ async def in_worker_thread(pool: ThreadPoolExecutor, fn: Callable[..., Any], *ar
 
 def quick_read(endpoint: Callable[..., Any]) -> Callable[..., Any]:
     """Mark the GET route ``endpoint`` a quick read: it reads a few rows by key and computes
-    little (a controller, a slot, a session, the robot's state, a job: what a MES polls every
+    little (a controller, a slot, a session, the robot's state: what a MES polls every
     second). On SQLite :func:`one_thread` runs it on the event loop rather than in a worker
     thread: a read there waits for no writer (WAL) and no network, and the hop to a thread and
     back cost more than the read. Each hop hands the GIL between threads, and a thread that
     wants it back while another computes waits up to the switch interval (5 ms): at 1000
     reads/s beside 100 touch-ups/s, 864 reads/s were answered with the hop and the touch-ups'
-    p99 grew to 10 s; 990-996/s and 120-180 ms without (``benchmarks/plant.py``, README
-    "Measured"). A read that may take long (a file export, an analysis, a history) stays in a
-    thread, where the loop keeps answering while it works; so does every read on PostgreSQL,
-    which waits for the network."""
+    p99 grew to 10 s; 989-996/s and 0.05-0.5 s without (``benchmarks/plant.py``, README
+    "Measured"). A read that may take long stays in a thread, where the loop keeps answering
+    while it works: a file export, an analysis, a history, a job (its row holds its
+    parameters: a restore's are megabytes); so does every read on PostgreSQL, which waits
+    for the network."""
     endpoint.quick_read = True  # type: ignore[attr-defined]
     return endpoint
 

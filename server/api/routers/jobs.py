@@ -19,7 +19,7 @@ from pydantic import BaseModel, ConfigDict
 
 from db import jobs
 from db.models import Job
-from server.api.deps import SessionDep, quick_read
+from server.api.deps import SessionDep
 from server.service import jobs as job_service
 
 router = APIRouter(prefix="/jobs", tags=["Jobs"])
@@ -74,7 +74,6 @@ def accepted(response: Response, job: Job) -> JobOut:
 
 
 @router.get("/{job_id}")
-@quick_read
 def get_job(job_id: int, db: SessionDep) -> JobOut:
     """A job's state, progress and, when done, its result and the link to it."""
     return JobOut.of(jobs.get(db, job_id))
