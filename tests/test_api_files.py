@@ -226,6 +226,10 @@ def test_cli_dry_run_shows_values_before_and_after_and_slots_choose(db_url, tmp_
     assert main(["import", str(f), "--controller", "cell-1", "--slots", "tool3,base1",
                  "--db", db_url]) == 0
     assert "2 slot(s) changed" in capsys.readouterr().out
+    for bad in ("tool" + "1" * 5000, "tool\u0663", "gripper1"):  # a traceback (ValueError) before
+        assert main(["import", str(f), "--controller", "cell-1", "--slots", bad,
+                     "--db", db_url]) != 0
+        assert "--slots: expected tool<n> or base<n>" in capsys.readouterr().err
     with make_client(db_url) as client:
         assert ok(client.get(f"{C}/tools/1"))["name"] == "pointer"
         assert ok(client.get(f"{C}/bases/1"))["pose"]["b"] == 0.238999218

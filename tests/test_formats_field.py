@@ -409,3 +409,45 @@ def test_fanuc_sysframe_last_line_uninitialized_and_a_base_on_a_positioner():
     with pytest.raises(FormatError, match="a base on the external axis unit POS1"):
         formats.PATCHERS["fanuc"]([replace(base, kind="coordinated_base", mech_unit="POS1")
                                    if e is base else e for e in entries], frames)
+
+
+D = "1" * 5000  # Python's int() refuses more than 4300 digits with a ValueError
+
+
+@pytest.mark.parametrize("fmt, name, old, new, line", [
+    ("kuka", "kuka_krc4_crlf_cp1252.dat", "TOOL_DATA[16]", f"TOOL_DATA[{D}]", 15),  # a size
+    ("kuka", "kuka_krc4_crlf_cp1252.dat", "TOOL_DATA[1]=", f"TOOL_DATA[{D}]=", 16),  # an index
+    ("abb", "abb_mixed_endings.mod", "! pendant: tool 1 ", f"! pendant: tool {D} ", 3),
+    ("fanuc", "fanuc_crlf.txt", " [1,1] =  ! tool", f" [1,{D}] =  ! tool", 25),
+    ("fanuc", "fanuc_sysframe_crlf.va", "ARRAY[2,9] OF POSITION", f"ARRAY[2,{D}] OF POSITION", 4),
+    ("ur", "ur_crlf.script", "# tool 1 ", f"# tool {D} ", 5),
+    ("kuka", "kuka_krc4_crlf_cp1252.dat", "TOOL_DATA[1]=", "TOOL_DATA[\u0663]=", 16),
+])
+def test_an_index_of_thousands_of_digits_is_refused_naming_its_line(client, fmt, name, old, new,
+                                                                    line):
+    """An index or a table size of 5000 digits in a controller file: 422 naming the file's
+    line, nothing imported (it was a 500, Python's int() refusing the string); one written in
+    another script's digits (int() reads "\u0663" as 3) too."""
+    text, encoding = load(name)
+    assert old in text
+    body = {"format": fmt, "text": text.replace(old, new, 1)}
+    if encoding != "utf-8":
+        body["encoding"] = encoding
+    before = ok(client.get(f"{C}/tools"))
+    r = client.post(f"{C}/import", json=body)
+    assert r.status_code == 422, r.text[:300]
+    detail = r.json()["detail"][0]
+    assert f"line {line}" in detail["loc"] and "an index " in detail["msg"], detail
+    assert ok(client.get(f"{C}/tools")) == before
+
+
+def test_a_machine_def_index_of_thousands_of_digits_is_kept_and_exports_still_work(client):
+    """A $config.dat whose MACHINE_DEF has an index of 5000 digits imports (pendant does not
+    read MACHINE_DEF from it) and every later export keeps the line byte for byte: each export
+    answered 500 (Python's int() refusing the string)."""
+    text, encoding = load("kuka_krc4_crlf_cp1252.dat")
+    odd = f'MACHINE_DEF[{D}]={{NAME[] "TABLE1"}}'
+    ok(client.post(f"{C}/import", json={"format": "kuka", "encoding": encoding,
+                                         "text": text.replace("ENDDAT", odd + "\r\nENDDAT", 1)}))
+    r = client.get(f"{C}/export", params={"format": "kuka"})
+    assert r.status_code == 200 and odd.encode("cp1252") + b"\r\n" in r.content

@@ -430,3 +430,17 @@ def test_a_login_cookie_unused_too_long_opens_no_socket(cell: dict, monkeypatch)
                                       headers=_socket_headers(tc)):
                 pass
         assert refused.value.code == 1008
+
+
+def test_a_subscription_number_of_thousands_of_digits_is_refused(cell: dict) -> None:
+    """``/poll/<5000 digits>`` (no login needed to send it) closes the socket as an unknown
+    subscription does; it was a 500 (Python's int() refusing the string)."""
+    from starlette.testclient import TestClient
+    from starlette.websockets import WebSocketDisconnect
+
+    with TestClient(create_rws_app(RwsFace(cell["maker"])), base_url="http://127.0.0.1:8610") as tc:
+        for path in ("/poll/" + "1" * 5000, "/poll/\u0663", "/poll/-1"):
+            with pytest.raises(WebSocketDisconnect) as refused:
+                with tc.websocket_connect(path, headers={"Host": "127.0.0.1:8610"}):
+                    pass
+            assert refused.value.code == 1008, path

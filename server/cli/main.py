@@ -428,7 +428,7 @@ def _slot_ref(ref: str) -> tuple[str, int]:
     """``tool3`` / ``base12`` (as --slots gives them) -> ("tool", 3)."""
     import re
 
-    m = re.fullmatch(r"\s*(tool|base)\s*(\d+)\s*", ref)
+    m = re.fullmatch(r"\s*(tool|base)\s*([0-9]{1,6})\s*", ref)
     if not m:
         raise CalibrationError(("--slots",), f"expected tool<n> or base<n>, got {ref!r}")
     return m.group(1), int(m.group(2))

@@ -44,6 +44,7 @@ from solvers.frames import Pose, abb_from_matrix, kuka_from_matrix, matrix_from_
 
 from server.service.bounds import check_name, check_value
 from server.formats.model import (
+    index_number,
     FormatError,
     FrameEntry,
     LoadData,
@@ -415,7 +416,8 @@ def _declarations(text: str) -> tuple[list[_Decl], list[Skipped], int]:
     for n, raw in enumerate(lines, start=1):
         m = _TAG.match(raw)
         if m:
-            tags[n] = (m.group(1).lower(), int(m.group(2)), m.group(3).strip(), n)
+            tags[n] = (m.group(1).lower(), index_number(m.group(2), n, "! pendant:"),
+                       m.group(3).strip(), n)
     code = _strip_comments(text)
     begin, endmodule = _module_span(text, code)
     routines = _routines(code, begin, endmodule)

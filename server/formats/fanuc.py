@@ -22,6 +22,7 @@ from solvers.frames import Pose, fanuc_from_matrix, matrix_from_fanuc
 from server.formats.fanuc_sysframe import is_sysframe, read_sysframe
 from server.service.bounds import check_value
 from server.formats.model import (
+    index_number,
     ROBOT_HELD,
     FormatError,
     FrameEntry,
@@ -233,7 +234,7 @@ def read_fanuc(text: str) -> ParsedFile:
             section = "UTOOL" if sec.group(1) == "MNUTOOL" else "UFRAME"
         elif section and _ROLE_LINE.match(raw):
             m = _ROLE_LINE.match(raw)
-            roles[(section, int(m.group(2)))] = m.group(3)  # type: ignore[union-attr]
+            roles[(section, index_number(m.group(2), n, section))] = m.group(3)  # type: ignore[union-attr]
     entries, where = [], {}
     for (label, number), (name, pose, line) in rows.items():
         role = roles.get((label, number), "tool" if label == "UTOOL" else "user frame")

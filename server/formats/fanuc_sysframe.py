@@ -31,6 +31,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from server.formats.model import (
+    index_number,
     FormatError,
     FrameEntry,
     ParsedFile,
@@ -49,7 +50,7 @@ _VAR = re.compile(r"^\s*\[\*SYSTEM\*\]\$([A-Z0-9_]+)\b(.*)$")
 _ARRAY = re.compile(r"ARRAY\[\s*(\d+)\s*,\s*(\d+)\s*\]\s+OF\s+POSITION", re.I)
 _INDEX = re.compile(r"^\s*\[\s*(\d+)\s*,\s*(\d+)\s*\]\s*=(.*)$")
 # a number, and nothing that could continue one after it (1.#INF, 185.000abc, 12,5, 1.5-3)
-_NUM = r"[-+]?(?:\d+(?:\.\d*)?|\.\d+)(?:[eE][-+]?\d+)?(?![\w.#,+-])"
+_NUM = r"[-+]?(?:[0-9]+(?:\.[0-9]*)?|\.[0-9]+)(?:[eE][-+]?[0-9]+)?(?![\w.#,+-])"  # ASCII digits
 _TRIPLE = {ax: re.compile(rf"\b({a}:\s*)({_NUM})\s+({b}:\s*)({_NUM})\s+({c}:\s*)({_NUM})")
            for ax, (a, b, c) in (("XYZ", "XYZ"), ("WPR", "WPR"))}
 _TABLES = {"MNUTOOL": "tool", "MNUFRAME": "base"}
@@ -103,13 +104,14 @@ def _scan(lines: list[str]) -> tuple[list[_Slot], dict[str, int]]:
                 if size is None:
                     raise FormatError.at_line(n, f"${var.group(1)}", "expected 'ARRAY[g,n] OF "
                                               "POSITION' after the variable's name")
-                sizes[table] = int(size.group(2))
+                sizes[table] = index_number(size.group(2), n, f"${var.group(1)}")
             continue
         if table is None:
             continue
         if (ix := _INDEX.match(raw)) is not None:
             close(n)
-            slot = _Slot(table, int(ix.group(1)), int(ix.group(2)), n)
+            slot = _Slot(table, index_number(ix.group(1), n, table),
+                         index_number(ix.group(2), n, table), n)
             rest = ix.group(3).strip().strip("'").strip()
             slot.uninitialized = rest.lower().startswith("uninit")
             if not 1 <= slot.number <= sizes[table]:

@@ -43,6 +43,7 @@ from solvers.frames import Pose
 
 from server.service.bounds import NAME_CHARS, check_name, check_value
 from server.formats.model import (
+    index_number,
     FormatError,
     FrameEntry,
     LoadData,
@@ -234,7 +235,7 @@ _BASE_LOAD = re.compile(r"^\s*;\s*pendant\s+BASE_LOAD\[(\d+)\]\s*=\s*(\{.*\})\s*
 _TOKEN = re.compile(
     r'\s*(?:(\{)|(\})|(,)|(' + _NUM + r')(?![\w.])|(#\w+)|("[^"]*")|([A-Za-z_]\w*(?:\[\])?))')
 _DEFDAT = re.compile(r"^\s*DEFDAT\b", re.IGNORECASE)
-_MACHINE_DEF = re.compile(r'^\s*MACHINE_DEF\[(\d+)\]\s*=\s*\{\s*NAME\[\]\s*"([^"]*)"',
+_MACHINE_DEF = re.compile(r'^\s*MACHINE_DEF\[([0-9]{1,6})\]\s*=\s*\{\s*NAME\[\]\s*"([^"]*)"',
                           re.IGNORECASE | re.MULTILINE)
 _ENDDAT = re.compile(r"^\s*ENDDAT\b", re.IGNORECASE)
 _UNITS = {"X": "mm", "Y": "mm", "Z": "mm", "A": "deg", "B": "deg", "C": "deg"}
@@ -420,7 +421,7 @@ def _scan(text: str) -> _Parsed:
         raw = raw_end.rstrip("\r\n")
         bl = _BASE_LOAD.match(raw)
         if bl:
-            n = int(bl.group(1))
+            n = index_number(bl.group(1), number, "BASE_LOAD")
             base_loads[n] = _Value(parse_load(bl.group(2), number, f"BASE_LOAD[{n}]"), number,
                                    bl.span(2))
             continue
@@ -444,9 +445,9 @@ def _scan(text: str) -> _Parsed:
         decl = _DECL.match(code)
         if decl:
             array = decl.group(1).upper()
-            sizes[array] = (int(decl.group(2)), number)
+            sizes[array] = (index_number(decl.group(2), number, array), number)
             if decl.group(3):
-                widths[array] = int(decl.group(3))
+                widths[array] = index_number(decl.group(3), number, array)
             continue
         start = _START.match(code)
         if not start:
@@ -455,7 +456,8 @@ def _scan(text: str) -> _Parsed:
         m = _ASSIGN.match(code)
         if not m or m.group(1).upper() != array:
             raise FormatError.at_line(number, array, f"cannot read {code.strip()[:60]!r}")
-        index, has_comma, rhs = int(m.group(2)), bool(m.group(3)), m.group(4)
+        index, has_comma, rhs = (index_number(m.group(2), number, array), bool(m.group(3)),
+                                 m.group(4))
         is_name = array.endswith("_NAME")
         fld = f"{array}[{index}{',' if is_name else ''}]"
         if is_name != has_comma:

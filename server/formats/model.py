@@ -56,11 +56,38 @@ class FormatError(CalibrationError):
         self.field: str | None = str(loc[-1]) if loc else None
 
     @classmethod
-    def at_line(cls, line: int, field: str, reason: str) -> "FormatError":
-        """Parse error on 1-based ``line`` in the field ``field``."""
-        err = cls(("file", f"line {line}", field), reason)
+    def at_line(cls, line: int, field: str, reason: str, source: str = "file") -> "FormatError":
+        """Parse error on 1-based ``line`` in the field ``field`` (of ``source``)."""
+        err = cls((source, f"line {line}", field), reason)
         err.line = line
         return err
+
+
+MAX_INDEX_DIGITS = 6  # an index or a table size in a controller file: none has a million slots
+
+
+def index_number(digits: str, line: int, field: str, source: str = "file") -> int:
+    """``digits`` (the digits a pattern caught, ``\\d`` or ``[0-9]``) as an index or a table's size.
+
+    More than :data:`MAX_INDEX_DIGITS` digits is a :class:`FormatError` naming the line and
+    the field: Python's ``int()`` refuses a string of over 4300 digits with a ``ValueError``,
+    which answered a controller file's import with a 500 (``TOOL_DATA[111...]``).
+
+    >>> index_number("12", 3, "TOOL_DATA")
+    12
+    >>> index_number("1" * 7, 3, "TOOL_DATA")
+    Traceback (most recent call last):
+    ...
+    server.formats.model.FormatError: file.line 3.TOOL_DATA: an index of 7 digits: at most 6 (no controller has a table that long)
+    """
+    if not digits.lstrip("+-").isascii():  # int() reads other scripts' digits: "٣" is 3
+        raise FormatError.at_line(line, field, f"an index written with digits other than 0-9: "
+                                  f"{digits[:12]!r}", source)
+    if len(digits) > MAX_INDEX_DIGITS:
+        raise FormatError.at_line(line, field, f"an index of {len(digits)} digits: at most "
+                                  f"{MAX_INDEX_DIGITS} (no controller has a table that long)",
+                                  source)
+    return int(digits)
 
 
 @dataclass(frozen=True)

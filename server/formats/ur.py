@@ -20,6 +20,7 @@ from solvers.frames import Pose, matrix_from_ur, ur_from_matrix
 
 from server.service.bounds import check_value
 from server.formats.model import (
+    index_number,
     FormatError,
     FrameEntry,
     LoadData,
@@ -132,7 +133,7 @@ def export_ur(entries: Iterable[FrameEntry]) -> str:
 # --------------------------------------------------------------------------- reading
 
 END_LINE = "# end of pendant frames"
-_NUM = r"[+-]?(?:\d+\.?\d*|\.\d+)(?:[eE][+-]?\d+)?"
+_NUM = r"[+-]?(?:[0-9]+\.?[0-9]*|\.[0-9]+)(?:[eE][+-]?[0-9]+)?"  # ASCII digits
 _TAG = re.compile(r'^# (tool|workpiece|base|fixed_tool|coordinated_base) (\d+) "(.*?)"'
                   r'(?: on "([^"]*)")?\s*$')
 _GLOBAL = re.compile(r"^global (\w+) = p\[(.*)\]\s*$")
@@ -182,7 +183,7 @@ def read_ur(text: str) -> ParsedFile:
     for n, raw in enumerate(lines[:end], 1):
         tag = _TAG.match(raw)
         if tag:
-            found.append({"kind": tag.group(1), "number": int(tag.group(2)),
+            found.append({"kind": tag.group(1), "number": index_number(tag.group(2), n, "#"),
                           "name": tag.group(3), "unit": tag.group(4), "line": n,
                           "pose": None, "mass": None, "com": None, "inertia": None,
                           "axes": None})

@@ -16,7 +16,7 @@ import numpy as np
 from server.formats import kuka as _kuka
 from server.formats.external.model import (MAX_KINEMATICS, ExternalKinematic, ExternalSetup,
                                            _check_setup, _pose)
-from server.formats.model import FormatError, FrameEntry, family_of, one_line
+from server.formats.model import FormatError, FrameEntry, family_of, index_number, one_line
 from solvers.errors import CalibrationError
 from solvers.frames import Pose
 
@@ -254,8 +254,8 @@ def _patch_config(template: str, kins: list[ExternalKinematic], bases: list[Fram
                 raise FormatError(("config_template", f"line {found[key].line}", key),
                                   f"holds {other} and no MACHINE_DEF names {_kname(k)!r}: "
                                   "free the entry or name the kinematic like it")
-        if decl and i > int(decl.group(1)):
-            line = template.count("\n", 0, decl.start()) + 1
+        line = template.count("\n", 0, decl.start()) + 1 if decl else 0
+        if decl and i > index_number(decl.group(1), line, "MACHINE_DEF", "config_template"):
             raise FormatError(("config_template", f"line {line}", "MACHINE_DEF"),
                               f"declared with {decl.group(1)} entries; ET{k.number} "
                               f"({_kname(k)!r}) needs MACHINE_DEF[{i}]: enlarge the array on "
@@ -461,7 +461,8 @@ def _machine_defs(cv: dict[str, _Found]) -> dict[str, tuple[Pose, int]]:
         except FormatError as err:
             raise FormatError(("config_dat", f"line {found.line}", str(err.loc[-1])),
                               err.reason) from None
-        out[name[1:-1].strip().upper()] = (pose, int(m.group(1)))
+        out[name[1:-1].strip().upper()] = (pose, index_number(m.group(1), found.line, fld,
+                                                              "config_dat"))
     return out
 
 
@@ -472,7 +473,7 @@ def _read_bases(cv: dict[str, _Found], kins: list[ExternalKinematic]) -> list[Fr
         m = re.fullmatch(r"MACHINE_FRAME_DAT\[(\d+)\]", key)
         if not m:
             continue
-        n = int(m.group(1))
+        n = index_number(m.group(1), found.line, key, "config_dat")
         try:
             unit = _kuka._parse_value("MACHINE_FRAME_DAT", str(found.value), found.line, key,
                                       None)
