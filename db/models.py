@@ -369,7 +369,9 @@ class Job(Base):
     id: Mapped[int] = mapped_column(primary_key=True)
     kind: Mapped[str] = mapped_column(String(32))  # analysis | restore
     state: Mapped[str] = mapped_column(String(16), default="queued", index=True)
-    params: Mapped[dict[str, Any]]
+    # loaded when used (the worker that runs the job): a restore's are the whole backup, and
+    # reading the job's state (a client polling its progress) read and decoded them each time
+    params: Mapped[dict[str, Any]] = mapped_column(deferred=True)
     progress: Mapped[float] = mapped_column(default=0.0)
     message: Mapped[str] = mapped_column(String(200), default="")
     result: Mapped[dict[str, Any] | None]

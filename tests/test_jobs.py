@@ -314,3 +314,29 @@ def test_a_failure_is_written_even_if_a_lease_renewal_commits_while_it_is(tmp_pa
     assert renewals == ["database is locked"]
     with sm() as db:
         assert db.get(Job, job_id).error["status"] == 413
+
+
+def test_reading_a_jobs_state_does_not_read_its_parameters(client):
+    """A restore's parameters are the whole backup (megabytes): a client polling the job's
+    progress reads its state without them (every poll read and decoded them), and the worker
+    that claims the job still gets them whole."""
+    from sqlalchemy import event
+
+    big = {"controller_id": 1, "doc": {"rows": ["x" * 1000] * 2000}}  # ~2 MB of JSON
+    with client.app.state.sessionmaker() as db:
+        job_id = jobs.enqueue(db, "restore", big).id
+        db.commit()
+    statements: list[str] = []
+    engine = client.app.state.engine
+    listener = lambda _c, _cur, stmt, *_a: statements.append(stmt)  # noqa: E731
+    event.listen(engine, "before_cursor_execute", listener)
+    try:
+        answer = ok(client.get(f"/jobs/{job_id}"))
+    finally:
+        event.remove(engine, "before_cursor_execute", listener)
+    assert answer["state"] == "queued" and "params" not in answer
+    reads = [s for s in statements if "FROM job" in s]
+    assert reads and not any("job.params" in s for s in reads), reads
+    with client.app.state.sessionmaker() as db:
+        claimed = jobs.claim(db, "test-worker")
+        assert claimed.id == job_id and claimed.params == big
