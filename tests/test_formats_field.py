@@ -451,3 +451,14 @@ def test_a_machine_def_index_of_thousands_of_digits_is_kept_and_exports_still_wo
                                          "text": text.replace("ENDDAT", odd + "\r\nENDDAT", 1)}))
     r = client.get(f"{C}/export", params={"format": "kuka"})
     assert r.status_code == 200 and odd.encode("cp1252") + b"\r\n" in r.content
+
+
+def test_a_fanuc_payload_line_without_its_number_is_refused_naming_the_line(client):
+    """``PAYLOAD [ 1 ...`` (the number out of its columns): 422 naming line 19; it was a 500
+    (found by mutating the corpus files)."""
+    text, _ = load("fanuc_crlf.txt")
+    r = client.post(f"{C}/import", json={"format": "fanuc",
+                                         "text": text.replace("PAYLOAD  1", "PAYLOAD [ 1", 1)})
+    assert r.status_code == 422, r.text[:300]
+    detail = r.json()["detail"][0]
+    assert "line 19" in detail["loc"] and "payload's number" in detail["msg"], detail

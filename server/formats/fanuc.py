@@ -212,7 +212,8 @@ def read_fanuc(text: str) -> ParsedFile:
     for n, raw in enumerate(lines[:end], 1):
         label = raw[:7].strip()
         if label in ("UTOOL", "UFRAME") and raw[7:10].strip().isdigit():
-            number, fld = int(raw[7:10]), f"{label} {int(raw[7:10])}"
+            number = index_number(raw[7:10].strip(), n, label)
+            fld = f"{label} {number}"
             cells = raw[28:].split()
             if len(cells) != 6:
                 raise FormatError.at_line(n, fld, "expected X, Y, Z, W, P, R")
@@ -220,7 +221,11 @@ def read_fanuc(text: str) -> ParsedFile:
                  for i, c in enumerate(cells)]
             rows[(label, number)] = (raw[12:28].rstrip(), Pose.from_matrix(matrix_from_fanuc(v)), n)
         elif raw.startswith("PAYLOAD"):
-            number, fld = int(raw[7:10]), f"PAYLOAD {raw[7:10].strip()}"
+            if not raw[7:10].strip().isdigit():  # "PAYLOAD [ 1" or a cut line: a ValueError
+                raise FormatError.at_line(n, "PAYLOAD", "expected the payload's number in "
+                                          f"columns 8-10, got {raw[7:10]!r}")
+            number, fld = index_number(raw[7:10].strip(), n, "PAYLOAD"), \
+                f"PAYLOAD {raw[7:10].strip()}"
             cells = raw[10:].split()
             if len(cells) != 7:
                 raise FormatError.at_line(n, fld, "expected Mass, X, Y, Z, IX, IY, IZ")
