@@ -462,3 +462,16 @@ def test_a_fanuc_payload_line_without_its_number_is_refused_naming_the_line(clie
     assert r.status_code == 422, r.text[:300]
     detail = r.json()["detail"][0]
     assert "line 19" in detail["loc"] and "payload's number" in detail["msg"], detail
+
+
+@pytest.mark.parametrize("old, new", [("UTOOL    1  Pointer", "UTOOL 1  Pointer"),
+                                      ("UTOOL    1  Pointer", "UTOOL\u0663\u0663\u0663  Pointer")])
+def test_a_fanuc_row_whose_columns_moved_is_refused_naming_the_line(client, old, new):
+    """A UTOOL row with its number out of columns 8-10 (typed by hand): 422 naming line 6; it
+    was taken as a comment and the tool silently left out of the import."""
+    text, _ = load("fanuc_crlf.txt")
+    assert old in text
+    r = client.post(f"{C}/import", json={"format": "fanuc", "text": text.replace(old, new, 1)})
+    assert r.status_code == 422, r.text[:300]
+    detail = r.json()["detail"][0]
+    assert "line 6" in detail["loc"] and "columns 8-10" in detail["msg"], detail

@@ -211,6 +211,12 @@ def read_fanuc(text: str) -> ParsedFile:
     section = None
     for n, raw in enumerate(lines[:end], 1):
         label = raw[:7].strip()
+        if raw.startswith(("UTOOL", "UFRAME")) and not (label in ("UTOOL", "UFRAME")
+                                                         and raw[7:10].strip().isdigit()):
+            # a row whose columns moved ("UTOOL 12" typed by hand): it was taken as a comment
+            # and its frame silently left out
+            raise FormatError.at_line(n, raw[:6].strip(), "expected the frame's number in "
+                                      f"columns 8-10, as the listing writes it; got {raw[:12]!r}")
         if label in ("UTOOL", "UFRAME") and raw[7:10].strip().isdigit():
             number = index_number(raw[7:10].strip(), n, label)
             fld = f"{label} {number}"
