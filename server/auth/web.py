@@ -92,15 +92,14 @@ class SiteGuard:
 
         await self.app(scope, receive, send_with_headers)
 
-
     def _host_allowed(self, host: str) -> bool:
         return "*" in self.hosts or host_name(host) in self.hosts
 
     def _own_or_allowed(self, origin: str, scope: Scope, host: str) -> bool:
         """Whether ``origin`` is this site (scheme and Host) or one --cors-origin allows."""
         o = origin.rstrip("/").lower()
-        scheme = {"ws": "http", "wss": "https"}.get(scope.get("scheme", "http"),
-                                                     scope.get("scheme", "http"))
+        scheme = scope.get("scheme", "http")
+        scheme = {"ws": "http", "wss": "https"}.get(scheme, scheme)  # a WebSocket's handshake
         own = {f"{scheme}://{host.lower()}"}
         return (o in own or o in self.origins) and urlsplit(o).scheme in ("http", "https")
 

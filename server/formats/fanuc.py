@@ -210,15 +210,9 @@ def read_fanuc(text: str) -> ParsedFile:
     roles: dict[tuple[str, int], str] = {}
     section = None
     for n, raw in enumerate(lines[:end], 1):
-        label = raw[:7].strip()
-        if raw.startswith(("UTOOL", "UFRAME")) and not (label in ("UTOOL", "UFRAME")
-                                                         and raw[7:10].strip().isdigit()):
-            # a row whose columns moved ("UTOOL 12" typed by hand): it was taken as a comment
-            # and its frame silently left out
-            raise FormatError.at_line(n, raw[:6].strip(), "expected the frame's number in "
-                                      f"columns 8-10, as the listing writes it; got {raw[:12]!r}")
-        if label in ("UTOOL", "UFRAME") and raw[7:10].strip().isdigit():
-            number = index_number(raw[7:10].strip(), n, label)
+        label, digits = raw[:7].strip(), raw[7:10].strip()
+        if label in ("UTOOL", "UFRAME") and digits.isdigit():
+            number = index_number(digits, n, label)
             fld = f"{label} {number}"
             cells = raw[28:].split()
             if len(cells) != 6:
@@ -226,12 +220,16 @@ def read_fanuc(text: str) -> ParsedFile:
             v = [_number(c, "mm" if i < 3 else "deg", n, f"{fld}.{'XYZWPR'[i]}")
                  for i, c in enumerate(cells)]
             rows[(label, number)] = (raw[12:28].rstrip(), Pose.from_matrix(matrix_from_fanuc(v)), n)
+        elif raw.startswith(("UTOOL", "UFRAME")):
+            # a row whose columns moved ("UTOOL 12" typed by hand): it was taken as a comment
+            # and its frame silently left out
+            raise FormatError.at_line(n, raw[:6].strip(), "expected the frame's number in "
+                                      f"columns 8-10, as the listing writes it; got {raw[:12]!r}")
         elif raw.startswith("PAYLOAD"):
-            if not raw[7:10].strip().isdigit():  # "PAYLOAD [ 1" or a cut line: a ValueError
+            if not digits.isdigit():  # "PAYLOAD [ 1" or a cut line: a ValueError
                 raise FormatError.at_line(n, "PAYLOAD", "expected the payload's number in "
                                           f"columns 8-10, got {raw[7:10]!r}")
-            number, fld = index_number(raw[7:10].strip(), n, "PAYLOAD"), \
-                f"PAYLOAD {raw[7:10].strip()}"
+            number, fld = index_number(digits, n, "PAYLOAD"), f"PAYLOAD {digits}"
             cells = raw[10:].split()
             if len(cells) != 7:
                 raise FormatError.at_line(n, fld, "expected Mass, X, Y, Z, IX, IY, IZ")

@@ -238,6 +238,7 @@ def _patch_config(template: str, kins: list[ExternalKinematic], bases: list[Fram
     defs = _machine_defs(found)
     decl = re.search(r"^[ \t]*DECL\s+\w+\s+MACHINE_DEF\s*\[\s*(\d+)\s*\]", template,
                      re.IGNORECASE | re.MULTILINE)
+    decl_line = template.count("\n", 0, decl.start()) + 1 if decl else 0
     index: dict[int, int] = {}
     for k in kins:
         if k.linear:
@@ -254,9 +255,8 @@ def _patch_config(template: str, kins: list[ExternalKinematic], bases: list[Fram
                 raise FormatError(("config_template", f"line {found[key].line}", key),
                                   f"holds {other} and no MACHINE_DEF names {_kname(k)!r}: "
                                   "free the entry or name the kinematic like it")
-        line = template.count("\n", 0, decl.start()) + 1 if decl else 0
-        if decl and i > index_number(decl.group(1), line, "MACHINE_DEF", "config_template"):
-            raise FormatError(("config_template", f"line {line}", "MACHINE_DEF"),
+        if decl and i > index_number(decl.group(1), decl_line, "MACHINE_DEF", "config_template"):
+            raise FormatError(("config_template", f"line {decl_line}", "MACHINE_DEF"),
                               f"declared with {decl.group(1)} entries; ET{k.number} "
                               f"({_kname(k)!r}) needs MACHINE_DEF[{i}]: enlarge the array on "
                               "the controller or free an entry")
