@@ -50,6 +50,7 @@ import numpy as np
 ROOT = Path(__file__).resolve().parent.parent
 sys.path.insert(0, str(ROOT))
 
+from benchmarks.in_pg import report, run_in_pg, url_from_env  # noqa: E402
 from emulator import approach, cell_for, home_joints  # noqa: E402
 from solvers.robots import ROBOTS  # noqa: E402
 
@@ -216,17 +217,11 @@ def run_service(db_url: str, workers: int, args: argparse.Namespace, phases: tup
         stop(proc)
 
 
-def pg_url_from_env(port: str | None = None) -> str:
-    e = os.environ
-    return (f"postgresql+psycopg://{e['PGUSER']}:{e.get('PGPASSWORD', '')}@{e['PGHOST']}:"
-            f"{port or e['PGPORT']}/{e['PGDATABASE']}")
-
-
 def delayed_pg(delay_ms: float) -> tuple[str, subprocess.Popen | None]:
     """The pg_virtualenv cluster's URL, behind ``benchmarks/delay_proxy.py`` holding each
     chunk ``delay_ms`` each way when it is > 0 (PostgreSQL on another host), and the proxy."""
     if delay_ms <= 0:
-        return pg_url_from_env(), None
+        return url_from_env(), None
     port = free_port()
     proxy = subprocess.Popen([sys.executable, str(ROOT / "benchmarks" / "delay_proxy.py"),
                               str(port), os.environ["PGHOST"], os.environ["PGPORT"],
@@ -236,27 +231,16 @@ def delayed_pg(delay_ms: float) -> tuple[str, subprocess.Popen | None]:
             if s.connect_ex(("127.0.0.1", port)) == 0:
                 break
         time.sleep(0.05)
-    return pg_url_from_env(str(port)), proxy
+    return url_from_env(str(port)), proxy
 
 
 def pg_touch_rps(workers: int, args: argparse.Namespace) -> str:
-    """Touch-up req/s on PostgreSQL (a pg_virtualenv cluster), or 'n/a' with the reason."""
+    """Touch-up req/s on PostgreSQL (a pg_virtualenv cluster), or 'n/a' (the reason on stderr)."""
     if args.no_pg:
         return "n/a"
-    if shutil.which("pg_virtualenv") is None:
-        print("pg_rps: pg_virtualenv not found (apt-get install postgresql)", file=sys.stderr)
-        return "n/a"
-    cmd = ["pg_virtualenv", "-t", sys.executable, __file__, "--pg-inner", "--workers", str(workers),
-           "--connections", str(args.connections), "--seconds", str(args.seconds),
-           "--pg-delay-ms", str(args.pg_delay_ms)]
-    r = subprocess.run(cmd, capture_output=True, text=True, cwd=ROOT)
-    m = re.search(r"^pg_inner_rps=([\d.]+)", r.stdout, re.M)
-    if r.returncode != 0 or m is None:
-        tail = (r.stderr or r.stdout).strip().splitlines()[-3:]
-        print(f"pg_rps: the PostgreSQL run failed: {' | '.join(tail)}", file=sys.stderr)
-        return "n/a"
-    print(r.stdout.split("pg_inner_rps=")[0], end="")
-    return m.group(1)
+    r = run_in_pg(__file__, ["--workers", str(workers), "--connections", str(args.connections),
+                             "--seconds", str(args.seconds), "--pg-delay-ms", str(args.pg_delay_ms)])
+    return "n/a" if r is None else f"{r['rps']:.1f}"
 
 
 def show(title: str, rows: dict[str, dict]) -> None:
@@ -300,7 +284,7 @@ def main() -> int:
             delay = f", {args.pg_delay_ms:g} ms each way" if args.pg_delay_ms > 0 else ""
             show(f"PostgreSQL{delay}, uvicorn --workers {counts[0]}, {args.connections} "
                  "connections", rows)
-            print(f"pg_inner_rps={rows['touch-up']['rps']:.1f}")
+            report(rps=round(rows["touch-up"]["rps"], 1))
             return 0
         results = {}
         for n in counts:

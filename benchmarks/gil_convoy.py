@@ -19,12 +19,16 @@ from __future__ import annotations
 import argparse
 import os
 import sqlite3
-import subprocess
 import sys
 import tempfile
 import threading
 import time
 from collections.abc import Callable
+from pathlib import Path
+
+sys.path.insert(0, str(Path(__file__).resolve().parent.parent))
+
+from benchmarks.in_pg import report, run_in_pg  # noqa: E402
 
 INTERVALS_S = (0.005, 0.001, 0.0002)  # 5 ms is CPython's default
 
@@ -83,23 +87,15 @@ def main() -> int:
         import psycopg
 
         r = measure("postgresql", lambda: psycopg.connect("", autocommit=True), args.seconds)
-        print(f"pg_inner alone={r['alone']:.0f} beside={r['beside']:.0f}")
+        report(alone=round(r["alone"]), beside=round(r["beside"]))
         return 0
     with tempfile.TemporaryDirectory() as tmp:
         path = os.path.join(tmp, "convoy.db")
         lite = measure("sqlite", lambda: sqlite3.connect(path, check_same_thread=False),
                        args.seconds)
     pg = {"alone": float("nan"), "beside": float("nan")}
-    if not args.no_pg:
-        r = subprocess.run(["pg_virtualenv", "-t", sys.executable, __file__, "--pg-inner",
-                            "--seconds", str(args.seconds)], capture_output=True, text=True)
-        lines = r.stdout.splitlines()
-        print("\n".join(line for line in lines if not line.startswith("pg_inner")))
-        last = next((line for line in lines if line.startswith("pg_inner")), None)
-        if r.returncode != 0 or last is None:
-            print(f"postgresql: the run failed: {r.stderr[-600:]}", file=sys.stderr)
-        else:
-            pg = {k: float(v) for k, v in (kv.split("=") for kv in last.split()[1:])}
+    if not args.no_pg and (r := run_in_pg(__file__, ["--seconds", str(args.seconds)])):
+        pg = r
     print(f"sqlite_alone_qps={lite['alone']:.0f} sqlite_beside_qps={lite['beside']:.0f} "
           f"pg_alone_qps={pg['alone']:.0f} pg_beside_qps={pg['beside']:.0f}")
     return 0

@@ -59,7 +59,8 @@ ROOT = Path(__file__).resolve().parent.parent
 sys.path.insert(0, str(ROOT))
 
 sys.path.insert(0, str(ROOT / "tests"))
-from benchmarks.api import free_port, parse_wrk, pg_url_from_env, touch_joints  # noqa: E402
+from benchmarks.api import free_port, parse_wrk, touch_joints  # noqa: E402
+from benchmarks.in_pg import report, run_in_pg, url_from_env  # noqa: E402
 from opcua_helpers import client_certificate  # noqa: E402  (a client's self-signed certificate)
 
 TOKEN = "pdt_plant-benchmark-administrator-0123456789"  # the service's first Administrator
@@ -461,9 +462,9 @@ def run_backend(name: str, db_url: str, args: argparse.Namespace) -> dict:
 
 
 def pg_inner(args: argparse.Namespace) -> int:
-    r = run_backend("postgresql", pg_url_from_env(), args)
-    print(f"pg_inner p99={r['p99']:.2f} max_rate={r['max_rate']:g} read_rps={r['read_rps']:.1f} "
-          f"errors={r['errors']}")
+    r = run_backend("postgresql", url_from_env(), args)
+    report(p99=round(r["p99"], 2), max_rate=r["max_rate"], read_rps=round(r["read_rps"], 1),
+           errors=r["errors"])
     return 0
 
 
@@ -485,20 +486,10 @@ def main() -> int:
         lite = run_backend("sqlite", f"sqlite:///{tmp}/plant.db", args)
     pg = {"p99": float("nan"), "max_rate": float("nan"), "read_rps": float("nan"), "errors": 0}
     if not args.no_pg:
-        cmd = ["pg_virtualenv", "-t", sys.executable, __file__, "--pg-inner",
-               "--controllers", str(args.controllers), "--rate", str(args.rate),
-               "--seconds", str(args.seconds), "--read-rate", str(args.read_rate),
-               "--warm-up", str(args.warm_up)]
-        r = subprocess.run(cmd, capture_output=True, text=True, cwd=ROOT)
-        print(r.stdout.split("pg_inner ")[0], end="")
-        m = re.search(r"^pg_inner p99=([\d.na]+) max_rate=([\d.na]+) read_rps=([\d.na]+) "
-                      r"errors=(\d+)", r.stdout, re.M)
-        if r.returncode != 0 or m is None:
-            print(f"postgresql: the run failed: {r.stderr[-800:]}", file=sys.stderr)
-            pg["errors"] = 1
-        else:
-            pg = {"p99": float(m.group(1)), "max_rate": float(m.group(2)),
-                  "read_rps": float(m.group(3)), "errors": int(m.group(4))}
+        r = run_in_pg(__file__, ["--controllers", str(args.controllers), "--rate", str(args.rate),
+                                 "--seconds", str(args.seconds), "--read-rate", str(args.read_rate),
+                                 "--warm-up", str(args.warm_up)])
+        pg = {**r, "errors": int(r["errors"])} if r is not None else {**pg, "errors": 1}
     read_rps = min(v for v in (lite["read_rps"], pg["read_rps"]) if v == v)
     print(f"sqlite_p99_ms={lite['p99']:.1f} pg_p99_ms={pg['p99']:.1f} "
           f"sqlite_max_rate={lite['max_rate']:g} pg_max_rate={pg['max_rate']:g} "

@@ -15,9 +15,6 @@ from __future__ import annotations
 
 import argparse
 import os
-import re
-import shutil
-import subprocess
 import sys
 import tempfile
 from pathlib import Path
@@ -27,11 +24,11 @@ import httpx
 ROOT = Path(__file__).resolve().parent.parent
 sys.path.insert(0, str(ROOT))
 
+from benchmarks.in_pg import report, run_in_pg, url_from_env  # noqa: E402
 from benchmarks.api import (
     HEADERS,
     cpu_seconds,
     free_port,
-    pg_url_from_env,
     prepare,
     service_pids,
     start,
@@ -80,24 +77,17 @@ def main() -> int:
     ap.add_argument("--pg-inner", action="store_true", help=argparse.SUPPRESS)
     args = ap.parse_args()
     if args.pg_inner:
-        r = measure(pg_url_from_env(), args.requests)
-        print(f"pg_inner read={r['read']:.3f} touch={r['touch']:.3f}")
+        r = measure(url_from_env(), args.requests)
+        report(read=round(r["read"], 3), touch=round(r["touch"], 3))
         return 0
     with tempfile.TemporaryDirectory() as tmp:
         lite = measure(f"sqlite:///{tmp}/cpu.db", args.requests)
     print(f"sqlite: read {lite['read']:.3f} ms, touch-up {lite['touch']:.3f} ms of CPU "
           f"(load {os.getloadavg()[0]:.2f})", flush=True)
     pg = {"read": float("nan"), "touch": float("nan")}
-    if not args.no_pg and shutil.which("pg_virtualenv"):
-        r = subprocess.run(["pg_virtualenv", "-t", sys.executable, __file__, "--pg-inner",
-                            "--requests", str(args.requests)], capture_output=True, text=True,
-                           cwd=ROOT, check=False)
-        m = re.search(r"^pg_inner read=([\d.]+) touch=([\d.]+)", r.stdout, re.MULTILINE)
-        if m is None:
-            print(f"postgresql: the run failed: {r.stderr[-600:]}", file=sys.stderr)
-        else:
-            pg = {"read": float(m.group(1)), "touch": float(m.group(2))}
-            print(f"postgresql: read {pg['read']:.3f} ms, touch-up {pg['touch']:.3f} ms of CPU")
+    if not args.no_pg and (r := run_in_pg(__file__, ["--requests", str(args.requests)])):
+        pg = r
+        print(f"postgresql: read {pg['read']:.3f} ms, touch-up {pg['touch']:.3f} ms of CPU")
     print(f"lite_read_cpu_ms={lite['read']:.3f} lite_touch_cpu_ms={lite['touch']:.3f} "
           f"pg_read_cpu_ms={pg['read']:.3f} pg_touch_cpu_ms={pg['touch']:.3f}")
     return 0
