@@ -42,7 +42,7 @@ def make_db(folder: Path, cells: int):
     """A migrated SQLite file with ``cells`` controllers; its sessionmaker."""
     from fastapi.testclient import TestClient
 
-    from server.app import create_app
+    from server.api.app import create_app
     from server.settings import Settings
 
     app = create_app(Settings(db_url=f"sqlite:///{folder / 'cells.db'}", bootstrap_token=TOKEN))
