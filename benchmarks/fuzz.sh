@@ -3,7 +3,7 @@
 # fresh service on a temporary SQLite file, a user "fuzz" with role ROLE (default Expert),
 # SECONDS of fuzzing (default 200).
 # Prints schemathesis's summary, then the service's answers by status; the last line is
-# `cases=<generated> server_errors=<500s in the access log>`.
+# `role=<ROLE> schemathesis_exit=<0: no failure> cases=<generated> server_errors=<5xx in the access log>`.
 #   bash benchmarks/fuzz.sh [SECONDS] [PORT] [ROLE]
 set -euo pipefail
 cd "$(dirname "$0")/.."

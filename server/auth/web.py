@@ -11,7 +11,8 @@ origins (then Starlette's ``CORSMiddleware`` answers for those only).
   UUID), answered in ``X-Request-ID`` and written into the audit records of its changes.
 - Every response gets ``X-Content-Type-Options: nosniff``, ``X-Frame-Options: DENY`` and
   ``Referrer-Policy: same-origin``; pages get a ``Content-Security-Policy`` allowing only this
-  origin (FastAPI's /docs and /redoc load their scripts from a CDN and keep their own policy).
+  origin (FastAPI's /docs and /redoc, served from the installed fastapi-offline package with inline
+  scripts, are left without one).
 """
 
 from __future__ import annotations
