@@ -20,6 +20,12 @@
    ``predict --refit-setup`` on the second half (instrument frame and tool point refitted,
    the robot held), pendant against blind DH; and a constant-orientation path with repeated
    neighbours (each point visited three times), both splits.
+4. What the analysis names on all of series D, under the blocked split (what ``pendant
+   analyze`` uses on it) and the random one (seed 0): each finding with its value and
+   standard deviation, strongest first; the findings chosen on the linearisation that the
+   model itself did not confirm (``not_confirmed``); the stand-ins; the leading structure
+   left unexplained (``locate.unexplained``, smallest p-value first). docs/analysis.md and
+   the README quote these lines.
 
 The last line is machine-read:
 ``analysis_1000_s=<s> analysis_1000_cpu_s=<s> heldout_physics_mm=<mm> heldout_blind_dh_mm=<mm>
@@ -42,6 +48,7 @@ from server.formats.recording import parse_recording  # noqa: E402
 from solvers.analysis import analyze  # noqa: E402
 from solvers.analysis.blind import blind_dh  # noqa: E402
 from solvers.analysis.model import model_document, predict  # noqa: E402
+from solvers.analysis.selection import default_split  # noqa: E402
 from solvers.physics import Imperfections  # noqa: E402
 from solvers.simulate import simulate_recording  # noqa: E402
 
@@ -62,6 +69,43 @@ def names(rep: dict) -> str:
                      + (f" ({f['parameters']['dh_parameter']})"
                         if f["parameters"].get("dh_parameter") else "")
                      for f in rep["findings"])
+
+
+def value(f: dict) -> str:
+    """A finding's name and its values with their standard deviations, in the report's
+    units (``a2 (delta_mm -0.819±0.032)``)."""
+    p, j = f["parameters"], f["joint"]
+    if f["effect"] in ("link_length", "link_twist"):
+        name = (p.get("dh_parameter") or "alpha") + str(j)
+    else:
+        name = f"J{j} " * bool(j) + f["effect"].replace("_", " ")
+    if "periods_per_turn" in p:
+        name += f" {p['periods_per_turn']}/turn"
+    vals = []
+    for k, v in p.items():
+        if "std" in k or k in ("dh_parameter", "periods_per_turn") or not isinstance(v, float):
+            continue
+        s = next((p[n] for n in (k + "_std", k.replace("_deg", "_std_deg")) if n in p), None)
+        vals.append(f"{k} {v:+.3g}" + (f"±{s:.2g}" if s is not None else ""))
+    return f"{name} ({', '.join(vals)})"
+
+
+def named(rep: dict, default: str) -> str:
+    """What the analysis names on series D, compactly (the docs quote these lines)."""
+    sp = rep["split"]
+    how = (f"{sp['method']} split" + (f" (seed {sp['seed']})" if "seed" in sp else "")
+           + (" (the default: pendant analyze uses it)" if sp["method"] == default else ""))
+    lines = [(f"series D, {how}: {len(rep['findings'])} findings, held-out "
+              f"{rep['final']['heldout_rms_mm']:.3f} mm, verdict {rep['verdict']}")]
+    lines += [f"  {i}. {value(f)}" for i, f in enumerate(rep["findings"], 1)]
+    lines.append("  not confirmed by the model itself: " + (", ".join(
+        d["key"] for d in rep["not_confirmed"]) or "-"))
+    lines.append("  stand-ins: " + (", ".join(
+        f"{w['key']} for {w['stands_in_for']}" for w in rep["stand_ins"]) or "-"))
+    un = rep["locate"].get("unexplained") or []
+    lines.append(f"  unexplained ({len(un)} groups), leading: " + ("; ".join(
+        f"{u['varies_with']} (p {u['p_value']:.1e})" for u in un[:6]) or "-"))
+    return "\n".join(lines)
 
 
 def row(label: str, rec, split: str | None = None, repeat: int = 1
@@ -118,6 +162,16 @@ def main() -> None:
           f"predict --refit-setup on the second): pendant {tr:.3f} mm, blind DH {tr_blind:.3f} mm "
           f"(target pendant <= blind: {'met' if tr <= tr_blind else 'MISSED'})")
     print(f"path with repeated neighbours: {path}")
+    for r in (rep_b, rep):
+        print(named(r, default_split(rec.t_s, rec.kind)))
+    ident = rep_b["identifiability"]
+    groups = "; ".join(f"{g['group']} given the others "
+                       f"{g['smallest_relative_singular_value_given_others']:.1e}"
+                       for g in ident["groups"])
+    hidden = ", ".join(", ".join(e["parameters"]) for e in ident["not_identifiable"]) or "-"
+    print(f"series D setup: smallest relative singular value "
+          f"{ident['smallest_relative_singular_value']:.1e} (tolerance {ident['tolerance']:g}); "
+          f"{groups}; not identifiable: {hidden}")
     print(f"analysis_1000_s={t1000[0]:.3f} analysis_1000_cpu_s={t1000[1]:.3f} heldout_physics_mm={rep['final']['heldout_rms_mm']:.4f} "
           f"heldout_blind_dh_mm={blind['heldout_rms_mm']:.4f} "
           f"heldout_first200_mm={rep200['final']['heldout_rms_mm']:.4f} "
@@ -141,6 +195,7 @@ def transfer(doc: dict) -> tuple[float, float]:
           f"pendant {mine:.4f} mm ({len(rep['model']['effects'])} effects), blind DH "
           f"{theirs:.4f} mm ({len(b['dh_parameters'])} DH parameters), rigid {rigid:.4f} mm "
           f"(RMS of the second half predicted, setup refitted)")
+    print(f"{'':<24} findings on the first half: {names(rep) or '-'}")
     return mine, theirs
 
 
