@@ -63,6 +63,15 @@ CASES = [
     ("beam", 72, "kuka_kr6_r900_sixx", dict(trigger_latency_ms=4.0), "trigger_latency", None, "latency_ms", 4.0, ""),
     ("beam", 216, "tm5_900", dict(trigger_latency_ms=3.1), "trigger_latency", None, "latency_ms", 3.1, "noise"),
     ("touch", 80, "tm5_900", dict(joint_offset_deg=per_joint(5, 0.027)), "joint_offset", 5, "offset_deg", 0.027, "both"),
+    # link_twist on axes 2..4 (alpha2..alpha4 of each of the six arms at 0.05 deg, tracker, 60
+    # samples, seed 217: all named with joint and value, also alpha1 of the standard-DH arms).
+    # Not the base's axis (modified DH alpha1: the instrument frame absorbs it) nor axis 6
+    # against the flange (standard DH alpha6: the TCP absorbs it), both ``not_identifiable``;
+    # nor the axis carrying the TCP (standard alpha5, modified alpha6: axis 6 tilted against
+    # axis 5): with the TCP on axis 6 that tilt moves it by a constant along axis 5, as d5 does,
+    # and the finding is d5 with the twist under ``indistinguishable_from`` (priority order).
+    ("tracker", 60, "tm5_900", dict(dh_delta={("alpha_deg", 3): 0.05}), "link_twist", 3, "delta_alpha_deg", 0.05, ""),
+    ("tracker", 60, "kuka_kr6_r900_sixx", dict(dh_delta={("alpha_deg", 2): 0.05}), "link_twist", 2, "delta_alpha_deg", 0.05, "absorbed"),
 ]
 
 
