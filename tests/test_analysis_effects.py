@@ -72,6 +72,8 @@ CASES = [
     # and the finding is d5 with the twist under ``indistinguishable_from`` (priority order).
     ("tracker", 60, "tm5_900", dict(dh_delta={("alpha_deg", 3): 0.05}), "link_twist", 3, "delta_alpha_deg", 0.05, ""),
     ("tracker", 60, "kuka_kr6_r900_sixx", dict(dh_delta={("alpha_deg", 2): 0.05}), "link_twist", 2, "delta_alpha_deg", 0.05, "absorbed"),
+    # one gear harmonic (more harmonics, with compliance, concealed: test_analysis_warmup_gear)
+    ("tracker", 60, "kuka_kr6_r900_sixx", dict(gear_transmission_error=((3, 0.012, 4, 30.0),)), "gear_transmission_error", 3, "amplitude_deg", 0.012, ""),
 ]
 
 
@@ -148,6 +150,9 @@ def test_effect_is_named_with_joint_value_and_better_prediction(i: int) -> None:
     assert (first["effect"], first["joint"]) == (effect, joint), [
         (f["effect"], f["joint"]) for f in rep["findings"]]
     assert first["parameters"][param] == pytest.approx(true, rel=0.3)
+    for _, _, periods, phase in effects.get("gear_transmission_error", ()):
+        assert first["parameters"]["periods_per_turn"] == periods
+        assert abs((first["parameters"]["phase_deg"] - phase + 180.0) % 360.0 - 180.0) < 30.0
     assert rep["verdict"] == "explained"
     ratio = rep["final"]["heldout_rms_mm"] / rep["baseline"]["heldout_rms_mm"]
     assert ratio <= HELDOUT_RATIO, (ratio, out["effect_ratio"])
