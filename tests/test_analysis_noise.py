@@ -32,6 +32,7 @@ def test_pure_noise_gives_at_most_two_recordings_with_findings() -> None:
         else:
             assert rep["verdict"] in ("no_missing_physics", "unexplained_structure")
     assert kinds == {"tracker", "touch", "beam"}
+    print(f"pure noise: {len(with_findings)} of 200 recordings with a finding: {with_findings}")
     assert len(with_findings) <= 2, with_findings
 
 
