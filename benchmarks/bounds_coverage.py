@@ -256,7 +256,6 @@ def scene_light_barrier(rng: np.random.Generator, noise_draws: int = 1) -> list[
     return out
 
 
-#: (row name, scene) of the coverage table; every scene returns one Trial.
 # ------------------------------------------------------------------ chained scenes
 # What the server does (server.service.external.solve_in_chain) with the same solvers.external.chain
 # functions: the touching tool is itself calibrated (XYZ 4-point, its covariance stored), the
@@ -357,6 +356,164 @@ def scene_root_point_on_rail(rng: np.random.Generator) -> Trial:
     return _chained_trial(res, truth, terms, {"tool": nu_t, "rail": nu_b}, position_only=True)
 
 
+# ------------------------------------------------------------------ external kinematics
+# solvers.external_sim's machines (docs/methods/external.md) with random hidden errors, the
+# marks touched with SIGMA_MM per coordinate on the touched point (solvers.external_sim.touch:
+# the emulator's aim, emulator.controller's noise_mm, is the same isotropic Gaussian). The
+# truth is the frame as the method defines it (``Turntable.true_root_frame``: origin the centre
+# of the mark's circle, z the axis positive values turn about, x towards the mark at 0).
+
+
+def _random_turntable(rng: np.random.Generator) -> tuple[object, np.ndarray]:
+    """A turntable whose nominal axis is within 30 deg of vertical, hidden tilt 0-1 deg, root
+    offset 0-3 mm and a random sign; a mark 150-400 mm off the axis, -50..100 mm up it."""
+    from solvers.external_sim import make_turntable
+
+    nominal = _frame(_rotation(rng, 30.0), rng.uniform([1000, -400, 0], [1600, 400, 600]))
+    table = make_turntable(tilt_deg=rng.uniform(0, 1), root_offset_mm=rng.uniform(0, 3),
+                           sign=int(rng.choice([-1, 1])), nominal_root=nominal)
+    a = rng.uniform(0, 2 * np.pi)
+    mark = np.r_[rng.uniform(150, 400) * np.array([np.cos(a), np.sin(a)]), rng.uniform(-50, 100)]
+    return table, mark
+
+
+def _rotary_values(rng: np.random.Generator, n: int) -> np.ndarray:
+    """N axis values over 270 deg (-135..135), each jittered +-10 deg (the ends fixed for N > 8)."""
+    return np.linspace(-135.0, 135.0, n) + rng.uniform(-10, 10, n) * (n <= 8)
+
+
+def _axis_angle_deg(a: np.ndarray, b: np.ndarray) -> float:
+    return float(np.degrees(np.arccos(np.clip(a @ b, -1.0, 1.0))))
+
+
+def _ext_trial(result: CalibrationResult, position_mm: float | None,
+               angle_deg: float | None, source: str | None = None) -> Trial:
+    """The external kinematics report no Mahalanobis bound; sigma from ``extras["dof"]``."""
+    rep = result.report
+    if source is None:
+        source = "residual" if (rep.extras or {}).get("dof") else "assumed"
+    return Trial(position_mm, rep.position_bound95_mm, angle_deg, rep.angle_bound95_deg,
+                 None, None, source)
+
+
+def scene_root_point(n: int) -> Callable[[np.random.Generator], Trial]:
+    """ext.root_point: the mark touched at N axis values; the centre (position) and the axis
+    direction (angle: ``angle_bound95_deg`` is the axis direction's, 2 dof)."""
+    from solvers.external import root_point
+
+    def run(rng: np.random.Generator) -> Trial:
+        table, mark = _random_turntable(rng)
+        values = _rotary_values(rng, n)
+        tu = table.touch_mark(mark, values, SIGMA_MM, rng)
+        res = root_point(tu.points_mm, tu.axis_values, nominal_axis=table.nominal_root[:3, 2])
+        truth = table.true_root_frame(mark)
+        return _ext_trial(res, float(np.linalg.norm(res.frame[:3, 3] - truth[:3, 3])),
+                          _axis_angle_deg(res.frame[:3, 2], truth[:3, 2]))
+    return run
+
+
+def scene_offset(rng: np.random.Generator) -> Trial:
+    """ext.offset: the root point from 4 touch-ups (its covariance and dof carried), then a base
+    on the table (origin within 150 mm of the axis, any yaw, tilted up to 10 deg) touched at
+    one axis value by its origin, a point 200 mm along +X and one 150 mm along +Y."""
+    from solvers.external import offset, root_point
+    from solvers.external.common import rz
+
+    table, mark = _random_turntable(rng)
+    tu = table.touch_mark(mark, _rotary_values(rng, 4), SIGMA_MM, rng)
+    rp = root_point(tu.points_mm, tu.axis_values, nominal_axis=table.nominal_root[:3, 2])
+    truth = _frame((Rotation.from_matrix(_rotation(rng, 10.0))
+                    * Rotation.from_euler("z", rng.uniform(-180, 180), degrees=True)).as_matrix(),
+                   np.r_[rng.uniform(-150, 150, 2), rng.uniform(0, 50)])
+    theta = rng.uniform(-180, 180)
+    W = table.true_root_frame(mark) @ rz([theta])[0] @ truth
+    P = np.array([W[:3, 3], W[:3, 3] + 200 * W[:3, 0], W[:3, 3] + 150 * W[:3, 1]])
+    P += rng.normal(0.0, SIGMA_MM, (3, 3))
+    res = offset(*P, theta, rp.frame, root_covariance=rp.report.covariance,
+                 root_dof=rp.report.extras["dof"], touch_sigma_mm=SIGMA_MM)
+    e = pose_difference(res.frame, truth)
+    return _ext_trial(res, float(np.linalg.norm(e[:3])), float(np.linalg.norm(e[3:])),
+                      "assumed+residual")
+
+
+def scene_linear_unit(n: int) -> Callable[[np.random.Generator], Trial]:
+    """ext.linear_unit: a rail with its travel tilted up to 1 deg, a random sign, an encoder
+    scale within 0.5 % and the robot yawed on the carriage; one fixed mark touched at N rail
+    positions spread over -400..400 mm. Position: the mark at encoder 0 (the report's position
+    block, ``mark_at_zero_mm``); angle: the travel direction."""
+    from solvers.external import linear_unit
+    from solvers.external_sim import make_linear_unit
+
+    def run(rng: np.random.Generator) -> Trial:
+        rail = make_linear_unit(direction_tilt_deg=rng.uniform(-1, 1),
+                                sign=int(rng.choice([-1, 1])), scale=1 + rng.uniform(-0.005, 0.005),
+                                base_yaw_deg=rng.uniform(-180, 180))
+        mark = rng.uniform([400, -300, -100], [900, 300, 400])
+        values = np.linspace(-400.0, 400.0, n) + rng.uniform(-20, 20, n)
+        tu = rail.touch_mark(mark, values, SIGMA_MM, rng)
+        res = linear_unit(tu.points_mm, tu.axis_values, nominal_direction=rail.nominal_in_base)
+        a_true = rail.mark_in_base(mark, [0.0])[0]
+        return _ext_trial(res, float(np.linalg.norm(res.report.extras["mark_at_zero_mm"] - a_true)),
+                          _axis_angle_deg(res.report.extras["travel_direction"], rail.travel_in_base))
+    return run
+
+
+def _positioner_solve(rng: np.random.Generator) -> tuple[CalibrationResult, np.ndarray]:
+    """A positioner with hidden errors (tilt axis tilted 0-1 deg and 0-3 mm off its root, a
+    random tilt sign, the turn axis tilted 0-1 deg and missing the tilt axis by 1-3 mm), a mark
+    100-200 mm off the turn axis; the tilt taught at 4 values over +-75 deg (turn at 0), the
+    turn at 4 values over 270 deg with the tilt at -30..30 deg. Returns (result, the true
+    T_tiltflange_turnroot)."""
+    from solvers.external import positioner_2axis
+    from solvers.external.common import rz
+    from solvers.external_sim import Turntable, make_positioner, touch
+
+    pos = make_positioner(tilt_deg=rng.uniform(0, 1), root_offset_mm=rng.uniform(0, 3),
+                          sign=int(rng.choice([-1, 1])), turn_tilt_deg=rng.uniform(0, 1),
+                          axis_offset_mm=rng.uniform(1, 3))
+    a = rng.uniform(0, 2 * np.pi)
+    mark = np.r_[rng.uniform(100, 200) * np.array([np.cos(a), np.sin(a)]), 0.0]
+    tilt_values = np.linspace(-75.0, 75.0, 4) + rng.uniform(-5, 5, 4)
+    turn_values = _rotary_values(rng, 4)
+    tau = rng.uniform(-30, 30)
+    tilt = touch(pos.mark(mark, tilt_values, np.zeros(4)), tilt_values, SIGMA_MM, rng)
+    turn = touch(pos.mark(mark, np.full(4, tau), turn_values), turn_values, SIGMA_MM, rng)
+    res = positioner_2axis(tilt.points_mm, tilt_values, turn.points_mm, turn_values, tau,
+                           nominal_root_mm=pos.tilt.nominal_root[:3, 3], touch_sigma_mm=SIGMA_MM)
+    # the truth as root_point defines both roots: the tilt's for the mark at turn 0, the turn's
+    # at tilt tau, the turn root carried into the tilt flange frame at tau
+    mark_in_tilt = pos.turn_in_tilt[:3, :3] @ mark + pos.turn_in_tilt[:3, 3]
+    T_tilt = pos.tilt.true_root_frame(mark_in_tilt)
+    T_turn = Turntable(pos.turn_root_in_base(tau), pos.turn_root_in_base(tau),
+                       pos.turn_sign).true_root_frame(mark)
+    return res, np.linalg.inv(T_tilt @ rz([tau])[0]) @ T_turn
+
+
+def scene_positioner_2axis(rng: np.random.Generator) -> Trial:
+    """ext.positioner_2axis: the turn root in the tilt flange frame (the result's frame)."""
+    res, X = _positioner_solve(rng)
+    e = pose_difference(res.frame, X)
+    return _ext_trial(res, float(np.linalg.norm(e[:3])), float(np.linalg.norm(e[3:])), "residual")
+
+
+def scene_positioner_axes(rng: np.random.Generator) -> Trial:
+    """ext.positioner_2axis' 1-D bounds: the common normal's length (mm, in the position
+    column) against ``common_normal_bound95_mm``, the angle between the axes (deg, in the angle
+    column) against ``axes_angle_bound95_deg``."""
+    from solvers.external.common import line_distance
+
+    res, X = _positioner_solve(rng)
+    ex = res.report.extras
+    # of the true frame: with the tilt sign reversed the tilt root's z (the axis positive
+    # values turn about) is the machine's -z, and the angle between the axes 180 deg minus it
+    L, _, _ = line_distance(np.zeros(3), np.array([0.0, 0.0, 1.0]), X[:3, 3], X[:3, 2])
+    angle = float(np.degrees(np.arccos(np.clip(X[2, 2], -1.0, 1.0))))
+    return Trial(abs(ex["common_normal_mm"] - L), ex["common_normal_bound95_mm"],
+                 abs(ex["axes_angle_deg"] - angle), ex["axes_angle_bound95_deg"], None, None,
+                 "residual")
+
+
+#: (row name, scene) of the coverage table; every scene returns one Trial.
 SCENES: list[tuple[str, Callable[[np.random.Generator], Trial]]] = [
     ("tool.xyz_4point N=4", scene_xyz_4point(4)),
     ("tool.xyz_4point N=8", scene_xyz_4point(8)),
@@ -372,6 +529,12 @@ SCENES: list[tuple[str, Callable[[np.random.Generator], Trial]]] = [
     ("fixed_tool.6d 2 touches", scene_fixed_tool("6d", 2)),
     ("chain: base.3point+tool", scene_base_3point_with_tool),
     ("chain: root_point on rail", scene_root_point_on_rail),
+    ("ext.root_point N=4", scene_root_point(4)),
+    ("ext.root_point N=12", scene_root_point(12)),
+    ("ext.offset (root N=4)", scene_offset),
+    ("ext.linear_unit N=5", scene_linear_unit(5)),
+    ("ext.positioner_2axis 4+4", scene_positioner_2axis),
+    ("ext.positioner_2axis axes", scene_positioner_axes),
 ]
 
 
