@@ -27,7 +27,7 @@ from solvers.external.common import (MIN_OFF_LINE_MM, MIN_RADIUS_MM, SIGMA_FLOOR
                                      off_line_rms_mm, outlier_critical, scale95,
                                      sigma_from_residuals, unit, wrap_rad)
 from solvers.frames import Pose
-from solvers.report import BadPoint, CalibrationResult, Finding, QualityReport
+from solvers.report import BadPoint, CalibrationResult, Finding, QualityReport, bound95
 from solvers.validate import FloatArray, as_array, as_points
 
 #: An axis tilted less than this (deg) against nominal is not reported (mechanical tolerance).
@@ -103,12 +103,12 @@ def angle_check(fit: CircleFit, P: FloatArray, theta_deg: FloatArray, sigma_mm: 
 
 
 def _next_axis_value(fit: CircleFit, phi0: float, sign: int,
-                     limits_deg: FloatArray) -> tuple[float, float]:
+                     limits_deg: FloatArray) -> tuple[float, FloatArray]:
     """The axis value whose touch-up shrinks the centre and axis uncertainty most.
 
     Candidate points on the fitted circle every 5 deg within the limits; the one minimising
     ``tr C_c + r² tr C_tilt`` of ``(JᵀJ + J_newᵀ J_new)⁻¹`` (unit sigma). Returns (value,
-    the new centre bound factor sqrt(λ_max C_c))."""
+    the centre's covariance C_c with that point added, unit sigma)."""
     JtJ = fit.jacobian.T @ fit.jacobian
     cand = np.arange(limits_deg[0], limits_deg[1] + 1e-9, 5.0)
     phis = phi0 + sign * np.radians(cand)
@@ -119,7 +119,7 @@ def _next_axis_value(fit: CircleFit, phi0: float, sign: int,
     C = np.linalg.inv(M)
     cost = np.trace(C[:, :3, :3], axis1=1, axis2=2) + fit.radius_mm**2 * (C[:, 3, 3] + C[:, 4, 4])
     k = int(np.argmin(cost))
-    return float(cand[k]), float(np.sqrt(np.linalg.eigvalsh(C[k, :3, :3]).max()))
+    return float(cand[k]), C[k, :3, :3]
 
 
 def root_point(points_mm: object, axis_values_deg: object, *,
@@ -144,7 +144,12 @@ def root_point(points_mm: object, axis_values_deg: object, *,
     ``T_base_root``: origin c, ``z = s n``, x towards the mark at θ = 0 (module docstring).
     Covariance of the circle ``C = σ² (JᵀJ)⁻¹`` (J of the stacked ``[h_k, ρ_k - r]``),
     ``σ² = SSR / (2N - 6)`` (``touch_sigma_mm`` when N = 3); the angle about the axis adds
-    ``σ² / (N r²)``. Bounds use ``k F(k, 2N - 6)`` when σ is estimated.
+    ``σ² / (N r²)``. The bounds are :func:`solvers.report.bound95` of the centre's and of the
+    tilts' covariance blocks (F quantiles with ν = 2N - 6 when σ is estimated), like every
+    other method's: the 95 % radius of the error's actual ellipsoid. (Until 2026-11 they were
+    ``sqrt(k F(k, ν) λ_max)``, the radius of a sphere as wide as the ellipsoid's longest axis:
+    the centre's ellipsoid over a 270 deg arc has axes about 1 : 0.8 : 0.65, so that bound
+    held the truth 98 % of the time instead of 95 % -- wide, not honest.)
 
     Parameters
     ----------
@@ -235,11 +240,10 @@ def root_point(points_mm: object, axis_values_deg: object, *,
     J[3:, 3], J[3:, 4], J[3:, 6] = (np.degrees(T[:3, :3].T @ e) for e in (fit.u, fit.v, fit.normal))
     C_root = J @ C7 @ J.T
 
-    k_pos = scale95(3, dof, estimated)
-    k_ang = scale95(2, dof, estimated)
     k_one = scale95(1, dof, estimated)
-    pos_b = float(np.sqrt(k_pos * np.linalg.eigvalsh(C6[:3, :3]).max()))
-    axis_b = float(np.degrees(np.sqrt(k_ang * np.linalg.eigvalsh(C6[3:5, 3:5]).max())))
+    nu = dof if estimated and dof > 0 else None  # None: sigma assumed, chi-square
+    pos_b = bound95(C6[:3, :3], nu)
+    axis_b = float(np.degrees(bound95(C6[3:5, 3:5], nu)))
     radius_b = float(np.sqrt(k_one * C6[5, 5]))
     scale_b = float(np.sqrt(k_one) * ang["slope_sigma"])
 
@@ -298,14 +302,14 @@ def root_point(points_mm: object, axis_values_deg: object, *,
 
     phi_u = s * np.radians(theta) + phi0 + ang["residuals_rad"]
     bad = None if axis_wrong else circle_bad_point(P, phi_u, np.radians(theta), touch_sigma_mm)
-    next_value, next_b = _next_axis_value(fit, phi0, s, limits)
+    next_value, next_C = _next_axis_value(fit, phi0, s, limits)
     if bad is not None:
         warnings.append(Finding("bad_point", bad.message(), (points_loc, bad.index)))
         guidance = f"re-teach point {bad.index + 1}"
     else:
         guidance = (f"touch the mark at axis value {next_value:.0f} deg next: the centre's 95 % "
                     f"bound would shrink from {pos_b:.3f} to about "
-                    f"{np.sqrt(scale95(3, dof + 2, estimated)) * sigma * next_b:.3f} mm")
+                    f"{bound95(sigma**2 * next_C, None if nu is None else nu + 2):.3f} mm")
 
     report = QualityReport(
         residuals_mm=fit.distances_mm,
