@@ -155,6 +155,9 @@ class Library:
     torques_nm: FloatArray | None = None
     signs: FloatArray | None = None
     skipped: list[dict] = field(default_factory=list)   # not offered, with the reason
+    # the gear harmonics left out for too little travel (``skipped``), kept as yardsticks:
+    # never named, but a named harmonic must fit better than they do (``forward.resolved``)
+    longer: list[Candidate] = field(default_factory=list)
 
 
 def build_library(rec, base: Baseline, torques_nm: FloatArray | None = None,
@@ -197,6 +200,7 @@ def build_library(rec, base: Baseline, torques_nm: FloatArray | None = None,
                                feature=sg[:, j], theta_per_unit=ctrl_unit * (-0.5 * sg[:, j:j + 1])))
     theta_deg = np.degrees(dh_angles_rad(rec.robot, rec.joints_deg))
     skipped: list[dict] = []
+    longer: list[Candidate] = []
     for j in range(n):
         travel = float(np.ptp(theta_deg[:, j]))
         if travel < 1e-6:
@@ -205,6 +209,7 @@ def build_library(rec, base: Baseline, torques_nm: FloatArray | None = None,
                  if travel * k / 360.0 < GEAR_MIN_PERIODS]
         cands += gear_candidates(base, theta_deg[:, j], j,
                                  [k for k in range(1, GEAR_HARMONICS + 1) if k not in short])
+        longer += gear_candidates(base, theta_deg[:, j], j, short)
         if short:
             skipped.append({"effect": "gear_transmission_error", "joint": j + 1,
                             "periods_per_turn": short,
@@ -235,7 +240,7 @@ def build_library(rec, base: Baseline, torques_nm: FloatArray | None = None,
         cands.append(Candidate("tool_deflection", None, _apply(base, tw), "deflection_mm_per_N",
                                regressor="the payload weight across the tool axis",
                                feature=np.linalg.norm(fperp, axis=1), shift_per_unit=tw[:, :3, None]))
-    return Library(cands, tau, sg, skipped)
+    return Library(cands, tau, sg, skipped, longer)
 
 
 def gear_candidates(base: Baseline, theta_deg: FloatArray, j: int, ks: list[int]

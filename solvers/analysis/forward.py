@@ -17,6 +17,18 @@ and assessment of statistical predictions", JRSS B 36:111-147, 1974) and explain
 ``GUARD_FRACTION`` of what the generic structure groups could (so an effect is not named for
 a small share of a large unexplained structure).
 
+A gear harmonic must also be *resolved* (``resolved``): still fit the residual, by the
+alternatives' margin ``ALTERNATIVE_LR`` sigma^2, once any harmonic of the same joint that
+the joint's travel left out (``effects.Library.longer``: periods longer than the travel,
+never named themselves) is in the model. Over a travel of T deg the harmonics k and k+1 drift apart in
+phase by only T deg, so on a narrow travel (a touch recording:
+20-90 deg) their regressors, outside the rigid model, have principal cosines of 0.95-0.999
+and two offered harmonics span a left-out one to |cos| 0.999: a left-out 6-per-turn error
+over 59 deg came out as 7 and 8 per turn at twice its amplitude. If a left-out (longer)
+period explains what it does, the data show a smooth trend over the travel, which the travel rule
+already says no harmonic is named for; the harmonic is not named (``Selection.unresolved``),
+nor listed among another finding's alternatives.
+
 The backward check drops a finding that is no longer significant in the full model
 (Bonferroni over the findings).
 """
@@ -31,8 +43,9 @@ from solvers.analysis.baseline import Baseline
 from solvers.analysis.effects import Candidate
 from solvers.analysis.screen import IDENT_TOL, PLAUSIBLE
 from solvers.analysis.selection import (CV, batch_f_tests, f_test, fit_linear, holm_pass,
-                                        normalise, orth, project_out,
+                                        identifiable_part, normalise, orth, project_out,
                                         residual_ratio)
+from solvers.analysis.text import unresolved_reason
 
 ALPHA = 1e-3            # family-wise level of each selection step (Holm)
 GUARD_FRACTION = 0.05   # a named effect must explain this share of the structure found
@@ -63,6 +76,9 @@ class Selection:
 
     chosen: list[Candidate] = field(default_factory=list)
     steps: list[StepStats] = field(default_factory=list)
+    # gear harmonics not named because a period longer than the travel fits as well (report
+    # entries, ``not_identifiable``), by key
+    unresolved: dict[str, dict] = field(default_factory=dict)
 
     def keys(self) -> list[str]:
         return [c.key for c in self.chosen]
@@ -106,6 +122,52 @@ def _indistinguishable(c, Q, tests) -> list[Candidate]:
     return [d for d, v in zip(ones, cos) if v > SAME_COS]
 
 
+class Longer:
+    """The gear harmonics left out for too little travel (``effects.Library.longer``), as
+    yardsticks of what a smooth trend over each joint's travel fits (see ``resolved``)."""
+
+    def __init__(self, cands: list[Candidate] | None):
+        self.by_joint: dict[int, list[Candidate]] = {}
+        for c in cands or []:
+            self.by_joint.setdefault(c.joint, []).append(c)
+
+
+def resolved(c: Candidate, Q, y_perp, n_rows: int, longer: Longer) -> Candidate | None:
+    """None if gear harmonic ``c`` still fits the residual once any left-out (longer) harmonic
+    of its joint is in the model; else the longer harmonic that leaves it the least.
+
+    With the current model (orthonormal basis ``Q``, residual ``y_perp`` outside it) and a
+    left-out harmonic d added, c's extra sum of squares must be at least ``ALTERNATIVE_LR``
+    residual variances of the model with both (``sigma^2 = RSS / (n - p)``): the margin
+    under which ``alternatives`` calls two candidates equally good. Below it, what c explains
+    a harmonic whose period is longer than the travel (a smooth trend over it) explains too,
+    and the data give no evidence for c's own period (the module docstring). Only d's
+    directions standing out of the model by ``IDENT_TOL`` count, as for every candidate.
+    """
+    if c.effect != "gear_transmission_error":
+        return None
+    Xc = project_out(Q, normalise(c.columns))
+    best, least = None, ALTERNATIVE_LR
+    for d in longer.by_joint.get(c.joint, []):
+        Pd = identifiable_part(Q, d.columns, IDENT_TOL)
+        if Pd.shape[1] == 0:
+            continue
+        Qd = orth(Pd)
+        r = y_perp - Qd @ (Qd.T @ y_perp)
+        Qc = orth(project_out(Qd, Xc), 1e-6)
+        extra = float(np.sum((Qc.T @ r) ** 2))
+        dof = n_rows - Q.shape[1] - Qd.shape[1] - Qc.shape[1]
+        s2 = max(float(r @ r) - extra, 1e-300) / max(dof, 1)
+        if extra / s2 < least:          # the longer harmonic that leaves c the least
+            best, least = d, extra / s2
+    return best
+
+
+def _unresolved(test, Q, y_perp, n_rows, longer: Longer) -> Candidate | None:
+    """:func:`resolved` of a step's test tuple (candidate, gain, p, k, _)."""
+    return resolved(test[0], Q, y_perp, n_rows, longer)
+
+
 def plausible(y, M, c: Candidate) -> bool:
     """Whether the candidate's fitted value (with the model M) is physically possible.
 
@@ -118,10 +180,12 @@ def plausible(y, M, c: Candidate) -> bool:
 
 
 def forward(y, base: Baseline, cands: list[Candidate], cv: CV, groups, alpha: float = ALPHA,
-            max_findings: int = 16) -> Selection:
-    """Forward selection (see the module docstring)."""
+            max_findings: int = 16, longer: list[Candidate] | None = None) -> Selection:
+    """Forward selection (see the module docstring); ``longer``: the gear harmonics left out
+    for too little travel, which a named harmonic must fit better than (``resolved``)."""
     n_rows = y.size
     sel = Selection()
+    yard = Longer(longer)
     cur_cv = cv.heldout_rms(y, base.B)
     X_all = np.hstack([normalise(c.columns) for c in cands]) if cands else np.zeros((n_rows, 0))
     P = project_out(orth(base.B), X_all)   # kept projected out of the growing model
@@ -149,11 +213,19 @@ def forward(y, base: Baseline, cands: list[Candidate], cv: CV, groups, alpha: fl
         gg = group_gains(y_perp, Q, groups, n_rows)
         sgain = max([g - k * sigma2 for _, g, _, k in gg], default=0.0)
         accepted = None
-        for c, gain, p, k, Xp in order[:8]:
+        for t in order[:8]:
+            c, gain, p, k, Xp = t
             cgain = gain - k * sigma2
             if sgain > 0 and cgain < GUARD_FRACTION * sgain:
                 continue
             if not plausible(y, M, c):
+                continue
+            d = _unresolved(t, Q, y_perp, n_rows, yard)
+            if d is not None:
+                sel.unresolved[c.key] = {"effect": c.effect, "joint": c.joint,
+                                         "periods_per_turn": c.periods,
+                                         "fits_as_well": d.periods,
+                                         "reason": unresolved_reason(c, d)}
                 continue
             new_cv = cv.heldout_rms(y, np.hstack([M, c.columns]))
             if new_cv < cur_cv * (1.0 - MIN_CV_GAIN):
@@ -172,7 +244,8 @@ def forward(y, base: Baseline, cands: list[Candidate], cv: CV, groups, alpha: fl
         # about two standard errors): this recording cannot tell them apart with confidence
         s2 = max(rss0 - gain, 1e-300) / max(n_rows - Q.shape[1] - k, 1)
         alternatives = [t[0] for t in order if t[0] is not c and t[0] not in same
-                        and t[0].family != c.family and (gain - t[1]) / s2 < ALTERNATIVE_LR]
+                        and t[0].family != c.family and (gain - t[1]) / s2 < ALTERNATIVE_LR
+                        and not _unresolved(t, Q, y_perp, n_rows, yard)]
         periodogram = {}
         if c.effect == "gear_transmission_error":
             periodogram = {t[0].periods: round(t[1] / rss0, 4) for t in tests
@@ -180,6 +253,7 @@ def forward(y, base: Baseline, cands: list[Candidate], cv: CV, groups, alpha: fl
         Qc = orth(project_out(Q, c.columns))
         P -= Qc @ (Qc.T @ P)
         sel.chosen.append(c)
+        sel.unresolved.pop(c.key, None)
         sel.steps.append(StepStats(
             p_value=float(p), family=len(tests), r=float(np.sqrt(gain / rss0)) if rss0 > 0 else 0.0,
             identifiability=residual_ratio(Q, c.columns),
@@ -218,4 +292,4 @@ def backward(y, base: Baseline, sel: Selection, alpha: float = ALPHA) -> Selecti
         if ps[worst] * len(chosen) < alpha:
             break
         del chosen[worst], steps[worst]
-    return Selection(chosen, steps)
+    return Selection(chosen, steps, sel.unresolved)

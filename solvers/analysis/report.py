@@ -133,7 +133,7 @@ def _analyze(rec, *, folds: int = 5, seed: int = 0, alpha: float = ALPHA,
     # 2. selection on the residual linearised at the rigid fit; then once more, linearised at
     #    the nonlinear fit of what was chosen (only those effects: none dropped lingers)
     sel = backward(y, base, forward(y, base, screened.candidates, cv, groups, alpha,
-                                    max_findings), alpha)
+                                    max_findings, lib.longer), alpha)
     if sel.chosen:
         prep = Prepared.make(rec, [Effect.of(c) for c in sel.chosen], torques=lib.torques_nm, signs=lib.signs)
         f = fit(prep)
@@ -149,14 +149,16 @@ def _analyze(rec, *, folds: int = 5, seed: int = 0, alpha: float = ALPHA,
             by_key = {c.key: c for c in lib.candidates}
             cands = [by_key[c.key] for c in screened.candidates if c.key in by_key]
             groups = structure_groups(rec, base)
-            sel2 = backward(y, base, forward(y, base, cands, cv, groups, alpha, max_findings),
-                            alpha)
+            sel2 = backward(y, base, forward(y, base, cands, cv, groups, alpha, max_findings,
+                                             lib.longer), alpha)
         if sel2 is None or not sel2.chosen:
             # the chosen effects' columns at the nonlinear fit (the model's own Jacobian;
             # all that is used of them from here on)
-            sel = Selection(_at_base(sel.chosen, prep, base), sel.steps)
+            sel = Selection(_at_base(sel.chosen, prep, base), sel.steps, sel.unresolved)
         else:
             sel = sel2
+    # gear harmonics not named: a period longer than the joint's travel fits as well
+    unresolved = list(sel.unresolved.values())
     profiles: dict[str, TauProfile] = {}
     for i, c in enumerate(sel.chosen):
         if c.effect == "thermal_drift":
@@ -236,7 +238,7 @@ def _analyze(rec, *, folds: int = 5, seed: int = 0, alpha: float = ALPHA,
                   "noise_mm": round(sigma_row * float(np.sqrt(m)), 5),
                   "n_parameters": int(_n_identifiable(base0) + prep.n_params),
                   "residuals_mm": [round(float(v), 6) for v in final_residuals]},
-        "not_identifiable": screened.not_identifiable + lib.skipped,
+        "not_identifiable": screened.not_identifiable + lib.skipped + unresolved,
         "not_confirmed": dropped,
         "stand_ins": [{"effect": c.effect, "joint": c.joint, "key": c.key,
                        "stands_in_for": standing[c.key].structure}

@@ -103,6 +103,16 @@ def explanation(c, f: dict, same: list[str] | None = None,
     return text
 
 
+def unresolved_reason(c, longer) -> str:
+    """Why a gear harmonic that passed its tests is not named (``forward.resolved``)."""
+    j, k, kl = c.joint, c.periods, longer.periods
+    return (f"explains nothing of joint {j}'s residual beyond what {kl} per turn explains, "
+            f"whose period ({360.0 / kl:.3g} deg) is longer than the joint's travel: over the "
+            f"travel the data "
+            f"show a smooth trend, not a period of {360.0 / k:.3g} deg, so no harmonic is named "
+            f"for it; spread joint {j} over more of a turn to tell the periods apart")
+
+
 def absorber_of(base, c) -> str:
     """Which of the baseline's parameter blocks soaks up the candidate's regressor."""
     from solvers.analysis.selection import orth, residual_ratio
