@@ -213,3 +213,61 @@ def test_the_pendant_recording_of_a_yielding_joint_2_is_analysed_back(client):
     assert (first["effect"], first["joint"]) == ("joint_compliance", 2), report["locate"]["summary"]
     assert first["parameters"]["compliance_deg_per_Nm"] == pytest.approx(0.002, rel=0.3)
     assert report["final"]["heldout_rms_mm"] < 0.6 * report["baseline"]["heldout_rms_mm"]
+
+
+def test_docs_emulator_md_payload_torque_figures():
+    """docs/emulator.md, "The robot's hidden physics": a KR 6 R900 sixx's A2 carries ~36 N·m
+    at HOME and ~49 N·m with 3 kg on the flange (``pytest -s`` prints them)."""
+    from emulator.controller import home_joints
+    from solvers.gravity import gravity_torques
+    from solvers.robots import ROBOTS
+
+    robot = ROBOTS["kuka_kr6_r900_sixx"]
+    bare = abs(gravity_torques(robot, home_joints(robot))[1])
+    loaded = abs(gravity_torques(robot, home_joints(robot), 3.0)[1])
+    print(f"\ndocs/emulator.md: A2 at HOME {bare:.1f} N·m, with 3 kg {loaded:.1f} N·m")
+    assert bare == pytest.approx(36, abs=0.5)
+    assert loaded == pytest.approx(49, abs=0.5)
+
+
+def light_barrier_cycle(client, heights_mm: list[float]) -> tuple[str, int, np.ndarray]:  # noqa: ANN001
+    """A light-barrier session's cycle at ``heights_mm``: (its URL, triggers, computed TCP)."""
+    url = open_session(client, "tool.light_barrier", 6, nominal_tool=NOMINAL, heights_mm=heights_mm)
+    steps = ok(client.post(f"{url}/run-cycle"))["session"]["steps"]
+    tcp = pose_array(ok(client.post(f"{url}/compute"))["frame"])[:3]
+    return url, len(steps), tcp
+
+
+THREE_HEIGHTS = [10.0, 25.0, 40.0]
+
+
+def test_docs_emulator_md_light_barrier_figures(client):
+    """docs/emulator.md, "Figures from that run": a light-barrier cycle at 3 heights with
+    ``trigger_latency_ms`` 20 gives 25 triggers, and the menu's TCP moves 0.40 mm along the
+    tool axis (20 ms late at 20 mm/s). ``pytest -s`` prints them."""
+    _, _, rigid = light_barrier_cycle(client, THREE_HEIGHTS)
+    ok(client.put(f"{C}/cell/physics", json={"trigger_latency_ms": 20.0}))
+    _, triggers, late = light_barrier_cycle(client, THREE_HEIGHTS)
+    moved = late - rigid
+    print(f"\ndocs/emulator.md: {triggers} triggers, TCP moved {np.linalg.norm(moved):.3f} mm "
+          f"({moved.round(3).tolist()} mm)")
+    assert triggers == 25
+    assert np.linalg.norm(moved) == pytest.approx(0.40, abs=0.005)
+    assert abs(moved[2]) == pytest.approx(0.40, abs=0.005)  # along the tool axis (base -z)
+
+
+@pytest.mark.xfail(strict=True, reason="since 6b4702c (first-order warm-up, gear harmonics) the "
+                   "analysis names nothing in this recording (verdict unexplained_structure); "
+                   "6b4702c^ named trigger_latency 20.000 ms on the same document")
+def test_docs_emulator_md_light_barrier_recording_names_the_latency(client):
+    """docs/emulator.md: the 3-height cycle's recording, analysed, names ``trigger_latency``
+    of 20 ms."""
+    ok(client.put(f"{C}/cell/physics", json={"trigger_latency_ms": 20.0}))
+    url, _, _ = light_barrier_cycle(client, THREE_HEIGHTS)
+    rid = ok(client.post("/recordings", json=ok(client.get(f"{url}/recording"))))["id"]
+    report = analyze(client, rid)
+    print(f"\ndocs/emulator.md: verdict {report['verdict']}, findings "
+          f"{[(f['effect'], f['parameters']) for f in report['findings']]}")
+    first = report["findings"][0] if report["findings"] else {}
+    assert first.get("effect") == "trigger_latency", report["locate"]["summary"]
+    assert first["parameters"]["latency_ms"] == pytest.approx(20.0, abs=0.01)

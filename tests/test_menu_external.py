@@ -719,3 +719,17 @@ def test_offset_on_the_demo_turntable_covers_the_truth_in_200_trials():
         inside_p += np.linalg.norm(d[:3]) <= res.report.position_bound95_mm
         inside_a += np.linalg.norm(d[3:]) <= res.report.angle_bound95_deg
     assert inside_p >= 186 and inside_a >= 186, (inside_p, inside_a)
+
+
+def test_docs_emulator_md_seed_1_hidden_errors():
+    """docs/emulator.md, "External axes": cell seed 1's hidden errors as the page gives them
+    (``pytest -s`` prints them)."""
+    e = ext_emu.default_errors(1)
+    print(f"\ndocs/emulator.md: {e}")
+    assert e["turntable"]["tilt_deg"] == pytest.approx(0.773)
+    assert e["turntable"]["root_offset_mm"] == pytest.approx(2.875)
+    assert e["positioner"]["turn_tilt_deg"] == pytest.approx(0.212)
+    assert e["positioner"]["axis_offset_mm"] == pytest.approx(1.111)
+    assert e["rail"]["direction_tilt_deg"] == pytest.approx(0.387)
+    assert e["rail"]["scale"] == pytest.approx(1.0024)
+    assert ext_emu.default_errors(2) != e  # seeded by the cell
