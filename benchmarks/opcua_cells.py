@@ -10,12 +10,16 @@ its 16 tool and 32 base slots), then in this process:
    time the face could answer no client.
 3. ``poll``: ``--polls`` (20) syncs with nothing changed: the wall and CPU time of one
    (the database read included).
+4. ``gc``: one full ``gc.collect()`` as the face runs (its nodesets and cells frozen, as
+   :meth:`PendantOpcUa.start` and ``sync`` leave them) and, after ``gc.unfreeze()``, as it
+   would be without ``gc.freeze`` (the median of 3 each).
 
 The last line::
 
-    cells=300 start_s=… add_ms=… add_block_ms=… poll_ms=… poll_cpu_ms=…
+    cells=300 start_s=… add_ms=… add_block_ms=… poll_ms=… poll_cpu_ms=… nodesets_s=… gc_ms=… gc_unfrozen_ms=…
 
-(``add_ms``/``add_block_ms``: the median of the added cells.)
+(``add_ms``/``add_block_ms``: the median of the added cells; ``nodesets_s``: the part of
+``start_s`` that loads the DI and Robotics nodesets, ``space.load_nodesets``.)
 
     PYTHONPATH=$PWD python benchmarks/opcua_cells.py [--cells 300] [--profile start|add]
 """
@@ -25,6 +29,7 @@ from __future__ import annotations
 import argparse
 import asyncio
 import cProfile
+import gc
 import pstats
 import statistics
 import sys
@@ -74,8 +79,21 @@ async def longest_gap(stop: asyncio.Event, gaps: list[float], tick_s: float = 0.
 
 
 async def run(args: argparse.Namespace, folder: Path) -> dict[str, float]:
+    from benchmarks.app_overheads import collect_ms
+    from server.opcua import service
     from server.opcua.service import PendantOpcUa
 
+    nodesets_s: list[float] = []
+    load_nodesets = service.space.load_nodesets
+
+    async def timed_load_nodesets(server):  # noqa: ANN001, ANN202
+        t = time.perf_counter()
+        try:
+            return await load_nodesets(server)
+        finally:
+            nodesets_s.append(time.perf_counter() - t)
+
+    service.space.load_nodesets = timed_load_nodesets
     make_session = make_db(folder, args.cells)
     face = PendantOpcUa(make_session, "opc.tcp://127.0.0.1:0/pendant/", poll_s=3600,
                         pki_dir=folder / "pki")
@@ -109,12 +127,18 @@ async def run(args: argparse.Namespace, folder: Path) -> dict[str, float]:
         await face.sync()
         polls.append((time.perf_counter() - t) * 1000)
         cpus.append((time.process_time() - c) * 1000)
+    gc_ms = collect_ms(3)  # the face's objects frozen, as it runs
+    gc.unfreeze()
+    gc_unfrozen_ms = collect_ms(3)  # what each full collection would cost without gc.freeze
     await face.stop()
+    service.space.load_nodesets = load_nodesets
     if args.profile:
         pstats.Stats(prof).sort_stats("cumulative").print_stats(40)
     return {"cells": args.cells, "start_s": start_s, "add_ms": statistics.median(add_ms),
             "add_block_ms": statistics.median(block_ms), "poll_ms": statistics.median(polls),
-            "poll_cpu_ms": statistics.median(cpus)}
+            "poll_cpu_ms": statistics.median(cpus), "nodesets_s": nodesets_s[0],
+            "gc_ms": gc_ms, "gc_unfrozen_ms": gc_unfrozen_ms}
+
 
 
 def main() -> None:
@@ -129,7 +153,8 @@ def main() -> None:
         out = asyncio.run(run(args, Path(tmp)))
     print(f"cells={out['cells']} start_s={out['start_s']:.1f} add_ms={out['add_ms']:.0f} "
           f"add_block_ms={out['add_block_ms']:.0f} poll_ms={out['poll_ms']:.1f} "
-          f"poll_cpu_ms={out['poll_cpu_ms']:.1f}")
+          f"poll_cpu_ms={out['poll_cpu_ms']:.1f} nodesets_s={out['nodesets_s']:.1f} "
+          f"gc_ms={out['gc_ms']:.0f} gc_unfrozen_ms={out['gc_unfrozen_ms']:.0f}")
 
 
 if __name__ == "__main__":
