@@ -173,7 +173,9 @@ def plausible(y, M, c: Candidate) -> bool:
 
     A value beyond ``screen.PLAUSIBLE`` (e.g. a gear's transmission error of degrees, where
     strain-wave and cycloidal gears stay within arcminutes) means the candidate's regressor
-    only fits some other structure; it is then not named, whatever the held-out gain.
+    only fits some other structure; it is then not named, whatever the held-out gain. Those
+    values are therefore upper limits of what each effect can be, not typical sizes: a
+    latency limit of 20 ms (docs/emulator.md's own example) left that recording unnamed.
     """
     beta = fit_linear(y, np.hstack([M, c.columns]))[0][M.shape[1]:]
     return float(np.linalg.norm(beta)) <= PLAUSIBLE[c.effect]

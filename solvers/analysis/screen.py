@@ -3,8 +3,9 @@
 A candidate effect enters the residual through its regressor ``X`` (``effects.py``). It is
 screened out when
 
-- *invisible*: even a large but possible value of its parameter (``PLAUSIBLE``) would change
-  the samples by less than ``VISIBLE_MM`` RMS;
+- *invisible*: even a large but possible value of its parameter (``PLAUSIBLE``, the upper
+  limit of what the effect can be, which the selection also uses) would change the samples by
+  less than ``VISIBLE_MM`` RMS;
 - *not identifiable*: ``X`` lies (almost) inside span(B), the baseline's Jacobian, so the
   rigid fit absorbs it (relative residual of the worst column direction below
   ``IDENT_TOL``). This is the column-rank test of the identification Jacobian used to find a
@@ -28,11 +29,22 @@ from solvers.analysis.text import not_identifiable_reason
 
 IDENT_TOL = 3e-3        # relative residual of a regressor outside the model's span
 VISIBLE_MM = 1e-3
-# a large but possible value of each effect's parameter; an effect that would change the
-# samples by less than VISIBLE_MM RMS even at this value is invisible in the recording
+# a large but possible value of each effect's parameter, used twice: an effect that would
+# change the samples by less than VISIBLE_MM RMS even at this value is invisible in the
+# recording (here), and a fitted value beyond it is physically impossible, so the candidate
+# is not named (``forward.plausible``, ``forward.backward``). The second use makes each value
+# an upper limit of what the effect can be in a working cell, not a typical size: a value
+# the robot can really show must lie inside it, or its effect is never named and other
+# candidates stand in for it. trigger_latency: the time from the beam's interruption to the
+# controller latching the joints, a sensor's response (up to ~20 ms) plus the input's path
+# (a controller polling its inputs once per interpolation cycle, 4-12 ms; through a PLC
+# and a fieldbus, scan and bus cycles of tens of ms): 100 ms. It was 20 ms, which
+# docs/emulator.md's light-barrier example sets: fitted at 20.0000068 ms (linearised) it was
+# "impossible", nothing was named; at 25-80 ms simulated beam recordings named backlash of
+# two or three joints instead, verdict ``explained``.
 PLAUSIBLE = {"joint_offset": 1.0, "link_length": 2.0, "link_twist": 1.0,
              "joint_compliance": 5e-3, "backlash": 0.5, "thermal_drift": 1.0,
-             "gear_transmission_error": 0.05, "trigger_latency": 20.0, "tool_deflection": 0.01}
+             "gear_transmission_error": 0.05, "trigger_latency": 100.0, "tool_deflection": 0.01}
 
 
 @dataclass
