@@ -430,7 +430,8 @@ def scene_offset(rng: np.random.Generator) -> Trial:
     P = np.array([W[:3, 3], W[:3, 3] + 200 * W[:3, 0], W[:3, 3] + 150 * W[:3, 1]])
     P += rng.normal(0.0, SIGMA_MM, (3, 3))
     res = offset(*P, theta, rp.frame, root_covariance=rp.report.covariance,
-                 root_dof=rp.report.extras["dof"], touch_sigma_mm=SIGMA_MM)
+                 root_dof=rp.report.extras["dof"], root_sigma_mm=rp.report.sigma_mm,
+                 touch_sigma_mm=SIGMA_MM)
     e = pose_difference(res.frame, truth)
     return _ext_trial(res, float(np.linalg.norm(e[:3])), float(np.linalg.norm(e[3:])),
                       "assumed+residual")
@@ -489,20 +490,26 @@ def _positioner_solve(rng: np.random.Generator) -> tuple[CalibrationResult, np.n
     return res, np.linalg.inv(T_tilt @ rz([tau])[0]) @ T_turn
 
 
-def scene_positioner_2axis(rng: np.random.Generator) -> Trial:
-    """ext.positioner_2axis: the turn root in the tilt flange frame (the result's frame)."""
-    res, X = _positioner_solve(rng)
+def _positioner_frame_trial(res: CalibrationResult, X: np.ndarray) -> Trial:
     e = pose_difference(res.frame, X)
     return _ext_trial(res, float(np.linalg.norm(e[:3])), float(np.linalg.norm(e[3:])), "residual")
+
+
+def scene_positioner_2axis(rng: np.random.Generator) -> Trial:
+    """ext.positioner_2axis: the turn root in the tilt flange frame (the result's frame)."""
+    return _positioner_frame_trial(*_positioner_solve(rng))
 
 
 def scene_positioner_axes(rng: np.random.Generator) -> Trial:
     """ext.positioner_2axis' 1-D bounds: the common normal's length (mm, in the position
     column) against ``common_normal_bound95_mm``, the angle between the axes (deg, in the angle
     column) against ``axes_angle_bound95_deg``."""
+    return _positioner_axes_trial(*_positioner_solve(rng))
+
+
+def _positioner_axes_trial(res: CalibrationResult, X: np.ndarray) -> Trial:
     from solvers.external.common import line_distance
 
-    res, X = _positioner_solve(rng)
     ex = res.report.extras
     # of the true frame: with the tilt sign reversed the tilt root's z (the axis positive
     # values turn about) is the machine's -z, and the angle between the axes 180 deg minus it
@@ -558,6 +565,15 @@ def coverage(name: str, trials: int, seed: int) -> Coverage:
     rng = np.random.default_rng(seed)
     runs = [scene(rng) for _ in range(trials)]
     return summarise(name, runs)
+
+
+def positioner_coverage(trials: int, seed: int) -> tuple[Coverage, Coverage]:
+    """The rows ``ext.positioner_2axis 4+4`` and ``ext.positioner_2axis axes`` from one run
+    of ``trials`` seeded solves (the two scenes draw the same trials from the same seed)."""
+    rng = np.random.default_rng(seed)
+    runs = [_positioner_solve(rng) for _ in range(trials)]
+    return (summarise("ext.positioner_2axis 4+4", [_positioner_frame_trial(*r) for r in runs]),
+            summarise("ext.positioner_2axis axes", [_positioner_axes_trial(*r) for r in runs]))
 
 
 def light_barrier_coverage(tools: int, draws: int, seed: int) -> Coverage:

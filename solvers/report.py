@@ -135,7 +135,7 @@ def sigma_dof(sigma: float, dof: int | None, floor: float = 0.0) -> int | None:
     return int(dof)
 
 
-def bound95(covariance: FloatArray, dof: int | None = None) -> float:
+def bound95(covariance: FloatArray, dof: float | None = None) -> float:
     """95% bound on the length of an error vector with this (k x k) covariance.
 
     The radius ``b`` with ``P(|e| <= b) = 0.95`` for ``e ~ N(0, C)``. ``|e|²`` is a weighted
@@ -144,7 +144,8 @@ def bound95(covariance: FloatArray, dof: int | None = None) -> float:
     ``c = Σλ²/Σλ``, ``f = (Σλ)²/Σλ²``. When C was scaled by a sigma estimated from the
     residual with ``dof`` degrees of freedom, ``|e|²/(c f)`` over ``σ̂²/σ²`` is ``F(f, dof)``
     distributed, so ``b² = c f F(f, dof; 0.95)``; with sigma assumed (``dof=None``)
-    ``b² = c χ²(f; 0.95)``. Exact for an isotropic C (f = k) and for a single dominant axis
+    ``b² = c χ²(f; 0.95)``. ``dof`` may be fractional (a Welch-Satterthwaite effective
+    dof of summed shares). Exact for an isotropic C (f = k) and for a single dominant axis
     (f = 1); between them the coverage is within 0.2 % of 95 % (checked by Monte Carlo over
     eigenvalue ratios down to 1/100 and dof from 2 to infinity).
 
@@ -165,7 +166,8 @@ def bound95(covariance: FloatArray, dof: int | None = None) -> float:
     return bound95_of_eigenvalues(np.linalg.eigvalsh(np.asarray(covariance, dtype=float)), dof)
 
 
-def bound95_of_eigenvalues(eigenvalues: Sequence[float] | FloatArray, dof: int | None = None) -> float:
+def bound95_of_eigenvalues(eigenvalues: Sequence[float] | FloatArray,
+                           dof: float | None = None) -> float:
     """:func:`bound95` from the covariance's eigenvalues (negative round-off taken as 0).
     The quantiles are ``scipy.special.chdtri`` / ``fdtri``, the functions behind
     ``scipy.stats.chi2.ppf`` / ``scipy.stats.f.ppf``, without their per-call overhead."""

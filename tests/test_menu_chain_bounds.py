@@ -5,6 +5,7 @@ the assumed touch scatter is the cell's aim (0.1 mm), named in the report."""
 from __future__ import annotations
 
 import numpy as np
+import pytest
 
 from api_helpers import C, CELL, approach, ok, open_session, pose_matrix, walk
 from emulator import external as ext_emu
@@ -91,3 +92,31 @@ def test_the_welch_satterthwaite_widening_stays_finite_on_every_scipy():
     assert 1.0 < chain._f_over_chi(5.0, 3) < 2.0
     assert chain._welch_dof(-1e-30, 4.0, [0.0], [None]) is None  # round-off, no variance
     assert chain._welch_dof(0.01, 4.0, [0.01], [8.0]) >= 4.0  # never below the smallest
+
+
+def test_the_offsets_and_the_positioners_own_dof_is_read_per_block():
+    """The Offset and the positioner report their plain covariance with the Welch-Satterthwaite
+    dof of each block (``extras.position_dof``, ``extras.angle_dof``); the chain reads them
+    so (``report_dofs``) and adds its terms to that covariance with the block's own dof: the
+    position's total is the one a scalar dof of the position gives, the angle's likewise.
+    (Before, the chain read the Offset's widened covariance with chi-square.)"""
+    from types import SimpleNamespace
+
+    from solvers.external.chain import combined_bounds, report_dofs
+    from solvers.report import bound95
+
+    own = np.diag([0.01, 0.02, 0.015, 0.001, 0.002, 0.0015])
+    rep = SimpleNamespace(dof=None, sigma_source=None,
+                          extras={"position_dof": 3.2, "angle_dof": 7.5})
+    dofs = report_dofs(rep)
+    assert dofs == (3.2, 7.5)
+    term = {"tool 1 TCP": np.diag([0.004, 0.004, 0.004, 0.0002, 0.0002, 0.0002])}
+    b_pos, b_ang = bound95(own[:3, :3], 3.2), bound95(own[3:, 3:], 7.5)
+    pair = combined_bounds(b_pos, b_ang, term, dofs, own, {"tool 1 TCP": 10})
+    pos = combined_bounds(b_pos, b_ang, term, 3.2, own, {"tool 1 TCP": 10})
+    ang = combined_bounds(b_pos, b_ang, term, 7.5, own, {"tool 1 TCP": 10})
+    assert pair["position_bound95_mm"] == pos["position_bound95_mm"]
+    assert pair["angle_bound95_deg"] == ang["angle_bound95_deg"]
+    alone = combined_bounds(b_pos, b_ang, {}, dofs, own)  # no terms: the solve's own bounds
+    assert alone["position_bound95_mm"] == pytest.approx(b_pos)
+    assert alone["angle_bound95_deg"] == pytest.approx(b_ang)

@@ -667,6 +667,13 @@ def test_linear_unit_on_the_demo_rail_covers_the_truth_in_200_trials(errors, cod
     ({"positioner": {"tilt_deg": 1.0}}, "axis_tilted"),
     ({"positioner": {"turn_tilt_deg": 1.0}}, "axes_angle")])
 def test_positioner_on_the_demo_positioner_covers_the_truth_in_200_trials(errors, code):
+    """The demo positioner (4 + 4 positions) through the menu's adapter: the common normal and
+    the angle between the axes inside their 95 % bounds within 3 binomial standard errors of
+    95 % (>= 181 of 200), the error named in all 200. The bounds are the plain covariance's
+    with the Welch-Satterthwaite dof (docs/methods/external.md); over 1000 trials (seed 5) the
+    common normal's held 93.1 / 93.3 / 93.5 % and the angle's 95.7 % on this geometry, so
+    >= 186 (93 %) of 200 would fail about half the seeds. (The old bounds, each root's share
+    widened for its own dof, held 98-99.5 % and passed 186 easily.)"""
     from solvers.external_sim import touch
 
     ext = ext_emu.external_cell(REACH, errors, 1)
@@ -684,7 +691,7 @@ def test_positioner_on_the_demo_positioner_covers_the_truth_in_200_trials(errors
         inside_l += abs(ex["common_normal_mm"] - L_true) <= ex["common_normal_bound95_mm"]
         inside_a += abs(ex["axes_angle_deg"] - angle_true) <= ex["axes_angle_bound95_deg"]
         named += code in {w.code for w in r.warnings}
-    assert inside_l >= 186 and inside_a >= 186 and named == 200, (inside_l, inside_a, named)
+    assert inside_l >= 181 and inside_a >= 181 and named == 200, (inside_l, inside_a, named)
 
 
 def test_offset_on_the_demo_turntable_covers_the_truth_in_200_trials():

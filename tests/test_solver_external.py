@@ -228,7 +228,7 @@ def test_offset_truth_within_95_bounds_with_a_calibrated_root(error):
         pts = np.array([W[:3, 3], W[:3, 3] + 200 * W[:3, 0], W[:3, 3] + 150 * W[:3, 1]])
         pts += rng.normal(0.0, SIGMA_MM, (3, 3))
         res = offset(*pts, theta, rp.frame, root_covariance=rp.report.covariance,
-                     root_dof=rp.report.extras["dof"])
+                     root_dof=rp.report.extras["dof"], root_sigma_mm=rp.report.sigma_mm)
         d = pose_difference(truth, res.frame)
         inside_p += np.linalg.norm(d[:3]) <= res.report.position_bound95_mm
         inside_a += np.linalg.norm(d[3:]) <= res.report.angle_bound95_deg
@@ -407,3 +407,98 @@ def test_root_point_bounds_are_the_95_percent_radius_of_their_ellipsoid():
         e = z[:, :L.shape[0]] @ L.T / w
         q95 = np.quantile(np.linalg.norm(e, axis=1), 0.95)
         assert bound == pytest.approx(q95, rel=0.02)
+
+
+def test_offset_reports_the_plain_covariance_with_the_welch_satterthwaite_dof():
+    """The Offset's covariance is the plain sum of the touch share and the root point's share
+    (the root's covariance through ``root_jacobian``), whatever the root's dof: not the root's
+    share widened by ``3 F(3, ν)/χ²(3)`` (7.3 x at ν = 2), whose bounds held the truth 98 % of
+    the time. Each bound is bound95 of its block with F quantiles of the block's
+    Welch-Satterthwaite dof, ``(v_t + v_r)² / (v_r² / ν)``, the root's share weighed at the
+    touch sigma; with the root's sigma known (dof 0) chi-square."""
+    from solvers.external.offset import root_jacobian
+    from solvers.report import bound95
+
+    table = make_turntable(tilt_deg=1.0, root_offset_mm=3.0)
+    tu = table.touch_mark(MARK, VALUES, SIGMA_MM, np.random.default_rng(5))
+    rp = root_point(tu.points_mm, tu.axis_values)
+    nu_r, s_r = rp.report.extras["dof"], rp.report.sigma_mm
+    assert nu_r == 2 and s_r > 0.01  # 4 positions: sigma estimated from 2 residual dof
+    theta = 35.0
+    W = table.true_root_frame(MARK) @ rz([theta])[0]
+    pts = np.array([W[:3, 3], W[:3, 3] + 200 * W[:3, 0], W[:3, 3] + 150 * W[:3, 1]])
+    pts += np.random.default_rng(6).normal(0.0, SIGMA_MM, (3, 3))
+    touch_only = offset(*pts, theta, rp.frame, touch_sigma_mm=SIGMA_MM).report
+    C_r = rp.report.covariance
+    res = offset(*pts, theta, rp.frame, root_covariance=C_r, root_dof=nu_r, root_sigma_mm=s_r,
+                 touch_sigma_mm=SIGMA_MM).report
+    known = offset(*pts, theta, rp.frame, root_covariance=C_r, root_dof=0,
+                   touch_sigma_mm=SIGMA_MM).report
+    J = root_jacobian(rp.frame, res.extras["base_in_robot_base"], theta)
+    root_share = J @ C_r @ J.T
+    np.testing.assert_allclose(res.covariance, touch_only.covariance + root_share, atol=1e-12)
+    np.testing.assert_allclose(known.covariance, res.covariance, atol=1e-12)
+    for block, key, bound, bound_known in (
+            (slice(0, 3), "position_dof", res.position_bound95_mm, known.position_bound95_mm),
+            (slice(3, 6), "angle_dof", res.angle_bound95_deg, known.angle_bound95_deg)):
+        v_t = np.trace(touch_only.covariance[block, block])
+        v_r = np.trace(root_share[block, block]) * (SIGMA_MM / s_r) ** 2
+        nu = (v_t + v_r) ** 2 / (v_r**2 / nu_r)
+        assert res.extras[key] == pytest.approx(nu, rel=1e-9) and nu > nu_r
+        assert bound == pytest.approx(bound95(res.covariance[block, block], nu), rel=1e-9)
+        assert known.extras[key] is None
+        assert bound_known == pytest.approx(bound95(res.covariance[block, block]), rel=1e-9)
+
+
+def test_positioner_reports_the_plain_covariance_with_the_welch_satterthwaite_dof():
+    """The positioner's covariance is the two roots' covariances carried to the frame, the
+    common normal and the angle between the axes (central differences here), unwidened: not
+    each root's widened by ``F(1, ν)/χ²(1)`` (4.8 x at ν = 2), whose bounds held the truth
+    98-99.5 % of the time. The bounds take F quantiles of each quantity's Welch-Satterthwaite
+    dof of the two shares weighed at one touch sigma, between 2 and 4 at 4 + 4 positions."""
+    from scipy import stats
+
+    from solvers.external.offset import _perturbed
+    from solvers.external.positioner import _axes_geometry
+    from solvers.report import bound95
+
+    pos = make_positioner(axis_offset_mm=3.0, turn_tilt_deg=1.0)
+    rng = np.random.default_rng(8)
+    tilt = pos.mark(TABLE_MARK, TILT_VALUES, np.zeros(4)) + rng.normal(0, SIGMA_MM, (4, 3))
+    turn = pos.mark(TABLE_MARK, np.full(4, 20.0), TURN_VALUES) + rng.normal(0, SIGMA_MM, (4, 3))
+    res = positioner_2axis(tilt, TILT_VALUES, turn, TURN_VALUES, 20.0)
+    ex = res.report.extras
+    roots = (ex["tilt"], ex["turn"])
+    X = res.frame
+    shares = []
+    for k, r in enumerate(roots):  # d(normal, angle, position, rotation of X) / d(root pose)
+        cols = []
+        for i in range(6):
+            h = 1e-4 if i < 3 else 1e-5
+            d = np.zeros(6)
+            d[i] = h
+            g = []
+            for sgn in (1.0, -1.0):
+                T = [roots[0].frame, roots[1].frame]
+                T[k] = _perturbed(T[k], sgn * d)
+                Xd, L, a = _axes_geometry(T[0], T[1], 20.0)
+                rot = Rotation.from_matrix(X[:3, :3].T @ Xd[:3, :3]).as_rotvec(degrees=True)
+                g.append(np.r_[L, a, Xd[:3, 3] - X[:3, 3], rot])
+            cols.append((g[0] - g[1]) / (2 * h))
+        J = np.array(cols).T
+        shares.append((J @ r.report.covariance @ J.T, r.report.sigma_mm))
+    assert all(r.report.extras["dof"] == 2 for r in roots)
+    C = shares[0][0] + shares[1][0]
+    np.testing.assert_allclose(res.report.covariance, C[2:, 2:], rtol=1e-4, atol=1e-12)
+    for block, key, bound in (
+            (slice(0, 1), "common_normal", ex["common_normal_bound95_mm"]),
+            (slice(1, 2), "axes_angle", ex["axes_angle_bound95_deg"]),
+            (slice(2, 5), "position", res.report.position_bound95_mm),
+            (slice(5, 8), "angle", res.report.angle_bound95_deg)):
+        v = [np.trace(S[block, block]) / s**2 for S, s in shares]
+        nu = sum(v) ** 2 / (v[0] ** 2 / 2 + v[1] ** 2 / 2)
+        assert ex[f"{key}_dof"] == pytest.approx(nu, rel=1e-3) and 2 <= nu <= 4
+        assert bound == pytest.approx(bound95(C[block, block], nu), rel=1e-3)
+    var_L = C[0, 0]
+    assert ex["common_normal_bound95_mm"] == pytest.approx(
+        np.sqrt(stats.f.ppf(0.95, 1, ex["common_normal_dof"]) * var_L), rel=1e-3)

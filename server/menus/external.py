@@ -46,7 +46,8 @@ ROTARY_LIMITS = (-185.0, 185.0)
 class ExtInputs:
     """The external kinematic a session works on, from its EX_KIN slot: kind, axes, root frame
     ``T_base_root`` and flange offset (a positioner's turn root in its tilt flange), the axis
-    the menu reads (``axis``), the root point's covariance and dof (for the Offset's bounds)."""
+    the menu reads (``axis``), the root point's covariance, dof and sigma (for the Offset's
+    bounds)."""
 
     number: int
     kind: str
@@ -56,6 +57,7 @@ class ExtInputs:
     axis: str | None = None
     root_covariance: FloatArray | None = None
     root_dof: int = 0
+    root_sigma_mm: float | None = None
 
 
 def _ext(inp: MethodInputs) -> ExtInputs:
@@ -155,7 +157,8 @@ def _offset(points: Sequence[TaughtData], inp: MethodInputs) -> CalibrationResul
     turning = ex.axes[-1]
     root = _nominal_root(ex, turning, values)
     return offset(origin, x_point, xy_point, values[turning], root,
-                  root_covariance=ex.root_covariance, root_dof=ex.root_dof, **_sigma(inp))
+                  root_covariance=ex.root_covariance, root_dof=ex.root_dof,
+                  root_sigma_mm=ex.root_sigma_mm, **_sigma(inp))
 
 
 def _linear_unit(points: Sequence[TaughtData], inp: MethodInputs) -> CalibrationResult:

@@ -197,7 +197,8 @@ METHOD_KINDS = {"ext.root_point": ("turntable", "positioner"), "ext.offset": ("t
 def ext_inputs(db: Session, s: CalibSession) -> Any:
     """The :class:`server.menus.external.ExtInputs` of an ``ext.*`` session: the kinematic of
     ``params.ext_no`` (the Offset menus) or of the target slot, and, when a root-point session
-    wrote that slot, its covariance and dof (the Offset's bounds carry the root's uncertainty)."""
+    wrote that slot, its covariance, dof and sigma (the Offset's bounds carry the root's
+    uncertainty)."""
     from server.menus.external import ExtInputs
 
     p = s.params
@@ -215,20 +216,22 @@ def ext_inputs(db: Session, s: CalibSession) -> Any:
         what = ("a base rides on a turntable or a positioner" if s.target_table != TABLE
                 else f"{s.method} calibrates a {' or a '.join(kinds)}")
         raise CalibrationError(loc, f"external kinematic {number} is a {e.kind}: {what}")
-    cov, dof = None, 0
+    cov, dof, sigma = None, 0, None
     if e.session_id is not None and e.method == "ext.root_point":
         root_session = db.get(CalibSession, e.session_id)
         report = root_session.report if root_session is not None else None
         if report and report.get("covariance"):
             cov = np.array(report["covariance"], dtype=float)
             dof = int((report.get("extras") or {}).get("dof") or 0)
+            sigma = report.get("sigma_mm")
     axis = p.get("axis")
     if axis is not None and axis not in axes_of(e):
         raise CalibrationError(("params", "axis"), f"external kinematic {number} moves "
                                f"{', '.join(axes_of(e)) or 'no axis'}, not {axis}")
     root = None if not any(e.pose_values()) else root_matrix(e)  # no machine data: no nominal
     return ExtInputs(number=e.number, kind=e.kind, axes=tuple(axes_of(e)), root=root,
-                     flange=flange_matrix(e), axis=axis, root_covariance=cov, root_dof=dof)
+                     flange=flange_matrix(e), axis=axis, root_covariance=cov, root_dof=dof,
+                     root_sigma_mm=None if sigma is None else float(sigma))
 
 
 def mech_unit(db: Session, controller_id: int, number: int) -> str:
@@ -420,7 +423,7 @@ def unplaced_positions(points: list) -> list:
 
 
 def entry_covariance(db: Session, controller_id: int, table: str,
-                     number: int) -> tuple[np.ndarray | None, int | None, str]:
+                     number: int) -> tuple[np.ndarray | None, float | None, str]:
     """The stored covariance (3, 3, mm²) of the position of tool (TCP in the flange) or base
     (a fixed tool's TCP in the world) ``number``: that of the last saved session that wrote
     the position the slot holds now, with the chain's terms when that session had them
@@ -448,7 +451,8 @@ def entry_covariance(db: Session, controller_id: int, table: str,
         if not rep.get("covariance"):
             break
         C = np.array(rep["covariance"], dtype=float)[:3, :3]
-        return C, (int(rep["dof"]) if rep.get("dof") else None), where
+        dof = rep.get("dof") or (rep.get("extras") or {}).get("position_dof")  # an Offset's
+        return C, (float(dof) if dof else None), where
     return None, None, (f"{what} has no stored covariance (not calibrated here, or edited "
                   "since): its position counts as exact in the bound")
 
@@ -524,13 +528,16 @@ def solve_in_chain(db: Session, s: CalibSession, spec: Any, points: list,
     """Solve session ``s`` with its touch-ups in the world (:func:`chain_points`), then widen
     the bounds by every calibrated element of the chain: the touching (reference, fixed) tool's
     stored covariance and the rail's slope, each carried through the menu's own solve
-    (:func:`solvers.external.chain.propagate`). The report says what the chain assumed
-    (``warnings``), which term adds how much (``extras.bound_terms``) and the sigma the touch
-    term assumed (``extras.assumed_sigma_mm``)."""
+    (:func:`solvers.external.chain.propagate`). The solve's own covariance is read as it is
+    reported, unwidened, with its degrees of freedom (``solvers.external.chain.report_dofs``:
+    per block for the Offset and the positioner, whose covariances sum shares of different
+    dof), so the total's F quantile is the Welch-Satterthwaite one of every share. The report
+    says what the chain assumed (``warnings``), which term adds how much
+    (``extras.bound_terms``) and the sigma the touch term assumed (``extras.assumed_sigma_mm``)."""
     from dataclasses import replace
 
     from solvers.external.chain import (combined_bounds, own_covariance, propagate,
-                                         report_dof, welch_dof)
+                                         report_dofs, welch_dof)
     from solvers.report import Finding
 
     if inputs.touch_sigma_mm is None:
@@ -608,7 +615,8 @@ def solve_in_chain(db: Session, s: CalibSession, spec: Any, points: list,
                              "(the cell's aim): the points leave no residual to estimate the "
                              "touch scatter, so the touch term of the bound rests on it; "
                              "touch more points to measure it", (), "info")
-    bounds = combined_bounds(r.position_bound95_mm, r.angle_bound95_deg, terms, report_dof(r),
+    own_dofs = report_dofs(r)  # (position, angle): the Offset's and the positioner's per block
+    bounds = combined_bounds(r.position_bound95_mm, r.angle_bound95_deg, terms, own_dofs,
                              own_covariance(r), dofs)
     for name, note in notes.items():
         bounds["terms"].setdefault(name, {"position_bound95_mm": None,  # type: ignore[index]
@@ -619,7 +627,7 @@ def solve_in_chain(db: Session, s: CalibSession, spec: Any, points: list,
         parts = [(C[:3, :3], dofs.get(name)) for name, C in terms.items()]
         names = tuple(r.parameter_names)[:3]
         if r.covariance is not None and names == XYZ_PARAMETERS:
-            parts.append((np.asarray(r.covariance, dtype=float)[:3, :3], report_dof(r)))
+            parts.append((np.asarray(r.covariance, dtype=float)[:3, :3], own_dofs[0]))
         total = sum(C for C, _ in parts)
         extras["position_covariance_total_mm2"] = total.tolist()
         extras["position_covariance_total_dof"] = welch_dof(

@@ -138,6 +138,29 @@ def report_dof(report: object) -> int | None:
     return int(extra) if extra else None
 
 
+def report_dofs(report: object) -> tuple[float | None, float | None]:
+    """The degrees of freedom of a report's position and angle blocks: ``extras["position_dof"]``
+    and ``extras["angle_dof"]`` where the report gives them (``ext.offset``,
+    ``ext.positioner_2axis``: a covariance summed from shares of different dof, each block
+    with its Welch-Satterthwaite dof, :func:`solvers.external.common.block_dof`), else
+    :func:`report_dof` for both. The covariance they go with is the report's own, unwidened.
+
+    Examples
+    --------
+    >>> from types import SimpleNamespace as R
+    >>> report_dofs(R(dof=None, extras={"position_dof": 3.5, "angle_dof": None}))
+    (3.5, None)
+    >>> report_dofs(R(dof=6, extras={}))
+    (6, 6)
+    """
+    extras = getattr(report, "extras", None) or {}
+    if "position_dof" in extras or "angle_dof" in extras:
+        pos, ang = extras.get("position_dof"), extras.get("angle_dof")
+        return (None if pos is None else float(pos)), (None if ang is None else float(ang))
+    dof = report_dof(report)
+    return dof, dof
+
+
 def _welch_dof(own: float, dof: float | None, others: list[float],
                other_dofs: list[float | None]) -> float | None:
     """Welch-Satterthwaite degrees of freedom of a sum of variance terms [1]_:
@@ -186,7 +209,8 @@ def _combine_cov(own: FloatArray, dof: float | None, others: list[FloatArray],
 
 
 def combined_bounds(position_bound95_mm: float | None, angle_bound95_deg: float | None,
-                    terms: dict[str, FloatArray], dof: float | None = None,
+                    terms: dict[str, FloatArray],
+                    dof: float | None | tuple[float | None, float | None] = None,
                     own_covariance: FloatArray | None = None,
                     term_dofs: dict[str, float | None] | None = None) -> dict[str, object]:
     """The result's 95 % bounds with every term: the solve's own (touch scatter; F quantiles
@@ -199,7 +223,8 @@ def combined_bounds(position_bound95_mm: float | None, angle_bound95_deg: float 
     solved frame's axes) the covariances add and the total is the bound of their sum;
     without it the squared bounds add on the chi-square scale (exact for terms of one shape,
     wide otherwise). With an estimated sigma the total takes the F quantile of the
-    Welch-Satterthwaite degrees of freedom (:func:`_combine`, :func:`_combine_cov`).
+    Welch-Satterthwaite degrees of freedom (:func:`_combine`, :func:`_combine_cov`). ``dof``
+    may be a pair, the position block's and the angle block's (:func:`report_dofs`).
 
     Returns
     -------
@@ -218,6 +243,7 @@ def combined_bounds(position_bound95_mm: float | None, angle_bound95_deg: float 
     >>> round(combined_bounds(0.2795, None, {"tool 1": C})["position_bound95_mm"], 4)
     0.3953
     """
+    dof_pos, dof_ang = dof if isinstance(dof, tuple) else (dof, dof)
     out_terms: dict[str, dict[str, float | None]] = {
         "touch": {"position_bound95_mm": position_bound95_mm,
                   "angle_bound95_deg": angle_bound95_deg}}
@@ -234,14 +260,14 @@ def combined_bounds(position_bound95_mm: float | None, angle_bound95_deg: float 
         C0 = np.asarray(own_covariance, dtype=float)
         Cs = [np.asarray(C, dtype=float) for C in terms.values()]
         return {"position_bound95_mm": None if position_bound95_mm is None else
-                _combine_cov(C0[:3, :3], dof, [C[:3, :3] for C in Cs], nus),
+                _combine_cov(C0[:3, :3], dof_pos, [C[:3, :3] for C in Cs], nus),
                 "angle_bound95_deg": None if angle_bound95_deg is None else
-                _combine_cov(C0[3:, 3:], dof, [C[3:, 3:] for C in Cs], nus),
+                _combine_cov(C0[3:, 3:], dof_ang, [C[3:, 3:] for C in Cs], nus),
                 "terms": out_terms}
-    return {"position_bound95_mm": _combine(position_bound95_mm, dof, pos, nus, 3),
-            "angle_bound95_deg": _combine(angle_bound95_deg, dof, ang, nus, 3),
+    return {"position_bound95_mm": _combine(position_bound95_mm, dof_pos, pos, nus, 3),
+            "angle_bound95_deg": _combine(angle_bound95_deg, dof_ang, ang, nus, 3),
             "terms": out_terms}
 
 
 __all__ = ["combined_bounds", "frame_vector", "own_covariance", "propagate", "rail_shift",
-           "report_dof", "to_world", "welch_dof"]
+           "report_dof", "report_dofs", "to_world", "welch_dof"]
