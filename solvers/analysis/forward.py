@@ -29,8 +29,16 @@ period explains what it does, the data show a smooth trend over the travel, whic
 already says no harmonic is named for; the harmonic is not named (``Selection.unresolved``),
 nor listed among another finding's alternatives.
 
+The best-ranked candidate of a step whose fitted value is physically impossible
+(``plausible``), if it ranks above the one the step accepts (or nothing is accepted), is
+*refused*, not forgotten (``Selection.refused``): its regressor fits real structure (it
+passed the step's tests) that no possible value of it explains, so what is accepted after it
+may only stand in for that structure (``verdict.py`` tests it on the final residual; a value
+beyond the limits of the possible points at a gross error: a wrong robot model, a wrong
+unit, a broken sensor).
+
 The backward check drops a finding that is no longer significant in the full model
-(Bonferroni over the findings).
+(Bonferroni over the findings), and refuses one whose value there is no longer possible.
 """
 
 from __future__ import annotations
@@ -71,6 +79,23 @@ class StepStats:
 
 
 @dataclass
+class Refused:
+    """A candidate that fitted the residual best (at its step) with an impossible value."""
+
+    candidate: Candidate
+    beta: np.ndarray               # its fitted parameter(s), effects.py units (linearised)
+    std: np.ndarray                # their standard deviations
+    step: int                      # 1-based selection step at which it was refused
+    preferred_over: str | None     # key of the candidate accepted at that step (None: none)
+    dropped: bool = False          # named at ``step``, its value impossible once others joined
+
+    @property
+    def size(self) -> float:
+        """What ``plausible`` compares with ``screen.PLAUSIBLE`` (the parameters' norm)."""
+        return float(np.linalg.norm(self.beta))
+
+
+@dataclass
 class Selection:
     """The chosen candidates, in order, with the evidence of each step."""
 
@@ -79,6 +104,9 @@ class Selection:
     # gear harmonics not named because a period longer than the travel fits as well (report
     # entries, ``not_identifiable``), by key
     unresolved: dict[str, dict] = field(default_factory=dict)
+    # each step's best-ranked candidate refused as physically impossible (ranked above what
+    # the step accepted, if anything), by key
+    refused: dict[str, Refused] = field(default_factory=dict)
 
     def keys(self) -> list[str]:
         return [c.key for c in self.chosen]
@@ -177,8 +205,16 @@ def plausible(y, M, c: Candidate) -> bool:
     values are therefore upper limits of what each effect can be, not typical sizes: a
     latency limit of 20 ms (docs/emulator.md's own example) left that recording unnamed.
     """
-    beta = fit_linear(y, np.hstack([M, c.columns]))[0][M.shape[1]:]
-    return float(np.linalg.norm(beta)) <= PLAUSIBLE[c.effect]
+    return fitted(y, M, c)[2] <= PLAUSIBLE[c.effect]
+
+
+def fitted(y, M, c: Candidate) -> tuple[np.ndarray, np.ndarray, float]:
+    """The candidate's fitted parameter(s) with the model M, their standard deviations, and
+    the size ``plausible`` compares with ``screen.PLAUSIBLE`` (their norm)."""
+    beta, cov, _, _ = fit_linear(y, np.hstack([M, c.columns]))
+    k = M.shape[1]
+    b = beta[k:]
+    return b, np.sqrt(np.maximum(np.diag(cov)[k:], 0.0)), float(np.linalg.norm(b))
 
 
 def forward(y, base: Baseline, cands: list[Candidate], cv: CV, groups, alpha: float = ALPHA,
@@ -214,13 +250,15 @@ def forward(y, base: Baseline, cands: list[Candidate], cv: CV, groups, alpha: fl
             break
         gg = group_gains(y_perp, Q, groups, n_rows)
         sgain = max([g - k * sigma2 for _, g, _, k in gg], default=0.0)
-        accepted = None
+        accepted, refused = None, []
         for t in order[:8]:
             c, gain, p, k, Xp = t
             cgain = gain - k * sigma2
             if sgain > 0 and cgain < GUARD_FRACTION * sgain:
                 continue
-            if not plausible(y, M, c):
+            b, s, size = fitted(y, M, c)
+            if size > PLAUSIBLE[c.effect]:
+                refused.append((c, b, s))
                 continue
             d = _unresolved(t, Q, y_perp, n_rows, yard)
             if d is not None:
@@ -233,6 +271,12 @@ def forward(y, base: Baseline, cands: list[Candidate], cv: CV, groups, alpha: fl
             if new_cv < cur_cv * (1.0 - MIN_CV_GAIN):
                 accepted = (c, gain, p, k, Xp, new_cv, cgain)
                 break
+        if refused and refused[0][0].key not in sel.refused:
+            # the step's best-ranked refused candidate (ranked above what it accepts, if any;
+            # those ranked below it fit the same structure less well)
+            d, b, s = refused[0]
+            sel.refused[d.key] = Refused(d, b, s, len(sel.chosen) + 1,
+                                         accepted[0].key if accepted else None)
         if accepted is None:
             break
         c, gain, p, k, Xp, new_cv, cgain = accepted
@@ -245,8 +289,11 @@ def forward(y, base: Baseline, cands: list[Candidate], cv: CV, groups, alpha: fl
         # other candidates that explain almost as much (likelihood-ratio difference < 4, i.e.
         # about two standard errors): this recording cannot tell them apart with confidence
         s2 = max(rss0 - gain, 1e-300) / max(n_rows - Q.shape[1] - k, 1)
+        # (not one refused above as physically impossible: that is no explanation)
+        impossible = {d.key for d, _, _ in refused}
         alternatives = [t[0] for t in order if t[0] is not c and t[0] not in same
                         and t[0].family != c.family and (gain - t[1]) / s2 < ALTERNATIVE_LR
+                        and t[0].key not in impossible
                         and not _unresolved(t, Q, y_perp, n_rows, yard)]
         periodogram = {}
         if c.effect == "gear_transmission_error":
@@ -256,6 +303,7 @@ def forward(y, base: Baseline, cands: list[Candidate], cv: CV, groups, alpha: fl
         P -= Qc @ (Qc.T @ P)
         sel.chosen.append(c)
         sel.unresolved.pop(c.key, None)
+        sel.refused.pop(c.key, None)     # possible after all, with the model grown
         sel.steps.append(StepStats(
             p_value=float(p), family=len(tests), r=float(np.sqrt(gain / rss0)) if rss0 > 0 else 0.0,
             identifiability=residual_ratio(Q, c.columns),
@@ -275,23 +323,26 @@ def significance_in(y, base: Baseline, chosen: list[Candidate], c: Candidate, ex
 
 
 def backward(y, base: Baseline, sel: Selection, alpha: float = ALPHA) -> Selection:
-    """Drop findings no longer significant (alpha / #findings) in the full model, and any
-    whose value in the full model is no longer physically possible (``plausible``)."""
-    chosen, steps = list(sel.chosen), list(sel.steps)
+    """Drop findings no longer significant (alpha / #findings) in the full model, and refuse
+    any whose value in the full model is no longer physically possible (``plausible``)."""
+    chosen, steps, refused = list(sel.chosen), list(sel.steps), dict(sel.refused)
     while chosen:
-        beta = fit_linear(y, model(base, chosen))[0]
+        beta, cov, _, _ = fit_linear(y, model(base, chosen))
+        std = np.sqrt(np.maximum(np.diag(cov), 0.0))
         col, bad = base.B.shape[1], None
         for i, c in enumerate(chosen):
             k = c.columns.shape[1]
             if float(np.linalg.norm(beta[col:col + k])) > PLAUSIBLE[c.effect]:
-                bad = i
+                bad = (i, beta[col:col + k], std[col:col + k])
             col += k
         if bad is not None:
-            del chosen[bad], steps[bad]
+            i, b, s = bad
+            refused.setdefault(chosen[i].key, Refused(chosen[i], b, s, i + 1, None, True))
+            del chosen[i], steps[i]
             continue
         ps = [significance_in(y, base, chosen, c, [], y.size) for c in chosen]
         worst = int(np.argmax(ps))
         if ps[worst] * len(chosen) < alpha:
             break
         del chosen[worst], steps[worst]
-    return Selection(chosen, steps, sel.unresolved)
+    return Selection(chosen, steps, sel.unresolved, refused)

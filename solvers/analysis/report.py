@@ -31,17 +31,17 @@ import numpy as np
 from solvers.analysis.baseline import Baseline, fit_baseline, per_sample_rms
 from solvers.analysis.blas import single_thread
 from solvers.analysis.effects import Candidate, build_library
-from solvers.analysis.forward import (ALPHA, MIN_CV_GAIN, Selection, StepStats, backward,
-                                     forward, model)
+from solvers.analysis.forward import (ALPHA, MIN_CV_GAIN, Refused, Selection, StepStats,
+                                     backward, forward, group_gains, model)
 from solvers.analysis.locate import (correlations, features, joint_angle_terms, locate,
                                      structure_groups)
-from solvers.analysis.screen import screen
+from solvers.analysis.screen import PLAUSIBLE, screen
 from solvers.analysis.identify import report_block
 from solvers.analysis.model import Effect, Fit, Prepared, fit, model_document
 from solvers.analysis.model import heldout as model_heldout
 from solvers.analysis.selection import (CV, SPLITS, default_split, fit_linear, orth,
                                         project_out, residual_ratio)
-from solvers.analysis.text import explanation
+from solvers.analysis.text import explanation, refused_reason, refused_structure, refused_summary
 from solvers.analysis.thermal import TauProfile, profile_tau
 from solvers.analysis.verdict import StandIn, stand_ins, structure_test, verdict_of
 from solvers.errors import CalibrationError
@@ -134,6 +134,7 @@ def _analyze(rec, *, folds: int = 5, seed: int = 0, alpha: float = ALPHA,
     #    the nonlinear fit of what was chosen (only those effects: none dropped lingers)
     sel = backward(y, base, forward(y, base, screened.candidates, cv, groups, alpha,
                                     max_findings, lib.longer), alpha)
+    refused = dict(sel.refused)   # refused as physically impossible (forward.Refused)
     if sel.chosen:
         prep = Prepared.make(rec, [Effect.of(c) for c in sel.chosen], torques=lib.torques_nm, signs=lib.signs)
         f = fit(prep)
@@ -151,6 +152,8 @@ def _analyze(rec, *, folds: int = 5, seed: int = 0, alpha: float = ALPHA,
             groups = structure_groups(rec, base)
             sel2 = backward(y, base, forward(y, base, cands, cv, groups, alpha, max_findings,
                                              lib.longer), alpha)
+        if sel2 is not None:
+            refused = {**sel2.refused, **refused}   # a key's first refusal kept
         if sel2 is None or not sel2.chosen:
             # the chosen effects' columns at the nonlinear fit (the model's own Jacobian;
             # all that is used of them from here on)
@@ -194,7 +197,10 @@ def _analyze(rec, *, folds: int = 5, seed: int = 0, alpha: float = ALPHA,
         sel.chosen = _at_base(sel.chosen, prep, base)
     y = -base.g + (prep.columns(base) @ final_fit.beta if sel.chosen else 0.0)
     groups = structure_groups(rec, base)
-    standing = {s.key: s for s in stand_ins(y, base, sel.chosen, groups, n_rows, alpha)}
+    refused = {k: r for k, r in refused.items() if k not in set(sel.keys())}
+    rgroups = _refused_groups(rec, base, lib, refused, include_twist)
+    standing = {s.key: s for s in stand_ins(y, base, sel.chosen, groups, n_rows, alpha,
+                                            [g for _, g in rgroups])}
     findings, M, rank = _findings(rec, base, y, sel, figures, standing, profiles,
                                   final_fit.beta, lib)
 
@@ -204,7 +210,7 @@ def _analyze(rec, *, folds: int = 5, seed: int = 0, alpha: float = ALPHA,
     Q = orth(M)
     final_cv = prev_cv
     final_residuals = per_sample_rms(base.g_mm, m)
-    sig = structure_test(resid, Q, groups, n_rows)
+    sig = structure_test(resid, Q, groups + [g for _, g in rgroups], n_rows)
     if sig:
         feats = features(rec, base, lib.torques_nm, lib.signs)   # at the final fit
         corr = correlations(project_out(Q, resid), Q, base, feats)
@@ -215,6 +221,9 @@ def _analyze(rec, *, folds: int = 5, seed: int = 0, alpha: float = ALPHA,
                                     f"explains: it varies with {what}"
                                     + (f"; it correlates most with {strong}." if strong else "."))
         locate_block["unexplained"] = [{"varies_with": n, "p_value": float(p)} for n, p, _ in sig]
+    refused_entries = _refused_entries(resid, Q, n_rows, rgroups, sig, standing, sel.chosen)
+    if any(e["remains"] for e in refused_entries):
+        locate_block["summary"] += " " + refused_summary(refused_entries)
     sigma_row = float(np.sqrt(rss_mm / max(n_rows - rank, 1)))
     final_rms = float(np.sqrt(rss_mm / N))
     checks = _checks(base_rms, base_cv, final_rms, final_cv, figures)
@@ -243,6 +252,7 @@ def _analyze(rec, *, folds: int = 5, seed: int = 0, alpha: float = ALPHA,
         "stand_ins": [{"effect": c.effect, "joint": c.joint, "key": c.key,
                        "stands_in_for": standing[c.key].structure}
                       for c in sel.chosen if c.key in standing],
+        "refused_as_implausible": refused_entries,
         "gravity_masses": lib_masses(rec),
         "checks": checks,
     }
@@ -267,6 +277,41 @@ def _checks(base_rms, base_cv, final_rms, final_cv, figures) -> list[dict]:
         ok = h >= HELDOUT_BELOW * r
         out.append({"check": f"{name}: held-out >= {HELDOUT_BELOW:g} x in-sample RMS",
                     "passed": bool(ok), "rms_mm": round(r, 5), "heldout_rms_mm": round(h, 5)})
+    return out
+
+
+def _refused_groups(rec, base: Baseline, lib, refused: dict[str, Refused], include_twist: bool
+                    ) -> list[tuple[Refused, tuple[str, np.ndarray]]]:
+    """Each refused candidate as a structure group (name, columns at ``base``, the final fit)."""
+    if not refused:
+        return []
+    at = {c.key: c for c in build_library(rec, base, torques_nm=lib.torques_nm,
+                                          include_twist=include_twist).candidates}
+    return [(r, (refused_structure(r.candidate, r.size, PLAUSIBLE[r.candidate.effect]),
+                 at.get(k, r.candidate).columns)) for k, r in refused.items()]
+
+
+def _refused_entries(resid, Q, n_rows, rgroups, sig, standing: dict[str, StandIn],
+                     chosen) -> list[dict]:
+    """The report's ``refused_as_implausible``: each refused candidate, its impossible value,
+    whether the final residual still carries its structure, and what may stand in for it."""
+    if not rgroups:
+        return []
+    left = {n for n, _, _ in sig}
+    gains = group_gains(project_out(Q, resid), Q, [g for _, g in rgroups], n_rows)
+    out = []
+    for (r, (name, _)), (_, _, p, _) in zip(rgroups, gains):
+        c = r.candidate
+        by = [d.key for d in chosen if d.key in standing and standing[d.key].structure == name]
+        e = {"effect": c.effect, "joint": c.joint, "key": c.key, "label": c.label,
+             **({"dh_parameter": c.dh_parameter} if c.dh_parameter else {}),
+             **({"periods_per_turn": c.periods} if c.periods else {}),
+             "parameters": c.report_parameters(r.beta, r.std),
+             "size": round(r.size, 6), "limit": PLAUSIBLE[c.effect], "step": r.step,
+             "preferred_over": r.preferred_over, "dropped": r.dropped, "remains": name in left,
+             "p_value": float(p), "stood_in_by": by, "structure": name}
+        e["reason"] = refused_reason(c, e)
+        out.append(e)
     return out
 
 

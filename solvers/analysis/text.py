@@ -103,6 +103,57 @@ def explanation(c, f: dict, same: list[str] | None = None,
     return text
 
 
+# the unit of each effect's parameter (its size, ``forward.Refused.size``, and its limit,
+# ``screen.PLAUSIBLE``)
+UNIT = {"joint_offset": "deg", "link_length": "mm", "link_twist": "deg",
+        "joint_compliance": "deg/Nm", "backlash": "deg", "thermal_drift": "mm",
+        "gear_transmission_error": "deg", "trigger_latency": "ms", "tool_deflection": "mm/N"}
+GROSS = "a wrong robot model, a wrong unit, a broken sensor"
+
+
+def refused_structure(c, size: float, limit: float) -> str:
+    """A refused candidate's name as structure (``locate.unexplained``, ``stands_in_for``)."""
+    u = UNIT.get(c.effect, "")
+    return f"{c.label}'s signature [best fit {size:.3g} {u}, beyond the possible {limit:g} {u}]"
+
+
+def refused_reason(c, e: dict) -> str:
+    """Why a candidate that fitted best is not named, and what became of its structure."""
+    u = UNIT.get(c.effect, "")
+    if e.get("dropped"):
+        text = (f"chosen at step {e['step']}, but with the later findings its value, "
+                f"{e['size']:.3g} {u}, is beyond what it can physically be ({e['limit']:g} {u}): "
+                f"dropped")
+    else:
+        text = (f"fitted the residual best at step {e['step']}"
+                + (f" (ahead of {e['preferred_over']}, which was accepted there)"
+                   if e.get("preferred_over") else "")
+                + f", but at {e['size']:.3g} {u}, beyond what it can physically be "
+                  f"({e['limit']:g} {u}): not named")
+    if e["remains"]:
+        text += (f"; the structure it fits remains after the findings (p = {e['p_value']:.1e}), "
+                 f"so it is unexplained: a best fit beyond the possible points at a gross error "
+                 f"({GROSS})")
+        if e["stood_in_by"]:
+            text += "; " + ", ".join(e["stood_in_by"]) + " may only stand in for it"
+    else:
+        text += (f"; the findings explain what it fitted: what remains of it is not significant "
+                 f"(p = {e['p_value']:.1e}, in the final structure test)")
+    return text
+
+
+def refused_summary(entries: list[dict]) -> str:
+    """The locate summary's sentence on refused candidates whose structure remains."""
+    left = [e for e in entries if e["remains"]]
+    u = [UNIT.get(e["effect"], "") for e in left]
+    what = "; ".join(f"{e['label']} at {e['size']:.3g} {v}, possible up to {e['limit']:g} {v}"
+                     for e, v in zip(left, u))
+    those = "those effects" if len(left) > 1 else "that effect"
+    return (f"Its best fit is beyond what is physically possible ({what}): rather than "
+            f"{those}, a gross error ({GROSS}) is likely, and findings fitted after it may only "
+            f"stand in for it.")
+
+
 def unresolved_reason(c, longer) -> str:
     """Why a gear harmonic that passed its tests is not named (``forward.resolved``)."""
     j, k, kl = c.joint, c.periods, longer.periods
@@ -205,6 +256,10 @@ def render_text(report: dict) -> str:
         name = w["effect"] + (f" J{w['joint']}" if w.get("joint") else "")
         lines.append(f"Stand-in: {name} may partly stand in for {w['stands_in_for']} "
                      "(kept: it lowers the held-out error).")
+    for e in report.get("refused_as_implausible") or []:
+        name = e["effect"] + (f" J{e['joint']}" if e.get("joint") else "") + (
+            f" ({e['periods_per_turn']} per turn)" if e.get("periods_per_turn") else "")
+        lines.append(f"Refused as physically impossible: {name}: {e['reason']}.")
     for c in report.get("checks") or []:
         if not c["passed"]:
             lines.append(f"DEFECT: {c['check']} failed (RMS {c['rms_mm']:.4f} mm, held-out "

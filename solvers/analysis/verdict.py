@@ -12,8 +12,16 @@ structure. It is **kept** (it was selected because it lowers the held-out error,
 withholding it would cost that accuracy) and named as a stand-in in its evidence and
 explanation.
 
-*Verdict.* ``unexplained_structure`` when a group still tests significant, else
-``explained`` with findings, else ``no_missing_physics``.
+*Refused candidates.* A candidate the selection refused as physically impossible
+(``forward.Refused``: it ranked above what its step accepted, but its fitted value lies
+beyond ``screen.PLAUSIBLE``) joins the groups as one more structure: its regressor fitted
+real structure that no possible value of it explains. If the final residual still carries
+it, that is structure left (the verdict cannot be ``explained``), and the findings that
+lose their significance or change by more than half once it is added (the stand-in measure
+above) may only stand in for it.
+
+*Verdict.* ``unexplained_structure`` when a group (or a refused candidate) still tests
+significant, else ``explained`` with findings, else ``no_missing_physics``.
 """
 
 from __future__ import annotations
@@ -48,30 +56,41 @@ def structure_test(y, Q, groups, n_rows, alpha=ALPHA_STRUCTURE):
     return sorted([(r[0], r[2], r[1]) for r, o in zip(res, ok) if o], key=lambda t: t[1])
 
 
-def stand_ins(y, base: Baseline, chosen, groups, n_rows, alpha: float = ALPHA) -> list[StandIn]:
-    """The findings that may only stand in for the strongest remaining structure."""
+def stand_ins(y, base: Baseline, chosen, groups, n_rows, alpha: float = ALPHA,
+              refused=()) -> list[StandIn]:
+    """The findings that may only stand in for the strongest remaining structure, or for a
+    refused candidate's structure that remains (``refused``: (name, columns) groups)."""
     if not chosen:
         return []
     Q = orth(model(base, chosen))
-    sig = structure_test(y, Q, groups, n_rows)
+    every = list(groups) + list(refused)
+    sig = structure_test(y, Q, every, n_rows)
     if not sig:
         return []
-    name = sig[0][0]
-    S = [cols for n, cols in groups if n == name]
+    rnames = {n for n, _ in refused}
+    # each refused candidate's structure that remains (the more specific claim: its best
+    # explanation was impossible), then the strongest structure; strongest first
+    targets = [n for n, _, _ in sig if n in rnames]
+    targets += [sig[0][0]] if sig[0][0] not in rnames else []
     b_old = fit_linear(y, model(base, chosen))[0]
-    b_new = fit_linear(y, model(base, chosen, S))[0]
-    out, col = [], base.B.shape[1]
-    for c in chosen:
-        k = c.columns.shape[1]
-        bo, bn = b_old[col:col + k], b_new[col:col + k]
-        col += k
-        change = float(np.linalg.norm(bn - bo) / max(np.linalg.norm(bo), 1e-300))
-        if residual_ratio(orth(S[0]), c.columns) < PART_OF:
-            continue   # one component of that very structure (a gear harmonic), not a stand-in
-        p = significance_in(y, base, chosen, c, S, n_rows)
-        if not (p * len(chosen) < alpha and change < STANDIN_CHANGE):
-            out.append(StandIn(c.key, name, float(p), round(change, 3)))
-    return out
+    found: dict[str, StandIn] = {}
+    for name in targets:
+        S = [cols for n, cols in every if n == name]
+        b_new = fit_linear(y, model(base, chosen, S))[0]
+        col = base.B.shape[1]
+        for c in chosen:
+            k = c.columns.shape[1]
+            bo, bn = b_old[col:col + k], b_new[col:col + k]
+            col += k
+            if c.key in found:
+                continue
+            change = float(np.linalg.norm(bn - bo) / max(np.linalg.norm(bo), 1e-300))
+            if residual_ratio(orth(S[0]), c.columns) < PART_OF:
+                continue   # one component of that very structure (a gear harmonic), not a stand-in
+            p = significance_in(y, base, chosen, c, S, n_rows)
+            if not (p * len(chosen) < alpha and change < STANDIN_CHANGE):
+                found[c.key] = StandIn(c.key, name, float(p), round(change, 3))
+    return [found[c.key] for c in chosen if c.key in found]
 
 
 def verdict_of(structure: list, n_findings: int) -> str:
