@@ -101,6 +101,8 @@ def test_compliance_recording_is_explained_with_plots_before_and_after(page, sit
     assert float(value.split()[0]) == pytest.approx(5e-4, rel=0.3)
     assert finding.locator('[data-evidence="p_value"] td').inner_text() != ""
 
+    assert page.locator("#refused-panel").is_hidden()   # nothing refused as impossible
+
     notes = page.locator("#not-identifiable li")
     # one line per entry, the gear harmonics left out for too little travel on one line
     short = [n for n in rep["not_identifiable"] if isinstance(n.get("periods_per_turn"), list)]
@@ -129,6 +131,27 @@ def test_compliance_recording_is_explained_with_plots_before_and_after(page, sit
     idle(page)
     assert page.locator("#upload-error code.loc").inner_text() == "analysis_id"
     assert "(404)" in page.locator("#upload-error").inner_text()
+
+
+def test_a_best_fit_beyond_the_possible_is_shown_refused_not_explained(page, tmp_path) -> None:
+    """A beam recording with a 150 ms trigger latency (limit 100 ms): the latency is listed as
+    refused with its fitted value, the verdict is unexplained structure (tests/
+    test_analysis_implausible.py has the report's side)."""
+    imp = Imperfections(noise_mm=0.02, trigger_latency_ms=150.0)
+    rec = tmp_path / "kuka-latency.json"
+    rec.write_text(json.dumps(simulate_recording("beam", "kuka_kr6_r900_sixx", imp, 72, seed=1,
+                                                 payload=(3.0, [0.0, 0.0, 60.0]))),
+                   encoding="utf-8")
+    upload(page, rec)
+    assert page.locator("#verdict").get_attribute("data-verdict") == "unexplained_structure"
+    rep = page.evaluate("window.analysisPage.report")
+    refused = page.locator("#refused li")
+    assert page.locator("#refused-panel").is_visible()
+    assert refused.count() == len(rep["refused_as_implausible"]) > 0
+    first = refused.first
+    assert first.get_attribute("data-effect") == "trigger_latency"
+    assert first.locator("strong").inner_text() == "Trigger latency"
+    assert "150 ms, beyond what it can physically be (100 ms)" in first.inner_text()
 
 
 def test_plots_draw_one_bar_per_sample_on_one_scale(page) -> None:

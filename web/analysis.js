@@ -632,6 +632,10 @@ function renderNotes(rep) {
   $("#not-identifiable").replaceChildren(...setup.map(identItem), ...ni.map((n) => noteItem(n)),
     ...(short.length ? [shortTravelItem(short)] : []));
   $("#notes-panel").hidden = all.length + setup.length === 0;
+  // the best fit of a step beyond the limit of the possible (report.refused_as_implausible)
+  const rf = rep.refused_as_implausible || [];
+  $("#refused").replaceChildren(...rf.map((n) => noteItem(n)));
+  $("#refused-panel").hidden = rf.length === 0;
   const wh = rep.withheld || [];
   $("#withheld").replaceChildren(...wh.map((n) => noteItem(n,
     isNum(n.p_value_with_structure) ? `p with the structure = ${pValue(n.p_value_with_structure)}` : "")));
