@@ -23,7 +23,8 @@
 4. What the analysis names on all of series D, under the blocked split (what ``pendant
    analyze`` uses on it) and the random one (seed 0): each finding with its value and
    standard deviation, strongest first; the findings chosen on the linearisation that the
-   model itself did not confirm (``not_confirmed``); the stand-ins; the leading structure
+   model itself did not confirm (``not_confirmed``); the stand-ins; the candidates refused
+   as physically impossible (``refused_as_implausible``); the leading structure
    left unexplained (``locate.unexplained``, smallest p-value first). docs/analysis.md and
    the README quote these lines.
 
@@ -102,6 +103,10 @@ def named(rep: dict, default: str) -> str:
         d["key"] for d in rep["not_confirmed"]) or "-"))
     lines.append("  stand-ins: " + (", ".join(
         f"{w['key']} for {w['stands_in_for']}" for w in rep["stand_ins"]) or "-"))
+    lines.append("  refused as impossible: " + (", ".join(
+        f"{e['key']} {e['size']:.3g} > {e['limit']:g}"
+        + (" (remains)" if e["remains"] else "")
+        for e in rep.get("refused_as_implausible") or []) or "-"))
     un = rep["locate"].get("unexplained") or []
     lines.append(f"  unexplained ({len(un)} groups), leading: " + ("; ".join(
         f"{u['varies_with']} (p {u['p_value']:.1e})" for u in un[:6]) or "-"))
