@@ -337,6 +337,7 @@ POSITIONER_ERRORS = {
 }
 
 
+@pytest.mark.slow  # TRIALS solves each: 6-25 s a case on the lowest versions (pass 3 leaves it out)
 @pytest.mark.parametrize("error", POSITIONER_ERRORS)
 def test_positioner_common_normal_and_angle_within_95_bounds(error):
     """Tilt, then turn at tilt 20 deg: the common normal and the angle between the axes inside
