@@ -22,7 +22,8 @@
    neighbours (each point visited three times), both splits.
 4. What the analysis names on all of series D, under the blocked split (what ``pendant
    analyze`` uses on it) and the random one (seed 0): each finding with its value and
-   standard deviation, strongest first; the findings chosen on the linearisation that the
+   standard deviation and the held-out RMS before and after it (the model's own check),
+   strongest first; the findings chosen on the linearisation that the
    model itself did not confirm (``not_confirmed``); the stand-ins; the candidates refused
    as physically impossible (``refused_as_implausible``); the leading structure
    left unexplained (``locate.unexplained``, smallest p-value first). docs/analysis.md and
@@ -98,7 +99,8 @@ def named(rep: dict, default: str) -> str:
            + (" (the default: pendant analyze uses it)" if sp["method"] == default else ""))
     lines = [(f"series D, {how}: {len(rep['findings'])} findings, held-out "
               f"{rep['final']['heldout_rms_mm']:.3f} mm, verdict {rep['verdict']}")]
-    lines += [f"  {i}. {value(f)}" for i, f in enumerate(rep["findings"], 1)]
+    lines += [f"  {i}. {value(f)}, held-out {f['evidence']['heldout_rms_before_mm']:.4f} -> "
+              f"{f['heldout_rms_mm']:.4f} mm" for i, f in enumerate(rep["findings"], 1)]
     lines.append("  not confirmed by the model itself: " + (", ".join(
         d["key"] for d in rep["not_confirmed"]) or "-"))
     lines.append("  stand-ins: " + (", ".join(
