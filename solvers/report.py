@@ -146,8 +146,10 @@ def bound95(covariance: FloatArray, dof: float | None = None) -> float:
     distributed, so ``b² = c f F(f, dof; 0.95)``; with sigma assumed (``dof=None``)
     ``b² = c χ²(f; 0.95)``. ``dof`` may be fractional (a Welch-Satterthwaite effective
     dof of summed shares). Exact for an isotropic C (f = k) and for a single dominant axis
-    (f = 1); between them the coverage is within 0.2 % of 95 % (checked by Monte Carlo over
-    eigenvalue ratios down to 1/100 and dof from 2 to infinity).
+    (f = 1); between them the coverage is within 0.2 % of 95 % (Monte Carlo over eigenvalue
+    ratios down to 1/100 and dof from 2 to infinity, 2 000 000 draws a cell: 94.97-95.20 %;
+    the furthest, eigenvalues (1, 0.2, 0.2) at dof 10, is 95.19 % by quadrature, wide;
+    ``python benchmarks/bound95_coverage.py --samples 2000000 --seed 7 --exact``).
 
     References
     ----------
