@@ -120,3 +120,21 @@ def test_the_offsets_and_the_positioners_own_dof_is_read_per_block():
     alone = combined_bounds(b_pos, b_ang, {}, dofs, own)  # no terms: the solve's own bounds
     assert alone["position_bound95_mm"] == pytest.approx(b_pos)
     assert alone["angle_bound95_deg"] == pytest.approx(b_ang)
+
+
+@pytest.mark.parametrize("shape", [(1.0, 1.0, 1.0), (1.0, 0.2, 0.2), (1.0, 0.01, 0.01)])
+def test_a_negligible_term_leaves_the_solves_own_bound(shape):
+    """A chained element with a negligible covariance changes the total by nothing, whatever
+    the shape of the solve's own covariance and its dof: the total is ``bound95`` of the sum
+    with the Welch-Satterthwaite dof, as the solve's own bound is ``bound95`` with its dof.
+    (The total was the chi-square bound times the F/chi-square ratio at the full dimension:
+    for diag(1, 0.01, 0.01) at dof 3 that moved 3.21 to 3.71.)"""
+    from solvers.external.chain import combined_bounds
+    from solvers.report import bound95
+
+    own = np.diag([*shape, *(0.01 * np.array(shape))])
+    b_pos, b_ang = bound95(own[:3, :3], 3), bound95(own[3:, 3:], 3)
+    tiny = {"tool 1 TCP": np.eye(6) * 1e-12}
+    total = combined_bounds(b_pos, b_ang, tiny, 3, own, {"tool 1 TCP": None})
+    assert total["position_bound95_mm"] == pytest.approx(b_pos, rel=1e-6)
+    assert total["angle_bound95_deg"] == pytest.approx(b_ang, rel=1e-6)
