@@ -337,7 +337,8 @@ def backward(y, base: Baseline, sel: Selection, alpha: float = ALPHA) -> Selecti
             col += k
         if bad is not None:
             i, b, s = bad
-            refused.setdefault(chosen[i].key, Refused(chosen[i], b, s, i + 1, None, True))
+            step = sel.chosen.index(chosen[i]) + 1  # its selection step (i: in the shrunk list)
+            refused.setdefault(chosen[i].key, Refused(chosen[i], b, s, step, None, True))
             del chosen[i], steps[i]
             continue
         ps = [significance_in(y, base, chosen, c, [], y.size) for c in chosen]

@@ -161,7 +161,7 @@ def _analyze(rec, *, folds: int = 5, seed: int = 0, alpha: float = ALPHA,
         else:
             sel = sel2
     # gear harmonics not named: a period longer than the joint's travel fits as well
-    unresolved = list(sel.unresolved.values())
+    unresolved = dict(sel.unresolved)   # by key
     profiles: dict[str, TauProfile] = {}
     for i, c in enumerate(sel.chosen):
         if c.effect == "thermal_drift":
@@ -181,7 +181,11 @@ def _analyze(rec, *, folds: int = 5, seed: int = 0, alpha: float = ALPHA,
         sel.chosen = _at_base(sel.chosen, prep, base)
     y = -base.g + (prep.columns(base) @ final_fit.beta if sel.chosen else 0.0)
     groups = structure_groups(rec, base)
-    refused = {k: r for k, r in refused.items() if k not in set(sel.keys())}
+    # a key in one list of the report: named, or not confirmed by the model itself (its last
+    # word), or refused as impossible; a refused harmonic is not also "unresolved"
+    gone = set(sel.keys()) | {d["key"] for d in dropped}
+    refused = {k: r for k, r in refused.items() if k not in gone}
+    unresolved = {k: u for k, u in unresolved.items() if k not in refused}
     rgroups = _refused_groups(rec, base, lib, refused, include_twist)
     standing = {s.key: s for s in stand_ins(y, base, sel.chosen, groups, n_rows, alpha,
                                             [g for _, g in rgroups])}
@@ -231,7 +235,7 @@ def _analyze(rec, *, folds: int = 5, seed: int = 0, alpha: float = ALPHA,
                   "noise_mm": round(sigma_row * float(np.sqrt(m)), 5),
                   "n_parameters": int(_n_identifiable(base0) + prep.n_params),
                   "residuals_mm": [round(float(v), 6) for v in final_residuals]},
-        "not_identifiable": screened.not_identifiable + lib.skipped + unresolved,
+        "not_identifiable": screened.not_identifiable + lib.skipped + list(unresolved.values()),
         "not_confirmed": dropped,
         "stand_ins": [{"effect": c.effect, "joint": c.joint, "key": c.key,
                        "stands_in_for": standing[c.key].structure}
