@@ -178,7 +178,10 @@ def bound95_of_eigenvalues(eigenvalues: Sequence[float] | FloatArray,
     if s1 <= 0.0:
         return 0.0
     c, f = s2 / s1, s1 * s1 / s2
-    q = special.chdtri(f, 0.05) if dof is None else f * special.fdtri(f, dof, 0.95)
+    # F(f, dof) -> chi2(f)/f as dof grows; a Welch-Satterthwaite dof of a sum dominated by a
+    # known-sigma term can be 1e41, where scipy 1.14's fdtri gives nan
+    chi = dof is None or not math.isfinite(dof) or dof > 1e6
+    q = special.chdtri(f, 0.05) if chi else f * special.fdtri(f, dof, 0.95)
     return math.sqrt(c * float(q))
 
 

@@ -89,6 +89,9 @@ def test_the_welch_satterthwaite_widening_stays_finite_on_every_scipy():
     from solvers.external import chain
 
     assert chain._f_over_chi(4.3e41, 3) == 1.0 and chain._f_over_chi(None, 3) == 1.0
+    from solvers.report import bound95  # the chained total is bound95 with that dof
+    C = np.diag([1.0, 0.2, 0.2])
+    assert bound95(C, 4.3e41) == bound95(C) and np.isfinite(bound95(C, float("inf")))
     assert 1.0 < chain._f_over_chi(5.0, 3) < 2.0
     assert chain._welch_dof(-1e-30, 4.0, [0.0], [None]) is None  # round-off, no variance
     assert chain._welch_dof(0.01, 4.0, [0.01], [8.0]) >= 4.0  # never below the smallest
