@@ -557,18 +557,51 @@ def _serve(app, host: str, port: int, **options: object) -> None:  # noqa: ANN00
 
     class Server(uvicorn.Server):
         interrupted = False
+        reraising = False  # uvicorn (0.29 on) raises the Ctrl-C it caught again, after its stop
 
         def handle_exit(self, sig: int, frame: object) -> None:
             if self.should_exit and sig == signal.SIGINT:  # the second Ctrl-C
-                busy = len(self.server_state.tasks)
-                print(f"pendant: stopped at once; {busy} request(s) in progress abandoned "
-                      "(they saved nothing)", file=sys.stderr, flush=True)
-                os._exit(130)
+                self.stop_now()
             self.interrupted = self.interrupted or sig == signal.SIGINT
             super().handle_exit(sig, frame)
 
+        def stop_now(self) -> None:
+            busy = len(self.server_state.tasks)
+            print(f"pendant: stopped at once; {busy} request(s) in progress abandoned "
+                  "(they saved nothing)", file=sys.stderr, flush=True)
+            os._exit(130)
+
+        @contextmanager
+        def capture_signals(self) -> Iterator[None]:
+            inner = super().capture_signals()  # type: ignore[misc]
+            inner.__enter__()
+            try:
+                yield
+            finally:
+                self.reraising = True  # it restores the handlers, then raises what it caught
+                try:
+                    inner.__exit__(None, None, None)
+                finally:
+                    self.reraising = False
+
     server = Server(uvicorn.Config(app, host=host, port=port, **options))
-    server.run()
+
+    def after_uvicorn(sig: int, frame: object) -> None:
+        # SIGINT outside uvicorn's own handler: before it starts, uvicorn's raising again the
+        # Ctrl-C it stopped for, and (a second Ctrl-C) while the event loop winds down after it.
+        # asyncio's handler raised the second one wherever the loop was (a traceback, status 1).
+        if server.interrupted and not server.reraising:
+            server.stop_now()
+        raise KeyboardInterrupt
+
+    main_thread = threading.current_thread() is threading.main_thread()  # signals: only there
+    if main_thread:
+        signal.signal(signal.SIGINT, after_uvicorn)  # so asyncio.run installs none of its own
+    try:
+        server.run()
+    finally:
+        if main_thread and not server.interrupted:
+            signal.signal(signal.SIGINT, signal.default_int_handler)
     if server.interrupted:  # uvicorn before 0.29 returns after a Ctrl-C; later ones re-raise it
         raise KeyboardInterrupt
 
