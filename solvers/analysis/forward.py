@@ -196,8 +196,9 @@ def _unresolved(test, Q, y_perp, n_rows, longer: Longer) -> Candidate | None:
     return resolved(test[0], Q, y_perp, n_rows, longer)
 
 
-def plausible(y, M, c: Candidate) -> bool:
-    """Whether the candidate's fitted value (with the model M) is physically possible.
+def plausible(c: Candidate, beta: np.ndarray) -> bool:
+    """Whether the candidate's fitted value ``beta`` is physically possible: the norm of its
+    parameter(s) within ``screen.PLAUSIBLE``.
 
     A value beyond ``screen.PLAUSIBLE`` (e.g. a gear's transmission error of degrees, where
     strain-wave and cycloidal gears stay within arcminutes) means the candidate's regressor
@@ -205,16 +206,14 @@ def plausible(y, M, c: Candidate) -> bool:
     values are therefore upper limits of what each effect can be, not typical sizes: a
     latency limit of 20 ms (docs/emulator.md's own example) left that recording unnamed.
     """
-    return fitted(y, M, c)[2] <= PLAUSIBLE[c.effect]
+    return float(np.linalg.norm(beta)) <= PLAUSIBLE[c.effect]
 
 
-def fitted(y, M, c: Candidate) -> tuple[np.ndarray, np.ndarray, float]:
-    """The candidate's fitted parameter(s) with the model M, their standard deviations, and
-    the size ``plausible`` compares with ``screen.PLAUSIBLE`` (their norm)."""
+def fitted(y, M, c: Candidate) -> tuple[np.ndarray, np.ndarray]:
+    """The candidate's fitted parameter(s) with the model M and their standard deviations."""
     beta, cov, _, _ = fit_linear(y, np.hstack([M, c.columns]))
     k = M.shape[1]
-    b = beta[k:]
-    return b, np.sqrt(np.maximum(np.diag(cov)[k:], 0.0)), float(np.linalg.norm(b))
+    return beta[k:], np.sqrt(np.maximum(np.diag(cov)[k:], 0.0))
 
 
 def forward(y, base: Baseline, cands: list[Candidate], cv: CV, groups, alpha: float = ALPHA,
@@ -256,8 +255,8 @@ def forward(y, base: Baseline, cands: list[Candidate], cv: CV, groups, alpha: fl
             cgain = gain - k * sigma2
             if sgain > 0 and cgain < GUARD_FRACTION * sgain:
                 continue
-            b, s, size = fitted(y, M, c)
-            if size > PLAUSIBLE[c.effect]:
+            b, s = fitted(y, M, c)
+            if not plausible(c, b):
                 refused.append((c, b, s))
                 continue
             d = _unresolved(t, Q, y_perp, n_rows, yard)
@@ -332,7 +331,7 @@ def backward(y, base: Baseline, sel: Selection, alpha: float = ALPHA) -> Selecti
         col, bad = base.B.shape[1], None
         for i, c in enumerate(chosen):
             k = c.columns.shape[1]
-            if float(np.linalg.norm(beta[col:col + k])) > PLAUSIBLE[c.effect]:
+            if not plausible(c, beta[col:col + k]):
                 bad = (i, beta[col:col + k], std[col:col + k])
             col += k
         if bad is not None:
