@@ -4,6 +4,8 @@ step says, touch up, compute, save). Import what a test uses by name."""
 
 from __future__ import annotations
 
+import time
+from collections.abc import Callable
 
 import numpy as np
 from fastapi.testclient import TestClient
@@ -138,3 +140,15 @@ __all__ = ["C", "CELL", "TRUE_TCP_MM", "ADMIN_TOKEN", "TEST_HOSTS", "app_setting
            "ok", "open_session", "edit_slot", "restore_slot",
            "approach", "walk", "calibrate", "pose_array", "pose_matrix", "angle_deg",
            "calibrated_pointer", "finish_job", "analyze"]
+
+
+def wait_for(check: Callable[[], object], timeout: float = 10.0) -> object:
+    """Poll ``check`` until it returns something true (returned), for at most ``timeout`` s:
+    a test waits for a state, never for a fixed time."""
+    deadline = time.monotonic() + timeout
+    while time.monotonic() < deadline:
+        got = check()
+        if got:
+            return got
+        time.sleep(0.02)
+    raise AssertionError(f"not within {timeout} s")

@@ -11,14 +11,14 @@ import shutil
 import subprocess
 import threading
 import time
-from collections.abc import Callable, Iterator
+from collections.abc import Iterator
 from http.server import BaseHTTPRequestHandler, ThreadingHTTPServer
 
 import paho.mqtt.client as mqtt
 import pytest
 from fastapi.testclient import TestClient
 
-from api_helpers import C, calibrate, edit_slot, make_client, ok
+from api_helpers import C, calibrate, edit_slot, make_client, ok, wait_for
 from browser_helpers import free_port
 from server.events.dispatcher import Dispatcher, WebhookSink
 from server.events.signing import HEADER, verify
@@ -53,16 +53,6 @@ class Receiver:
 
     def bodies(self) -> list[dict]:
         return [json.loads(r["body"]) for r in self.requests]
-
-
-def wait_for(check: Callable[[], object], timeout: float = 10.0) -> object:
-    deadline = time.monotonic() + timeout
-    while time.monotonic() < deadline:
-        got = check()
-        if got:
-            return got
-        time.sleep(0.05)
-    raise AssertionError(f"not within {timeout} s")
 
 
 @pytest.fixture
@@ -204,11 +194,13 @@ def test_events_are_published_on_unified_namespace_topics(db_url: str,  # noqa: 
     got: list[tuple[str, dict]] = []
     sub = mqtt.Client(mqtt.CallbackAPIVersion.VERSION2)
     sub.on_message = lambda _c, _u, m: got.append((m.topic, json.loads(m.payload)))
+    subscribed = threading.Event()
+    sub.on_subscribe = lambda *_: subscribed.set()  # the broker's SUBACK
     sub.connect("127.0.0.1", broker)
     sub.subscribe("plant1/body-shop/+/pendant/#", qos=1)
     sub.loop_start()
     try:
-        time.sleep(0.3)
+        assert subscribed.wait(10), "the broker did not acknowledge the subscription"
         with make_client(db_url, mqtt_url=f"mqtt://127.0.0.1:{broker}", uns_site="plant1",
                          uns_area="body-shop") as service:
             ok(edit_slot(service, f"{C}/tools/5", {"name": "welding torch"}))

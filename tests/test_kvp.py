@@ -11,7 +11,7 @@ import time
 from collections.abc import Iterator
 
 import pytest
-from api_helpers import C, edit_slot, make_client, ok
+from api_helpers import C, edit_slot, make_client, ok, wait_for
 from browser_helpers import free_port
 
 from server.kvp import server as kvp
@@ -325,7 +325,7 @@ def test_connections_held_open_and_silent_lock_no_client_out(cell: dict, monkeyp
     silent = [socket.create_connection(("127.0.0.1", cell["port"]), timeout=10)
               for _ in range(4)]
     try:
-        time.sleep(0.3)  # the face has taken them all
+        wait_for(lambda: cell["face"].connections >= 4)  # the face has taken them all
         c = connect(cell)
         assert c.read("$OV_PRO", debug=False) == b"100"
         c.close()

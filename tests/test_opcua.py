@@ -150,7 +150,10 @@ def test_a_rest_change_reaches_a_subscribed_client_within_a_second(face: dict) -
         inbox = Inbox()
         sub = await client.create_subscription(50, inbox)
         await sub.subscribe_data_change(name)
-        await asyncio.sleep(0.3)  # the initial value arrives first
+        deadline = time.monotonic() + 10.0
+        while not inbox.seen:  # the initial value arrives first
+            assert time.monotonic() < deadline, "no initial value of the subscribed name"
+            await asyncio.sleep(0.02)
         sent = time.monotonic()
         await asyncio.to_thread(edit_slot, face["rest"], f"{C}/tools/3", {"name": "spindle"})
         while time.monotonic() - sent < 3.0:
@@ -332,8 +335,7 @@ def test_a_frame_committed_over_rest_arrives_as_an_opcua_event(face: dict) -> No
         inbox = Inbox()
         sub = await client.create_subscription(50, inbox)
         etype = await client.nodes.base_event_type.get_child([f"{ns['pendant']}:PendantEventType"])
-        await sub.subscribe_events(client.nodes.server, etype)
-        await asyncio.sleep(0.3)
+        await sub.subscribe_events(client.nodes.server, etype)  # live once it answers
         sent = time.monotonic()
         await asyncio.to_thread(edit_slot, face["rest"], f"{C}/bases/4", {"name": "fixture"})
         while time.monotonic() - sent < 3.0:
