@@ -181,6 +181,13 @@ def install(app: FastAPI) -> None:
         if "database is locked" in str(exc.orig):  # SQLite's busy timeout ran out
             return _busy_answer("the database was locked by another writer for "
                                 f"{db_session.BUSY_TIMEOUT_MS / 1000:g} s")
+        if exc.connection_invalidated:  # the server ended the connection during the request
+            log.warning("the connection to the database was lost during %s %s: %s",
+                        request.method, request.url.path, exc.orig)
+            return JSONResponse(status_code=503, headers={"Retry-After": "1"}, content=detail(
+                (), "the connection to the database was lost during this request (a restart "
+                    "or failover); a write it was committing may or may not have been: read "
+                    "before writing again, or repeat it with the same Idempotency-Key", "busy"))
         if any(m in str(exc.orig) for m in ("too many clients",  # max_connections reached
                                             "remaining connection slots are reserved")):
             log.warning("PostgreSQL refused a connection: max_connections reached "
