@@ -16,6 +16,7 @@ from browser_helpers import free_port
 
 from server.kvp import server as kvp
 from server.kvp.server import KvpFace, serve_in_thread
+from server.service import transaction
 
 openshowvar = pytest.importorskip("py_openshowvar").openshowvar
 
@@ -359,3 +360,26 @@ def test_a_revoked_user_ends_the_faces_answers(cell: dict) -> None:
             assert (msg_id, good) == (2, False) and "revoked" in text
     finally:
         running.stop()
+
+
+def test_a_busy_database_is_a_refusal_to_retry_and_the_connection_goes_on(
+        cell: dict, monkeypatch) -> None:
+    """Another writer holds the database past the writers' wait (a long restore, the CLI): the
+    write is refused with the reason, nothing is written, the same connection answers the
+    next message (it was ended, with a traceback in the log)."""
+    rest = cell["rest"]
+    maker = rest.app.state.sessionmaker
+    if maker.kw["bind"].dialect.name != "sqlite":
+        pytest.skip("SQLite's writers' turn held; PostgreSQL locks the controller's row")
+    monkeypatch.setattr(transaction, "TURN_TIMEOUT_S", 0.3)
+    before = ok(rest.get(f"{C}/tools/6"))
+    with socket.create_connection(("127.0.0.1", cell["port"]), timeout=10) as s:
+        holder = transaction.writer(maker)
+        with holder, transaction.writers_turn(holder):  # the other writer's turn
+            s.sendall(raw(cell["port"], 21, 1, b"TOOL_DATA[6]", b"{X 7.5}"))
+            msg_id, text, good = answer_of(s)
+        assert (msg_id, good) == (21, False) and "locked by another writer" in text, text
+        assert "nothing was written" in text
+        s.sendall(raw(cell["port"], 22, 0, b"$OV_PRO"))
+        assert answer_of(s) == (22, "100", True)
+    assert ok(rest.get(f"{C}/tools/6")) == before

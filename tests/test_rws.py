@@ -20,6 +20,7 @@ from browser_helpers import free_port
 from server.rws import digest, ops
 from server.rws.app import RwsFace, create_rws_app
 from server.rws.service import serve_asgi
+from server.service import transaction
 from solvers.frames import Pose, abb_from_matrix
 
 rws = pytest.importorskip("abb_robot_client.rws")
@@ -444,3 +445,24 @@ def test_a_subscription_number_of_thousands_of_digits_is_refused(cell: dict) -> 
                 with tc.websocket_connect(path, headers={"Host": "127.0.0.1:8610"}):
                     pass
             assert refused.value.code == 1008, path
+
+
+def test_a_busy_database_is_a_503_to_retry_in_rws_shape(cell: dict, monkeypatch) -> None:
+    """Another writer holds the database past the writers' wait: the RAPID write answers 503
+    with Retry-After and an RWS status naming the reason (it was a 500 with a traceback in the
+    log), nothing is written, and the same write goes through once the database is free."""
+    maker = cell["maker"]
+    if maker.kw["bind"].dialect.name != "sqlite":
+        pytest.skip("SQLite's writers' turn held; PostgreSQL locks the controller's row")
+    monkeypatch.setattr(transaction, "TURN_TIMEOUT_S", 0.3)
+    url = f"{cell['url']}/rw/rapid/symbol/data/RAPID/T_ROB1/tool5?action=set&json=1"
+    auth = requests.auth.HTTPDigestAuth("expert", PASSWORD["expert"])
+    before = ok(cell["rest"].get(f"/controllers/{cell['cid']}/tools/5"))
+    holder = transaction.writer(maker)
+    with holder, transaction.writers_turn(holder):  # the other writer's turn
+        r = requests.post(url, data={"value": TOOL}, auth=auth)
+    assert r.status_code == 503 and r.headers["Retry-After"] == "1", r.text
+    status = r.json()["_embedded"]["status"]
+    assert status["code"] < 0 and "locked by another writer" in status["msg"]
+    assert ok(cell["rest"].get(f"/controllers/{cell['cid']}/tools/5")) == before
+    assert requests.post(url, data={"value": TOOL}, auth=auth).status_code == 204

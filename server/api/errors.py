@@ -19,10 +19,9 @@ from sqlalchemy.exc import TimeoutError as PoolTimeout
 from sqlalchemy.orm.exc import StaleDataError
 from starlette.exceptions import HTTPException
 
-from db import session as db_session
 from db.crud import NotFound, StateConflict
 from server.api.preconditions import PreconditionFailed, PreconditionRequired, etag
-from server.service.transaction import DatabaseBusy
+from server.service.transaction import DatabaseBusy, unavailable
 from solvers.errors import CalibrationError, KinematicsError
 
 log = logging.getLogger("pendant")
@@ -173,33 +172,22 @@ def install(app: FastAPI) -> None:
             "conflict"))
 
     @app.exception_handler(DatabaseBusy)
-    async def _busy(_: Request, exc: DatabaseBusy) -> JSONResponse:
-        return _busy_answer(str(exc))
-
     @app.exception_handler(OperationalError)
-    async def _locked(request: Request, exc: OperationalError) -> JSONResponse:
-        if "database is locked" in str(exc.orig):  # SQLite's busy timeout ran out
-            return _busy_answer("the database was locked by another writer for "
-                                f"{db_session.BUSY_TIMEOUT_MS / 1000:g} s")
-        if exc.connection_invalidated:  # the server ended the connection during the request
+    @app.exception_handler(PoolTimeout)
+    async def _unavailable(request: Request, exc: Exception) -> JSONResponse:
+        why = unavailable(exc)
+        if why is None:
+            return await _unexpected(request, exc)
+        if isinstance(exc, PoolTimeout):
+            log.warning("every database connection of this process stayed busy: %s", exc)
+        elif isinstance(exc, OperationalError) and exc.connection_invalidated:
             log.warning("the connection to the database was lost during %s %s: %s",
                         request.method, request.url.path, exc.orig)
-            return JSONResponse(status_code=503, headers={"Retry-After": "1"}, content=detail(
-                (), "the connection to the database was lost during this request (a restart "
-                    "or failover); a write it was committing may or may not have been: read "
-                    "before writing again, or repeat it with the same Idempotency-Key", "busy"))
-        if any(m in str(exc.orig) for m in ("too many clients",  # max_connections reached
-                                            "remaining connection slots are reserved")):
+        elif isinstance(exc, OperationalError) and "max_connections" in why:
             log.warning("PostgreSQL refused a connection: max_connections reached "
                         "(docs/deploy.md: 10 per pendant process)")
-            return _busy_answer("the database has no connection free (its max_connections)")
-        return await _unexpected(request, exc)
-
-    @app.exception_handler(PoolTimeout)
-    async def _pool(_: Request, exc: PoolTimeout) -> JSONResponse:
-        log.warning("every database connection of this process stayed busy: %s", exc)
-        return _busy_answer(f"every database connection of this worker stayed busy for "
-                            f"{db_session.POOL_TIMEOUT_S:g} s")
+        return JSONResponse(status_code=503, headers={"Retry-After": "1"},
+                            content=detail((), why, "busy"))
 
     @app.exception_handler(Exception)
     async def _unexpected(request: Request, exc: Exception) -> JSONResponse:
@@ -207,10 +195,3 @@ def install(app: FastAPI) -> None:
         return JSONResponse(status_code=500, content=detail(
             (), f"internal error ({type(exc).__name__}); the request changed nothing it had not "
                 "committed; see the service log", "internal"))
-
-
-def _busy_answer(why: str) -> JSONResponse:
-    """503: another writer (a long restore, the CLI) held the database, or no connection to it
-    was free; nothing was written."""
-    return JSONResponse(status_code=503, headers={"Retry-After": "1"}, content=detail(
-        (), f"{why}; nothing was written: retry", "busy"))

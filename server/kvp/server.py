@@ -27,6 +27,7 @@ from typing import TYPE_CHECKING
 
 from server.kvp import variables
 from server.rws import ops
+from server.service.transaction import unavailable
 
 if TYPE_CHECKING:
     from server.rws.service import Running
@@ -141,11 +142,18 @@ class KvpFace:
 
     def _answer(self, client: str | None, name: str, value: str | None) -> tuple[str, bool]:
         try:
-            cid = ops.controller_id(self.make_session, self.controller, "kuka")
-            face = variables.Face(self.make_session, cid, lambda: self.who(client))
-        except (ops.Refused, LookupError) as err:
-            return str(err), False
-        return variables.answer(face, name, value)
+            try:
+                cid = ops.controller_id(self.make_session, self.controller, "kuka")
+                face = variables.Face(self.make_session, cid, lambda: self.who(client))
+            except (ops.Refused, LookupError) as err:
+                return str(err), False
+            return variables.answer(face, name, value)
+        except Exception as err:  # the database busy or gone: refused, the connection kept
+            why = unavailable(err)
+            if why is None:
+                raise
+            log.warning("kvp: %s from %s: %s", name, client, why)
+            return why, False
 
     async def handle(self, reader: asyncio.StreamReader, writer: asyncio.StreamWriter) -> None:
         peer = writer.get_extra_info("peername")

@@ -47,6 +47,7 @@ from db import crud
 from server.auth.web import SiteGuard
 from server.formats import abb
 from server.rws import digest, ops, rapid
+from server.service.transaction import unavailable
 from server.api.schemas import EntryIn
 from solvers.errors import CalibrationError
 from solvers.frames import abb_from_matrix, invert
@@ -69,6 +70,7 @@ E_AUTH = -1073445864  # "not authorized"
 E_STALE = -1073445870  # "the data changed meanwhile"
 E_NOT_OFFERED = -1073445877  # "resource or action not supported"
 E_LARGE = -1073445876  # "request too large"
+E_BUSY = -1073445863  # "the database cannot answer now: retry" (pendant's: a 503)
 
 
 class RwsError(Exception):
@@ -241,6 +243,12 @@ def guarded(face: RwsFace, handler):
             if err.http == 401:
                 headers = {"WWW-Authenticate": digest.challenge(isinstance(err, _Stale))}
             return error(request, err, headers)
+        except Exception as err:  # the database busy or gone: REST's 503, in RWS's shape
+            why = unavailable(err)
+            if why is None:
+                raise
+            log.warning("rws: %s %s: %s", request.method, request.url.path, why)
+            return error(request, RwsError(503, E_BUSY, why), {"Retry-After": "1"})
         cookie = face.login(request.cookies.get("ABBCX"), who.name)
         if cookie is not None:
             response.set_cookie("ABBCX", cookie, httponly=True, samesite="strict",

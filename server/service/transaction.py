@@ -39,9 +39,12 @@ from collections.abc import Iterator
 from typing import Any
 
 from sqlalchemy import event
+from sqlalchemy.exc import OperationalError
+from sqlalchemy.exc import TimeoutError as PoolTimeout
 from sqlalchemy.orm import Session, sessionmaker
 
 from db import crud
+from db import session as db_session
 from db.session import BUSY_TIMEOUT_MS, PG_POOL_SIZE, write_session
 from server.auth import audit
 
@@ -244,6 +247,39 @@ class DatabaseBusy(Exception):
     def __init__(self, waited_s: float) -> None:
         super().__init__(f"the database was locked by another writer for {waited_s:g} s")
         self.waited_s = waited_s
+
+
+def unavailable(exc: BaseException) -> str | None:
+    """Why the database could not serve the request that raised ``exc``, said for the person
+    who retries it (a 503 with ``Retry-After`` on REST and RWS, a refusal on KVP, the
+    connection kept), or None when ``exc`` is not about the database's availability:
+
+    - another writer held the database past :data:`TURN_TIMEOUT_S` (:class:`DatabaseBusy`)
+      or SQLite's busy timeout ("database is locked");
+    - every pooled connection of the process stayed busy (the pool's timeout), or PostgreSQL
+      has no connection left (its ``max_connections``);
+    - the connection was lost during the request (a restart or failover): a write being
+      committed then may or may not have been, and the answer says so.
+    """
+    if isinstance(exc, DatabaseBusy):
+        return f"{exc}; nothing was written: retry"
+    if isinstance(exc, PoolTimeout):
+        return (f"every database connection of this worker stayed busy for "
+                f"{db_session.POOL_TIMEOUT_S:g} s; nothing was written: retry")
+    if not isinstance(exc, OperationalError):
+        return None
+    if exc.connection_invalidated:
+        return ("the connection to the database was lost during this request (a restart or "
+                "failover); a write it was committing may or may not have been: read before "
+                "writing again, or repeat it with the same Idempotency-Key")
+    if "database is locked" in str(exc.orig):  # SQLite's busy timeout ran out
+        return (f"the database was locked by another writer for "
+                f"{db_session.BUSY_TIMEOUT_MS / 1000:g} s; nothing was written: retry")
+    if any(m in str(exc.orig) for m in ("too many clients",  # max_connections reached
+                                        "remaining connection slots are reserved")):
+        return "the database has no connection free (its max_connections); nothing was " \
+               "written: retry"
+    return None
 
 
 def commit(db: Session, operation: str, **ids: int | None) -> None:
