@@ -24,6 +24,7 @@ from scipy.spatial.transform import Rotation
 
 from server.opcua.pki import default_pki_dir
 from server.opcua.space import PENDANT_URI
+from server.service import transaction
 
 MANDATORY = ua.NodeId(ua.ObjectIds.ModellingRule_Mandatory)
 
@@ -474,3 +475,32 @@ def test_a_registered_certificate_logs_in_over_the_encrypted_endpoint(face: dict
         asyncio.run(login(stranger))
     assert err.value.code == ua.StatusCodes.BadUserAccessDenied
     assert ok(face["rest"].get(f"{C}/tools/11"))["name"] == "scanner"
+
+
+def test_a_busy_database_is_resource_unavailable_and_changes_nothing(face: dict,
+                                                                     monkeypatch) -> None:
+    """Another writer holds the database past the writers' wait: CommitFrame answers
+    BadResourceUnavailable (REST's 503; it was a BadUnexpectedError), nothing is written, and
+    the same commit goes through once the database is free."""
+    maker = face["rest"].app.state.sessionmaker
+    if maker.kw["bind"].dialect.name != "sqlite":
+        pytest.skip("SQLite's writers' turn held; PostgreSQL locks the controller's row")
+    monkeypatch.setattr(transaction, "TURN_TIMEOUT_S", 0.3)
+    version = int(face["rest"].get(f"{C}/tools/10").headers["ETag"].strip('W/"'))
+    before = ok(face["rest"].get(f"{C}/tools/10"))
+
+    async def busy(client: Client, ns: dict) -> int:
+        holder = transaction.writer(maker)
+        with holder, transaction.writers_turn(holder):  # the other writer's turn
+            return await commit(client, ns, 10, [5.0, 6.0, 7.0, 0.0, 0.0, 0.0], "held", version)
+
+    with pytest.raises(ua.UaStatusCodeError) as err:
+        on_client(face, busy)
+    assert err.value.code == ua.StatusCodes.BadResourceUnavailable
+    assert ok(face["rest"].get(f"{C}/tools/10")) == before
+
+    async def free(client: Client, ns: dict) -> int:
+        return await commit(client, ns, 10, [5.0, 6.0, 7.0, 0.0, 0.0, 0.0], "held", version)
+
+    assert on_client(face, free) == version + 1
+    assert ok(face["rest"].get(f"{C}/tools/10"))["name"] == "held"

@@ -9,6 +9,7 @@ audit (source ``opcua``) and the ``frame-committed`` event in that transaction.
 
 from __future__ import annotations
 
+import logging
 from typing import Any
 
 from asyncua import ua
@@ -21,6 +22,8 @@ from server.service import slots, transaction
 from server.service.preconditions import PreconditionFailed, etag
 from solvers.errors import CalibrationError
 
+log = logging.getLogger("pendant.opcua")
+
 
 def commit_frame(make_session: sessionmaker[Session], controller_id: int, table: str, number: int,
                  frame: Any, name: str | None, expected_version: int,
@@ -29,7 +32,10 @@ def commit_frame(make_session: sessionmaker[Session], controller_id: int, table:
 
     - ``BadInvalidArgument``: not six finite numbers, or a value outside the API's bounds;
     - ``BadInvalidState``: the slot changed since ``expected_version`` was read (read again);
-    - ``BadNodeIdUnknown``: the controller is gone.
+    - ``BadNodeIdUnknown``: the controller is gone;
+    - ``BadResourceUnavailable``: the database cannot answer now (another writer held it past
+      the writers' wait, no connection free, the connection lost: REST's 503,
+      :func:`server.service.transaction.unavailable`): try again.
     """
     try:
         values6 = [float(v) for v in frame]
@@ -49,4 +55,10 @@ def commit_frame(make_session: sessionmaker[Session], controller_id: int, table:
         return ua.StatusCode(ua.StatusCodes.BadInvalidArgument)
     except PreconditionFailed:
         return ua.StatusCode(ua.StatusCodes.BadInvalidState)
+    except Exception as err:
+        why = transaction.unavailable(err)
+        if why is None:
+            raise
+        log.warning("opcua: CommitFrame of %s %d: %s", table, number, why)
+        return ua.StatusCode(ua.StatusCodes.BadResourceUnavailable)
     return int(e.version)
