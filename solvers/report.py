@@ -185,6 +185,43 @@ def bound95_of_eigenvalues(eigenvalues: Sequence[float] | FloatArray,
     return math.sqrt(c * float(q))
 
 
+def welch_dof(variances: Sequence[float], dofs: Sequence[float | None]) -> float | None:
+    """Welch-Satterthwaite effective degrees of freedom of a sum of independent variance
+    terms ``v_i``, term i's sigma estimated with ``ν_i`` degrees of freedom [1]_ [2]_ [3]_:
+
+        ``ν = (Σ v_i)² / Σ (v_i² / ν_i)``
+
+    A term with sigma known (``ν_i`` None or 0: infinite) adds to the numerator only; with
+    every sigma known, or no variance at all, the result is None (infinite: chi-square
+    quantiles, as :func:`bound95` takes None). A variance's round-off below 0 counts as 0.
+    ν is at least the smallest ν_i of the terms that count, and one term gives its own ν_i.
+    The bound of the summed covariance is then :func:`bound95` with this dof.
+
+    References
+    ----------
+    .. [1] F. E. Satterthwaite, "An approximate distribution of estimates of variance
+       components", Biometrics Bulletin 2(6), 110-114, 1946.
+    .. [2] B. L. Welch, "The generalization of 'Student's' problem when several different
+       population variances are involved", Biometrika 34(1/2), 28-35, 1947.
+    .. [3] JCGM 100:2008 (GUM), Evaluation of measurement data - Guide to the expression of
+       uncertainty in measurement, G.4.1.
+
+    Examples
+    --------
+    >>> welch_dof([0.01, 0.01], [None, 2])  # equal terms, one known: (0.02)² / (0.01² / 2)
+    8.0
+    >>> welch_dof([0.01, 0.01], [4, 4])  # two equal terms of 4 dof: 8, as if pooled
+    8.0
+    >>> welch_dof([0.01, 0.02], [None, 0]) is None, welch_dof([], []) is None
+    (True, True)
+    """
+    v = [max(float(x), 0.0) for x in variances]
+    den = sum(x * x / n for x, n in zip(v, dofs) if n)
+    if den <= 0 or sum(v) <= 0:
+        return None  # every term with sigma known, or no variance at all: chi-square
+    return sum(v) ** 2 / den
+
+
 def mahalanobis_bound95(n_parameters: int, dof: int | None = None) -> float:
     """95% bound on the Mahalanobis distance ``sqrt(eᵀ C⁻¹ e)`` of all p parameters jointly:
     ``sqrt(p F(p, dof; 0.95))`` when sigma was estimated with ``dof`` degrees of freedom (the

@@ -93,8 +93,10 @@ def test_the_welch_satterthwaite_widening_stays_finite_on_every_scipy():
     C = np.diag([1.0, 0.2, 0.2])
     assert bound95(C, 4.3e41) == bound95(C) and np.isfinite(bound95(C, float("inf")))
     assert 1.0 < chain._f_over_chi(5.0, 3) < 2.0
-    assert chain._welch_dof(-1e-30, 4.0, [0.0], [None]) is None  # round-off, no variance
-    assert chain._welch_dof(0.01, 4.0, [0.01], [8.0]) >= 4.0  # never below the smallest
+    from solvers.report import welch_dof  # the one Welch-Satterthwaite sum (chain's, common's)
+    assert welch_dof([-1e-30, 0.0], [4.0, None]) is None  # round-off, no variance
+    assert welch_dof([0.01, 0.01], [4.0, 8.0]) >= 4.0  # never below the smallest
+    assert chain.welch_dof is welch_dof  # server.service.external imports it from the chain
 
 
 def test_the_offsets_and_the_positioners_own_dof_is_read_per_block():

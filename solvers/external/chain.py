@@ -25,7 +25,7 @@ import numpy as np
 from scipy import special
 from scipy.spatial.transform import Rotation
 
-from solvers.report import bound95
+from solvers.report import bound95, welch_dof
 from solvers.validate import FloatArray
 
 
@@ -161,41 +161,17 @@ def report_dofs(report: object) -> tuple[float | None, float | None]:
     return dof, dof
 
 
-def _welch_dof(own: float, dof: float | None, others: list[float],
-               other_dofs: list[float | None]) -> float | None:
-    """Welch-Satterthwaite degrees of freedom of a sum of variance terms [1]_:
-    ``ν = (Σ v)² / Σ (v² / ν_i)``, a term with sigma known (None) counting as infinite.
-
-    References
-    ----------
-    .. [1] F. E. Satterthwaite, "An approximate distribution of estimates of variance
-       components", Biometrics Bulletin 2(6), 110-114, 1946.
-    """
-    v = [max(float(x), 0.0) for x in (own, *others)]  # a variance's round-off below 0 is 0
-    nus = [dof, *other_dofs]
-    den = sum(x * x / n for x, n in zip(v, nus) if n)
-    if den <= 0 or sum(v) <= 0:
-        return None  # every term with sigma known, or no variance at all: chi-square
-    return sum(v) ** 2 / den  # >= the smallest nu_i of a term that counts
-
-
-def welch_dof(variances: list[float], dofs: list[float | None]) -> float | None:
-    """:func:`_welch_dof` of a list of variance terms (None: all known)."""
-    if not variances:
-        return None
-    return _welch_dof(variances[0], dofs[0], list(variances[1:]), list(dofs[1:]))
-
-
 def _combine(own: float | None, dof: float | None, others: list[float],
              other_dofs: list[float | None], f: int) -> float | None:
     """Total of the solve's own bound (F with ``dof``, or chi-square) and the other terms'
     bounds (each F with its dof, or chi-square): their squares add on the chi-square scale,
-    and the total takes the F quantile of the Welch-Satterthwaite dof (:func:`_welch_dof`)."""
+    and the total takes the F quantile of the Welch-Satterthwaite dof
+    (:func:`solvers.report.welch_dof`)."""
     if own is None:
         return None
     v_own = (own / _f_over_chi(dof, f)) ** 2
     v = [(b / _f_over_chi(n, f)) ** 2 for b, n in zip(others, other_dofs)]
-    nu = _welch_dof(v_own, dof, v, other_dofs)
+    nu = welch_dof([v_own, *v], [dof, *other_dofs])
     return float(np.sqrt(v_own + sum(v))) * _f_over_chi(nu, f)
 
 
@@ -209,7 +185,7 @@ def _combine_cov(own: FloatArray, dof: float | None, others: list[FloatArray],
     bound95 with the same dof, so a negligible term moved the total away from the solve's own
     bound: diag(1, 0.01, 0.01) at dof 3 from 3.21 to 3.71.)"""
     total = own + sum(others, np.zeros_like(own))
-    nu = _welch_dof(float(np.trace(own)), dof, [float(np.trace(C)) for C in others], other_dofs)
+    nu = welch_dof([float(np.trace(C)) for C in (own, *others)], [dof, *other_dofs])
     return bound95(total, nu)
 
 

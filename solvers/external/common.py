@@ -10,7 +10,7 @@ from scipy import stats
 from scipy.spatial.transform import Rotation
 
 from solvers.errors import CalibrationError
-from solvers.external.chain import welch_dof
+from solvers.report import welch_dof
 from solvers.validate import FloatArray, as_array
 
 #: Default touch-up noise (1 sigma per coordinate, mm) when the residual has no redundancy.
@@ -146,26 +146,17 @@ def outlier_critical(k: int, dof: int, q: float) -> float:
 
 
 def block_dof(parts: Sequence[tuple[FloatArray, float | None]], block: slice) -> float | None:
-    """Welch-Satterthwaite degrees of freedom of one block of a covariance summed from
-    independent shares ``C = Σ_i C_i``, share i scaled by a sigma estimated with ``ν_i``
-    residual degrees of freedom (None or 0: sigma known) [1]_ [2]_:
-
-        ``ν_eff = (Σ_i v_i)² / Σ_i (v_i² / ν_i)``,  ``v_i = tr C_i[block, block]``
-
-    (mm² for a position block, deg² for an angle block; a share with sigma known adds to the
-    numerator only). The estimated total ``tr Ĉ = Σ v_i w_i``, ``w_i ~ χ²(ν_i)/ν_i``, has
-    mean ``tr C`` and variance ``2 Σ v_i²/ν_i``, those of ``tr C · χ²(ν_eff)/ν_eff``: the
-    block's bound is :func:`solvers.report.bound95` of the summed (unwidened) block with
-    ``F(f, ν_eff)`` quantiles, the rule :func:`solvers.external.chain.combined_bounds` applies
-    to a chain's terms. None when every share's sigma is known (chi-square). A single share
-    gives its own ν; ν_eff is at least the smallest ν_i of the shares that count.
-
-    References
-    ----------
-    .. [1] F. E. Satterthwaite, "An approximate distribution of estimates of variance
-       components", Biometrics Bulletin 2(6), 110-114, 1946.
-    .. [2] B. L. Welch, "The generalization of 'Student's' problem when several different
-       population variances are involved", Biometrika 34(1/2), 28-35, 1947.
+    """Welch-Satterthwaite degrees of freedom (:func:`solvers.report.welch_dof`) of one block
+    of a covariance summed from independent shares ``C = Σ_i C_i``, share i scaled by a sigma
+    estimated with ``ν_i`` residual degrees of freedom (None or 0: sigma known), the terms
+    ``v_i = tr C_i[block, block]`` (mm² for a position block, deg² for an angle block; a share
+    with sigma known adds to the numerator only). The estimated total ``tr Ĉ = Σ v_i w_i``,
+    ``w_i ~ χ²(ν_i)/ν_i``, has mean ``tr C`` and variance ``2 Σ v_i²/ν_i``, those of
+    ``tr C · χ²(ν_eff)/ν_eff``: the block's bound is :func:`solvers.report.bound95` of the
+    summed (unwidened) block with ``F(f, ν_eff)`` quantiles, the rule
+    :func:`solvers.external.chain.combined_bounds` applies to a chain's terms. None when every
+    share's sigma is known (chi-square). A single share gives its own ν; ν_eff is at least the
+    smallest ν_i of the shares that count.
 
     Examples
     --------
@@ -176,7 +167,7 @@ def block_dof(parts: Sequence[tuple[FloatArray, float | None]], block: slice) ->
     True
     """
     traces = [float(np.trace(np.asarray(C, dtype=float)[block, block])) for C, _ in parts]
-    return welch_dof(traces, [nu or None for _, nu in parts])
+    return welch_dof(traces, [nu for _, nu in parts])
 
 
 def sigma_from_residuals(residuals: FloatArray, n_parameters: int,
