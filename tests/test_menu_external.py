@@ -697,7 +697,11 @@ def test_positioner_on_the_demo_positioner_covers_the_truth_in_200_trials(errors
 def test_offset_on_the_demo_turntable_covers_the_truth_in_200_trials():
     """Root point (5 positions) then Offset (the plate on the table at E1 = 30), both through
     the menus' adapters on the emulated table tilted 1 deg and 3 mm off its root: the true
-    T_flange_base (in the calibrated root's flange frame) inside both 95 % bounds in >= 93 %."""
+    T_flange_base (in the calibrated root's flange frame) inside both 95 % bounds in >= 93 %.
+    The root's covariance, dof and sigma reach the Offset as the service passes them
+    (``server.service.external.ext_inputs``: ``extras["dof"]`` or 0, ``sigma_mm``, which
+    weighs the root's share at the touch sigma for the Welch-Satterthwaite dof), with the
+    touch sigma the cell assumes (``assumed_sigma_mm``: here the 0.05 mm the touches have)."""
     from server.menus import METHODS
     from server.menus.methods import MethodInputs, TaughtData
     from server.menus.external import ExtInputs
@@ -717,9 +721,9 @@ def test_offset_on_the_demo_turntable_covers_the_truth_in_200_trials():
         t = touch(table.mark(mark, ROOT_VALUES), ROOT_VALUES, 0.05, rng)
         rp = _menu_solve("ext.root_point", ext, 1, t, [{"E1": v} for v in ROOT_VALUES])
         tp = touch(corners, [30.0] * 3, 0.05, rng)
-        inputs = MethodInputs(tcp_mm=tp.tool[:3, 3], external=ExtInputs(
+        inputs = MethodInputs(tcp_mm=tp.tool[:3, 3], touch_sigma_mm=0.05, external=ExtInputs(
             1, "turntable", ("E1",), rp.frame, root_covariance=rp.report.covariance,
-            root_dof=rp.report.extras["dof"]))
+            root_dof=int(rp.report.extras["dof"] or 0), root_sigma_mm=float(rp.report.sigma_mm)))
         res = METHODS["ext.offset"].solve([TaughtData(F, external_axes={"E1": 30.0})
                                            for F in tp.flange_poses], inputs, {})
         d = pose_difference(truth, res.frame)
