@@ -7,7 +7,7 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from api_helpers import C, CELL, approach, ok, open_session, pose_matrix, walk
+from api_helpers import C, CELL, approach, calibrate, ok, open_session, pose_matrix, walk
 from emulator import external as ext_emu
 from solvers.robots import ROBOTS
 
@@ -143,3 +143,71 @@ def test_a_negligible_term_leaves_the_solves_own_bound(shape):
     total = combined_bounds(b_pos, b_ang, tiny, 3, own, {"tool 1 TCP": None})
     assert total["position_bound95_mm"] == pytest.approx(b_pos, rel=1e-6)
     assert total["angle_bound95_deg"] == pytest.approx(b_ang, rel=1e-6)
+
+
+def _teach(client, url: str, noise_mm: float = 0.0, extra: int = 0) -> dict:  # noqa: ANN001
+    """Every required step as its prompt says (its external axes, approach, touch up), then
+    ``extra`` of the menu's optional steps."""
+    from server.menus import METHODS
+
+    s = ok(client.get(url))
+    steps = list(s["steps"])
+    spec = METHODS[s["method"]]
+    for k in range(extra):
+        st = spec.extra_step(k)
+        steps.append({"index": len(steps), "target": st.target, "tilt_deg": st.tilt_deg,
+                      "around_deg": st.around_deg, "spin_deg": 0.0,
+                      "external_axes": dict(st.external_axes or ())})
+    for st in steps:
+        if st.get("external_axes"):
+            ok(client.put(f"{C}/robot/external", json={"values": st["external_axes"]}))
+        approach(client, st["target"], noise_mm=noise_mm,
+                 **{k: st[k] for k in ("tilt_deg", "around_deg", "spin_deg")})
+        s = ok(client.post(f"{url}/touch-up", json={"step": st["index"]}))
+    return s
+
+
+def test_an_offset_in_the_chain_holds_the_true_base_with_the_touching_tools_term(client):
+    """End to end through the REST API, as a user walks it: tool 2 calibrated (ideal aim), the
+    turntable's root point touched with it at 5 positions (0.05 mm aim) and saved into
+    EX_KIN 1; tool 1 calibrated by a sloppy aim (0.3 mm: its TCP ends up about 0.35 mm off);
+    the Offset of BASE 5 on the table touched with tool 1. Its compute goes through
+    ``server.service.external.solve_in_chain``: the Offset's own covariance (touch share and
+    the root's share, per-block Welch-Satterthwaite dof) plus the tool's stored covariance
+    carried through the Offset's solve. The true base (the emulator's plate in the true
+    root's flange frame) lies inside the chained bounds, and outside the bound without the
+    tool's term: the term is what makes the bound hold."""
+    from scipy.spatial.transform import Rotation
+
+    from solvers.external.common import rz
+
+    calibrate(client, "tool.xyz_4point", 2)
+    tool = _tool_with_aim(client, noise_mm=0.3)
+    tool_err = float(np.linalg.norm(pose_matrix(tool["frame"])[:3, 3] - CELL.T_flange_tool[:3, 3]))
+    assert tool_err > 0.2  # the aim left an error to carry
+    url = open_session(client, "ext.root_point", 1, tool_no=2)
+    _teach(client, url, noise_mm=0.05, extra=2)
+    root = ok(client.post(f"{url}/compute"))
+    assert root["extras"]["dof"] == 4  # 5 positions: the root's sigma from 4 residual dof
+    ok(client.post(f"{url}/save"))
+    url = open_session(client, "ext.offset", 5, tool_no=1, ext_no=1)
+    _teach(client, url)
+    rep = ok(client.post(f"{url}/compute"))
+
+    t = ext_emu.external_cell(REACH, ok(client.get(f"{C}/cell/external")), 1)
+    theta = rep["extras"]["axis_value_deg"]
+    plate = t.turntable.flange([theta])[0] @ t.T_flange_plate
+    true_root = t.turntable.true_root_frame(t.mark_flange("turntable"))
+    expected = np.linalg.inv(true_root @ rz([theta])[0]) @ plate
+    T = pose_matrix(rep["frame"])
+    err = float(np.linalg.norm(T[:3, 3] - expected[:3, 3]))
+    err_deg = float(np.degrees(Rotation.from_matrix(expected[:3, :3].T @ T[:3, :3]).magnitude()))
+    terms = rep["extras"]["bound_terms"]
+    assert err < rep["position_bound95_mm"], (err, terms)
+    assert err_deg < rep["angle_bound95_deg"], (err_deg, terms)
+    assert err > terms["touch"]["position_bound95_mm"], (err, terms)  # the tool's term is needed
+    assert set(terms) == {"touch", "tool 1 TCP"}
+    assert terms["tool 1 TCP"]["source"].startswith("tool.xyz_4point session")
+    own = (rep["extras"]["position_dof"], rep["extras"]["angle_dof"])
+    assert all(nu is not None and nu >= 4 for nu in own)  # the root's share: finite dof
+    assert rep["extras"]["position_covariance_total_dof"] is not None
