@@ -96,3 +96,28 @@ def test_first_serve_prints_a_login_link_that_works(tmp_path):
 def test_no_auth_refuses_a_non_loopback_host(capsys):
     assert main(["serve", "--host", "0.0.0.0", "--no-auth"]) == 2
     assert "--no-auth serves loopback only" in capsys.readouterr().err
+
+
+def test_a_busy_database_is_one_line_to_try_again(tmp_path, capsys, monkeypatch):
+    """Another writer (the service's long restore) holds the database past the writers' wait:
+    `pendant users add` says so in one line and exits 75 (EX_TEMPFAIL: try again), adding
+    nobody; it was a traceback. Once the database is free the same command adds the user."""
+    from db import session as db_session
+    from server.service import transaction
+
+    db = f"sqlite:///{tmp_path / 'p.db'}"
+    assert main(["users", "add", "eva", "--role", "Expert", "--db", db]) == 0
+    capsys.readouterr()
+    monkeypatch.setattr(transaction, "TURN_TIMEOUT_S", 0.3)
+    engine = db_session.make_engine(db)
+    holder = transaction.writer(db_session.make_sessionmaker(engine))
+    with holder, transaction.writers_turn(holder):  # the other writer's turn
+        assert main(["users", "add", "bob", "--role", "Operator", "--db", db]) == 75
+    err = capsys.readouterr().err
+    assert err.count("\n") == 1 and "Traceback" not in err, err
+    assert err.startswith("pendant: the database was locked by another writer") and \
+        "nothing was written: retry" in err, err
+    assert main(["users", "list", "--db", db]) == 0
+    assert "bob" not in capsys.readouterr().out
+    assert main(["users", "add", "bob", "--role", "Operator", "--db", db]) == 0
+    engine.dispose()

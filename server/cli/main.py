@@ -50,6 +50,7 @@ import numpy as np
 from server import __version__
 from server.cli.analysis import add_analysis_commands
 from server.service.backup import add_backup_commands
+from server.service.transaction import unavailable
 from server.auth.cli import add_auth_commands
 from server.cli.slot import add_slot_command
 from server.menus import METHODS
@@ -225,6 +226,8 @@ def format_report(report: ReportOut) -> str:
 
 
 # ------------------------------------------------------------------------------------ main
+
+EX_TEMPFAIL = 75  # sysexits.h: a temporary failure, try again (the database busy or gone)
 
 DESCRIPTION = """A controller-side teach-pendant emulator: the Calibrate menus as a REST
 service and a browser pendant, calibration from recorded poses, controller file export, and
@@ -841,6 +844,12 @@ def main(argv: Sequence[str] | None = None) -> int:
         signal.signal(signal.SIGINT, signal.SIG_IGN)  # leaving: one more Ctrl-C changes nothing
         print("pendant: interrupted", file=sys.stderr)
         return 130
+    except Exception as err:  # the database busy or gone: one line, to try again (EX_TEMPFAIL)
+        why = unavailable(err)
+        if why is None:
+            raise
+        print(f"pendant: {why}", file=sys.stderr)
+        return EX_TEMPFAIL
 
 
 if __name__ == "__main__":
