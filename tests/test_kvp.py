@@ -383,3 +383,26 @@ def test_a_busy_database_is_a_refusal_to_retry_and_the_connection_goes_on(
         s.sendall(raw(cell["port"], 22, 0, b"$OV_PRO"))
         assert answer_of(s) == (22, "100", True)
     assert ok(rest.get(f"{C}/tools/6")) == before
+
+
+def test_a_write_whose_read_back_meets_a_busy_database_is_answered_as_done(
+        cell: dict, monkeypatch) -> None:
+    """The write committed, then the database could not answer the read of the value back:
+    the write is answered as done, with the value as sent (it was refused as 'nothing was
+    written', which was false)."""
+    from sqlalchemy.exc import TimeoutError as PoolTimeout
+    from server.kvp import variables
+
+    read = variables.read
+
+    def busy_after_the_write(face, name, after_write=False):  # noqa: ANN001
+        if after_write:
+            raise PoolTimeout("every connection busy")
+        return read(face, name, after_write=after_write)
+
+    monkeypatch.setattr(variables, "read", busy_after_the_write)
+    with socket.create_connection(("127.0.0.1", cell["port"]), timeout=10) as s:
+        s.sendall(raw(cell["port"], 31, 1, b"TOOL_DATA[7]", b"{X 9.5}"))
+        assert answer_of(s) == (31, "{X 9.5}", True)
+    monkeypatch.setattr(variables, "read", read)
+    assert ok(cell["rest"].get(f"{C}/tools/7"))["pose"]["x"] == 9.5

@@ -21,7 +21,7 @@ from starlette.exceptions import HTTPException
 
 from db.crud import NotFound, StateConflict
 from server.api.preconditions import PreconditionFailed, PreconditionRequired, etag
-from server.service.transaction import DatabaseBusy, unavailable
+from server.service.transaction import LOST, DatabaseBusy, unavailable
 from solvers.errors import CalibrationError, KinematicsError
 
 log = logging.getLogger("pendant")
@@ -180,12 +180,15 @@ def install(app: FastAPI) -> None:
             return await _unexpected(request, exc)
         if isinstance(exc, PoolTimeout):
             log.warning("every database connection of this process stayed busy: %s", exc)
-        elif isinstance(exc, OperationalError) and exc.connection_invalidated:
+        elif why == LOST:
             log.warning("the connection to the database was lost during %s %s: %s",
                         request.method, request.url.path, exc.orig)
-        elif isinstance(exc, OperationalError) and "max_connections" in why:
-            log.warning("PostgreSQL refused a connection: max_connections reached "
-                        "(docs/deploy.md: 10 per pendant process)")
+            return JSONResponse(status_code=503, headers={"Retry-After": "1"}, content=detail(
+                (), f"{why}, or repeat it with the same Idempotency-Key", "connection_lost"))
+        elif isinstance(exc, OperationalError):
+            log.warning("the database could not serve %s %s: %s", request.method,
+                        request.url.path, str(exc.orig).strip().splitlines()[0] if exc.orig
+                        else exc)
         return JSONResponse(status_code=503, headers={"Retry-After": "1"},
                             content=detail((), why, "busy"))
 

@@ -9,7 +9,9 @@ Field", draft-ietf-httpapi-idempotency-key-header).
 - The same key while the first is still running, or after a crash between the commit and
   storing its response: **409**.
 - A refused request (4xx/5xx) stores nothing: its transaction, with the key, is rolled back,
-  so retrying it runs it again.
+  so retrying it runs it again. A 5xx whose transaction may have committed (the connection
+  lost during the commit) leaves the key claimed but unanswered: a retry then gets the 409 of
+  a command applied whose answer was lost, never the 5xx again.
 - Keys belong to the user who sent them: the stored key is the SHA-256 of the user's name and
   the key, so another user's request with the same key runs as a request of its own and never
   gets the first user's answer.
@@ -167,7 +169,10 @@ class IdempotencyMiddleware:
 
         await self.app(scope, receive, capture)
         key = state.get("idempotency_key")
-        if key is None or not start:
+        if key is None or not start or int(start["status"]) >= 500:
+            # a 5xx is no answer to keep: after a connection lost during the commit (which may
+            # have landed), the key left unanswered tells a retry "applied, answer lost: read
+            # the resource" (409) if it did, and runs the request again if it did not
             return
         headers = {k.decode("latin-1").lower(): v.decode("latin-1")
                    for k, v in start.get("headers", [])}

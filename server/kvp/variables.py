@@ -8,6 +8,7 @@ assignment does. Every read and write goes through :mod:`server.rws.ops`.
 
 from __future__ import annotations
 
+import logging
 import re
 from collections.abc import Callable
 from dataclasses import dataclass
@@ -19,8 +20,11 @@ from server.formats import kuka
 from server.formats.model import FormatError
 from server.rws import ops
 from server.api.schemas import EntryIn
+from server.service.transaction import unavailable
 from solvers.errors import CalibrationError
 from solvers.frames import Pose, kuka_from_matrix
+
+log = logging.getLogger("pendant.kvp")
 
 FRAME_KEYS = ("X", "Y", "Z", "A", "B", "C")
 UNITS = {"X": "mm", "Y": "mm", "Z": "mm", "A": "deg", "B": "deg", "C": "deg"}
@@ -180,6 +184,20 @@ def _write_frame(face: Face, who: ops.Caller, table: str, n: int, var: str, valu
                    "merged with it; nothing written, send it again")
 
 
+def _read_back(face: Face, name: str, sent: str) -> str:
+    """The value of ``name`` read back after its write committed; the value as sent when the
+    database cannot answer that read now (``transaction.unavailable``): the write is done, and
+    a refusal saying "nothing was written" would be false."""
+    try:
+        return read(face, name, after_write=True)
+    except Exception as err:
+        why = unavailable(err)
+        if why is None:
+            raise
+        log.warning("kvp: %s written; reading it back failed: %s", name, why)
+        return sent
+
+
 def write(face: Face, name: str, value: str) -> str:
     """Write ``value`` to ``name`` through the service's operations; the value read back."""
     var = name.strip().upper()
@@ -191,7 +209,7 @@ def write(face: Face, name: str, value: str) -> str:
         table = "tool" if array in ("TOOL_DATA", "LOAD_DATA", "TOOL_NAME") else "base"
         if array in ("TOOL_DATA", "BASE_DATA"):
             _write_frame(face, who, table, n, var, value)
-            return read(face, name, after_write=True)
+            return _read_back(face, name, value)
         _check_index(table, n, var)
         clear = False
         if array == "LOAD_DATA":
@@ -209,7 +227,7 @@ def write(face: Face, name: str, value: str) -> str:
         else:
             body = EntryIn(name=_name_write(value, var))
         ops.commit_slot(face.maker, who, cid, table, n, body, clear_load=clear)
-        return read(face, name, after_write=True)
+        return _read_back(face, name, value)
     if var in ("$ACT_TOOL", "$ACT_BASE"):
         if not re.fullmatch(r"\s*[0-9]+\s*", value):
             raise KvpError(f"{var}: expected an INT slot number, got {value[:40]!r}")
@@ -218,7 +236,7 @@ def write(face: Face, name: str, value: str) -> str:
             ops.set_active(face.maker, who, cid, tool_no=n)
         else:
             ops.set_active(face.maker, who, cid, base_no=n)
-        return read(face, name, after_write=True)
+        return _read_back(face, name, value)
     if var in SYSTEM:
         raise KvpError(f"{var}: write-protected (pendant moves the arm and selects frames "
                        "through $ACT_TOOL, $ACT_BASE and its REST API)")

@@ -285,7 +285,10 @@ class PendantOpcUa:
                 expected, caller.audit_actor())
             if isinstance(outcome, ua.StatusCode):
                 return outcome
-            await self.sync()  # the client reads its own write at once
+            try:
+                await self.sync()  # the client reads its own write at once
+            except Exception:  # committed: the answer is its version whatever the read did
+                log.exception("OPC UA read after a committed CommitFrame failed")
             return [ua.Variant(outcome, ua.VariantType.UInt64)]
 
         funcs = {"ReadFrame": read_frame, "ExportFile": export_file, "CommitFrame": commit_frame}

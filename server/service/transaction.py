@@ -249,6 +249,11 @@ class DatabaseBusy(Exception):
         self.waited_s = waited_s
 
 
+LOST = ("the connection to the database was lost during this request (a restart or "
+        "failover); a write it was committing may or may not have been: read before writing "
+        "again")
+
+
 def unavailable(exc: BaseException) -> str | None:
     """Why the database could not serve the request that raised ``exc``, said for the person
     who retries it (a 503 with ``Retry-After`` on REST and RWS, a refusal on KVP, the
@@ -258,8 +263,10 @@ def unavailable(exc: BaseException) -> str | None:
       or SQLite's busy timeout ("database is locked");
     - every pooled connection of the process stayed busy (the pool's timeout), or PostgreSQL
       has no connection left (its ``max_connections``);
+    - no connection could be made (PostgreSQL down, starting up or shutting down: the error
+      carries no statement);
     - the connection was lost during the request (a restart or failover): a write being
-      committed then may or may not have been, and the answer says so.
+      committed then may or may not have been, and the answer says so (:data:`LOST`).
     """
     if isinstance(exc, DatabaseBusy):
         return f"{exc}; nothing was written: retry"
@@ -269,9 +276,10 @@ def unavailable(exc: BaseException) -> str | None:
     if not isinstance(exc, OperationalError):
         return None
     if exc.connection_invalidated:
-        return ("the connection to the database was lost during this request (a restart or "
-                "failover); a write it was committing may or may not have been: read before "
-                "writing again, or repeat it with the same Idempotency-Key")
+        return LOST
+    if exc.statement is None:  # no connection to begin with: PostgreSQL down, starting up
+        reason = str(exc.orig).strip().splitlines()[0] if exc.orig is not None else ""
+        return f"the database cannot be reached now ({reason}); nothing was written: retry"
     if "database is locked" in str(exc.orig):  # SQLite's busy timeout ran out
         return (f"the database was locked by another writer for "
                 f"{db_session.BUSY_TIMEOUT_MS / 1000:g} s; nothing was written: retry")
