@@ -504,3 +504,24 @@ def test_a_busy_database_is_resource_unavailable_and_changes_nothing(face: dict,
 
     assert on_client(face, free) == version + 1
     assert ok(face["rest"].get(f"{C}/tools/10"))["name"] == "held"
+
+
+def test_an_export_the_database_cannot_answer_now_is_resource_unavailable(face: dict,
+                                                                          monkeypatch) -> None:
+    """ExportFile reads the database: when it cannot answer now (every connection busy), the
+    call answers BadResourceUnavailable, as CommitFrame and REST's 503 do (it was
+    BadUnexpectedError), and the next call answers the file."""
+    from sqlalchemy.exc import TimeoutError as PoolTimeout
+
+    def busy(cid: int, fmt: str) -> str:
+        raise PoolTimeout("every connection busy")
+
+    async def body(client: Client, ns: dict) -> str:
+        return await (await pendant(client, ns)).call_method(f"{ns['pendant']}:ExportFile", "abb")
+
+    monkeypatch.setattr(face["server"], "_export", busy)
+    with pytest.raises(ua.UaStatusCodeError) as err:
+        on_client(face, body)
+    assert err.value.code == ua.StatusCodes.BadResourceUnavailable
+    monkeypatch.undo()
+    assert on_client(face, body) == face["rest"].get(f"{C}/export", params={"format": "abb"}).text

@@ -30,6 +30,7 @@ from db import crud
 from server.opcua import access, commit, pki, space
 from server.opcua.state import CellReader, ControllerState, events_after, latest_event_id
 from server.service.export import export_text
+from server.service.transaction import unavailable
 from server.settings import LOOPBACK_HOSTS
 
 log = logging.getLogger("pendant.opcua")
@@ -270,7 +271,14 @@ class PendantOpcUa:
         async def export_file(fmt: str) -> list[ua.Variant] | ua.StatusCode:
             if fmt not in FORMATS:
                 return ua.StatusCode(ua.StatusCodes.BadInvalidArgument)
-            text = await asyncio.to_thread(self._export, cid, fmt)
+            try:
+                text = await asyncio.to_thread(self._export, cid, fmt)
+            except Exception as err:  # the database cannot answer now: REST's 503
+                why = unavailable(err)
+                if why is None:
+                    raise
+                log.warning("opcua: ExportFile %s: %s", fmt, why)
+                return ua.StatusCode(ua.StatusCodes.BadResourceUnavailable)
             return [ua.Variant(text, S)]
 
         async def commit_frame(table: str, number: int, frame: list[float], slot_name: str,
