@@ -330,7 +330,7 @@ def test_a_request_that_finds_no_connection_free_answers_503(db_url, monkeypatch
             for conn in held:
                 conn.close()
         assert r.status_code == 503 and r.headers["Retry-After"] == "1", r.text
-        assert "every database connection of this worker stayed busy for 0.3 s" in r.text
+        assert "every database connection of this process stayed busy for 0.3 s" in r.text
         assert client.get(f"{C}/tools/1").status_code == 200
 
 

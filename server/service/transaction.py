@@ -271,7 +271,7 @@ def unavailable(exc: BaseException) -> str | None:
     if isinstance(exc, DatabaseBusy):
         return f"{exc}; nothing was written: retry"
     if isinstance(exc, PoolTimeout):
-        return (f"every database connection of this worker stayed busy for "
+        return (f"every database connection of this process stayed busy for "
                 f"{db_session.POOL_TIMEOUT_S:g} s; nothing was written: retry")
     if not isinstance(exc, OperationalError):
         return None
