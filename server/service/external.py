@@ -10,7 +10,7 @@ event. No math here: the frames come from the solvers (``solvers.external``) and
 from __future__ import annotations
 
 import math
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 from typing import Any, get_args
 
 import numpy as np
@@ -523,6 +523,53 @@ def _label_rail(rail: Rail) -> str:
     return f"rail EX_KIN {rail.number}"
 
 
+def _root_terms(db: Session, k: ExternalKinematic, spec: Any, pts: list, inputs: Any,
+                params: dict, terms: dict, dofs: dict, notes: dict) -> None:
+    """Add to ``terms`` the chain terms of the root point that wrote EX_KIN ``k`` (the tool it
+    was touched with, its rail), each carried through this Offset's solve by moving the root
+    frame: the root's stored covariance (``ExtInputs.root_covariance``, in the Offset's own
+    share) is its touch share only, the error of the tool that touched the root is its
+    ``extras.covariance_terms`` (since 2026-11; a root computed before names the term as not
+    in the bound). A term of the same tool, from the same session, as this Offset's own tool
+    term is left out: the root and the base then move together with the TCP, the errors
+    partly cancel and the Offset's own tool term already holds them."""
+    from solvers.external.chain import propagate
+    from solvers.external.offset import _perturbed
+
+    rs = db.get(CalibSession, k.session_id) if k.session_id is not None else None
+    extras = ((rs.report if rs is not None else None) or {}).get("extras") or {}
+    stored = extras.get("covariance_terms") or {}
+    named = extras.get("bound_terms") or {}
+    ex = inputs.external
+    for name, info in named.items():
+        if name == "touch":
+            continue
+        label = f"EX_KIN {k.number} root: {name}"
+        term = stored.get(name)
+        if term is None:
+            if info.get("position_bound95_mm") is not None:
+                notes[label] = ("not stored with the root point (computed before the chain "
+                                "kept its terms): not in the bound; compute the root again")
+            continue
+        source = info.get("source")
+        mine = notes.get(name)
+        if mine is not None and mine == source and name in terms:
+            notes[label] = (f"{source}: the same tool as this base's, its error partly "
+                            f"cancels; the {name} term holds it")
+            continue
+        root = np.asarray(ex.root, dtype=float)
+
+        def moved(d: np.ndarray) -> np.ndarray:
+            r = replace(ex, root=_perturbed(root, d))
+            return spec.solve(pts, replace(inputs, external=r), params).frame
+        try:
+            terms[label] = propagate(moved, np.zeros(6), np.array(term["covariance"], float))
+            dofs[label] = term.get("dof")
+            notes[label] = f"{source} (root point session {k.session_id})"
+        except (CalibrationError, np.linalg.LinAlgError) as err:
+            notes[label] = f"not propagated: {err}"
+
+
 def solve_in_chain(db: Session, s: CalibSession, spec: Any, points: list,
                    inputs: Any) -> Any:
     """Solve session ``s`` with its touch-ups in the world (:func:`chain_points`), then widen
@@ -534,7 +581,6 @@ def solve_in_chain(db: Session, s: CalibSession, spec: Any, points: list,
     dof), so the total's F quantile is the Welch-Satterthwaite one of every share. The report
     says what the chain assumed (``warnings``), which term adds how much
     (``extras.bound_terms``) and the sigma the touch term assumed (``extras.assumed_sigma_mm``)."""
-    from dataclasses import replace
 
     from solvers.external.chain import (combined_bounds, own_covariance, propagate,
                                          report_dofs, welch_dof)
@@ -596,6 +642,8 @@ def solve_in_chain(db: Session, s: CalibSession, spec: Any, points: list,
     ex = inputs.external
     if ex is not None and s.target_table != TABLE:  # a base riding on EX_KIN n (the Offset)
         k = get_slot(db, s.controller_id, ex.number)
+        if k.method == "ext.root_point" and ex.root is not None:
+            _root_terms(db, k, spec, pts, inputs, s.params, terms, dofs, notes)
         if k.method in (None, "", "machine_data"):
             findings.append(Finding(
                 "kinematic_assumed", f"EX_KIN {k.number} ({k.name or k.kind}) is not "
@@ -623,6 +671,9 @@ def solve_in_chain(db: Session, s: CalibSession, spec: Any, points: list,
                                           "angle_bound95_deg": None})
         bounds["terms"][name]["source"] = note  # type: ignore[index]
     extras["bound_terms"] = bounds["terms"]
+    if terms:  # each term's own covariance (6, 6), for a frame that rests on this one
+        extras["covariance_terms"] = {name: {"covariance": C.tolist(), "dof": dofs.get(name)}
+                                      for name, C in terms.items()}
     if terms:
         parts = [(C[:3, :3], dofs.get(name)) for name, C in terms.items()]
         names = tuple(r.parameter_names)[:3]
