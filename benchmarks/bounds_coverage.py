@@ -356,6 +356,64 @@ def scene_root_point_on_rail(rng: np.random.Generator) -> Trial:
     return _chained_trial(res, truth, terms, {"tool": nu_t, "rail": nu_b}, position_only=True)
 
 
+def _base_on_table(rng: np.random.Generator, table: object, mark: np.ndarray, half_mm: float,
+                   sigma_mm: float) -> tuple[np.ndarray, float, np.ndarray]:
+    """(true base in the table's flange frame, the axis value, the three touched points): the
+    origin within ``half_mm`` of the axis, any yaw, tilted up to 10 deg; touched by its origin,
+    a point 200 mm along +X and one 150 mm along +Y with ``sigma_mm`` of noise."""
+    from solvers.external.common import rz
+
+    truth = _frame((Rotation.from_matrix(_rotation(rng, 10.0))
+                    * Rotation.from_euler("z", rng.uniform(-180, 180), degrees=True)).as_matrix(),
+                   np.r_[rng.uniform(-half_mm, half_mm, 2), rng.uniform(0, 50)])
+    theta = rng.uniform(-180, 180)
+    W = table.true_root_frame(mark) @ rz([theta])[0] @ truth  # type: ignore[attr-defined]
+    P = np.array([W[:3, 3], W[:3, 3] + 200 * W[:3, 0], W[:3, 3] + 150 * W[:3, 1]])
+    return truth, theta, P + rng.normal(0.0, sigma_mm, (3, 3))
+
+
+def scene_offset_on_root_by_tool(rng: np.random.Generator) -> Trial:
+    """ext.offset on a root point touched with tool 1 as XYZ 4-point calibrated it (4 table
+    positions, the tool's term stored with the root), the base then touched with an exact
+    tool: the Offset's own bound (touch and the root's own share) plus the root's tool term
+    carried through the Offset by moving the root frame, as the server does
+    (``server.service.external._root_terms``); per-block dof as ``report_dofs`` reads them."""
+    from solvers.dh import tcp_of
+    from solvers.external import offset, root_point
+    from solvers.external.chain import combined_bounds, own_covariance, propagate, report_dofs
+    from solvers.external.offset import _perturbed
+    from solvers.external_sim import make_turntable
+
+    t, t_hat, C_t, nu_t = _calibrated_tool(rng)
+    table = make_turntable(tilt_deg=rng.uniform(0, 0.8), root_offset_mm=rng.uniform(0, 3),
+                           nominal_root=_frame(np.eye(3), np.array([620.0, 300.0, 80.0])))
+    mark = np.array([150.0, 0.0, 0.0])
+    theta = np.array([-135.0, -45.0, 45.0, 135.0]) + rng.uniform(-10, 10, 4)
+    F = np.stack([_touch_poses(R[None], p, t, rng, AIM_SIGMA_MM)[0]
+                  for R, p in zip(_tilted_down(rng, 4), table.mark(mark, theta))])
+
+    def solve_root(x: np.ndarray) -> CalibrationResult:
+        return root_point(tcp_of(F, x), theta, nominal_axis=table.nominal_root[:3, 2],
+                          touch_sigma_mm=AIM_SIGMA_MM)
+    rp = solve_root(t_hat)
+    C_root_tool = propagate(lambda x: solve_root(x).frame, t_hat, C_t)
+    truth, th, P = _base_on_table(rng, table, mark, 100.0, AIM_SIGMA_MM)
+
+    def solve(root: np.ndarray) -> CalibrationResult:
+        return offset(*P, th, root, root_covariance=rp.report.covariance,
+                      root_dof=rp.report.extras["dof"], root_sigma_mm=rp.report.sigma_mm,
+                      touch_sigma_mm=AIM_SIGMA_MM)
+    res = solve(rp.frame)
+    term = propagate(lambda d: solve(_perturbed(rp.frame, d)).frame, np.zeros(6), C_root_tool)
+    rep = res.report
+    b = combined_bounds(rep.position_bound95_mm, rep.angle_bound95_deg, {"root tool": term},
+                        report_dofs(rep), own_covariance(rep), {"root tool": nu_t})
+    e = pose_difference(res.frame, truth)
+    return Trial(float(np.linalg.norm(e[:3])), b["position_bound95_mm"],
+                 float(np.linalg.norm(e[3:])), b["angle_bound95_deg"], None, None,
+                 "assumed+residual")
+
+
 # ------------------------------------------------------------------ external kinematics
 # solvers.external_sim's machines (docs/methods/external.md) with random hidden errors, the
 # marks touched with SIGMA_MM per coordinate on the touched point (solvers.external_sim.touch:
@@ -417,18 +475,11 @@ def scene_offset(rng: np.random.Generator) -> Trial:
     on the table (origin within 150 mm of the axis, any yaw, tilted up to 10 deg) touched at
     one axis value by its origin, a point 200 mm along +X and one 150 mm along +Y."""
     from solvers.external import offset, root_point
-    from solvers.external.common import rz
 
     table, mark = _random_turntable(rng)
     tu = table.touch_mark(mark, _rotary_values(rng, 4), SIGMA_MM, rng)
     rp = root_point(tu.points_mm, tu.axis_values, nominal_axis=table.nominal_root[:3, 2])
-    truth = _frame((Rotation.from_matrix(_rotation(rng, 10.0))
-                    * Rotation.from_euler("z", rng.uniform(-180, 180), degrees=True)).as_matrix(),
-                   np.r_[rng.uniform(-150, 150, 2), rng.uniform(0, 50)])
-    theta = rng.uniform(-180, 180)
-    W = table.true_root_frame(mark) @ rz([theta])[0] @ truth
-    P = np.array([W[:3, 3], W[:3, 3] + 200 * W[:3, 0], W[:3, 3] + 150 * W[:3, 1]])
-    P += rng.normal(0.0, SIGMA_MM, (3, 3))
+    truth, theta, P = _base_on_table(rng, table, mark, 150.0, SIGMA_MM)
     res = offset(*P, theta, rp.frame, root_covariance=rp.report.covariance,
                  root_dof=rp.report.extras["dof"], root_sigma_mm=rp.report.sigma_mm,
                  touch_sigma_mm=SIGMA_MM)
@@ -536,6 +587,7 @@ SCENES: list[tuple[str, Callable[[np.random.Generator], Trial]]] = [
     ("fixed_tool.6d 2 touches", scene_fixed_tool("6d", 2)),
     ("chain: base.3point+tool", scene_base_3point_with_tool),
     ("chain: root_point on rail", scene_root_point_on_rail),
+    ("chain: offset, root by tool", scene_offset_on_root_by_tool),
     ("ext.root_point N=4", scene_root_point(4)),
     ("ext.root_point N=12", scene_root_point(12)),
     ("ext.offset (root N=4)", scene_offset),

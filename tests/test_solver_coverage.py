@@ -67,7 +67,8 @@ def test_light_barrier_bounds_cover_95_percent():
     _check(cov, 0.95 - band, 0.95 + band)
 
 
-@pytest.mark.parametrize("name", ["chain: base.3point+tool", "chain: root_point on rail"])
+@pytest.mark.parametrize("name", ["chain: base.3point+tool", "chain: root_point on rail",
+                                  "chain: offset, root by tool"])
 def test_chained_bounds_cover_95_percent(name):
     """A base touched with a tool calibrated by XYZ 4-point (its stored covariance carried), a
     root point touched on a calibrated rail (the rail's slope carried too), at the aim's
