@@ -262,3 +262,28 @@ def test_a_root_point_touched_with_a_sloppy_tool_carries_its_term_into_the_offse
     stored = rep["extras"]["covariance_terms"]["EX_KIN 1 root: tool 1 TCP"]
     assert np.shape(stored["covariance"]) == (6, 6) and stored["dof"] is not None
     assert "tool 1 TCP" in root["extras"]["covariance_terms"]  # what the Offset read
+
+
+def test_a_root_point_stored_before_its_terms_still_reads_and_says_what_is_left_out(client):
+    """A root point saved before the chain kept its terms (its report has ``bound_terms`` but
+    no ``extras.covariance_terms``): the Offset on it computes, as before, and names the root's
+    tool term as not in the bound."""
+    from sqlalchemy import select
+
+    from db.models import CalibSession
+
+    _sloppy_tool(client)
+    _root_point(client, tool_no=1)
+    with client.app.state.sessionmaker() as db:
+        s = db.scalars(select(CalibSession).where(CalibSession.method == "ext.root_point")).one()
+        report = dict(s.report)
+        report["extras"] = {k: v for k, v in report["extras"].items() if k != "covariance_terms"}
+        s.report = report
+        db.commit()
+    calibrate(client, "tool.xyz_4point", 2)
+    url = open_session(client, "ext.offset", 5, tool_no=2, ext_no=1)
+    _teach(client, url)
+    rep = ok(client.post(f"{url}/compute"))
+    term = rep["extras"]["bound_terms"]["EX_KIN 1 root: tool 1 TCP"]
+    assert term["position_bound95_mm"] is None and "not in the bound" in term["source"]
+    assert "EX_KIN 1 root: tool 1 TCP" not in rep["extras"]["covariance_terms"]
