@@ -25,6 +25,8 @@ from emulator import external as ext_emu
 from server.api.schemas import EXT_AXIS_LIMIT, ExtAxis
 from server.auth import audit
 from solvers.errors import CalibrationError
+from solvers.external.chain import propagate
+from solvers.external.offset import _perturbed
 from solvers.frames import Pose
 
 TABLE = "extkin"  # entry_history.entry_table and calib_session.target_table of these slots
@@ -533,9 +535,6 @@ def _root_terms(db: Session, k: ExternalKinematic, spec: Any, pts: list, inputs:
     in the bound). A term of the same tool, from the same session, as this Offset's own tool
     term is left out: the root and the base then move together with the TCP, the errors
     partly cancel and the Offset's own tool term already holds them."""
-    from solvers.external.chain import propagate
-    from solvers.external.offset import _perturbed
-
     rs = db.get(CalibSession, k.session_id) if k.session_id is not None else None
     extras = ((rs.report if rs is not None else None) or {}).get("extras") or {}
     stored = extras.get("covariance_terms") or {}
