@@ -128,6 +128,29 @@ def test_root_point_names_the_bad_point_and_suggests_the_next_position():
     assert res5.report.position_bound95_mm < 0.5 * res4.report.position_bound95_mm
 
 
+@pytest.mark.parametrize("turn", [(0.0, 90.0, 0.0), (180.0, 0.0, 0.0), (0.0, 0.0, 0.0)])
+def test_the_bad_points_refit_frame_is_a_rotation_whichever_way_the_axis_points(turn):
+    """The root frame the other touch-ups give without the bad one is a rotation about the
+    axis, for an axis along +x, -z or +z: it was the identity's x and y with the normal as z
+    (a mirror, det -1, for an axis down: a 500 where the page shows it; singular for +x)."""
+    R = Rotation.from_euler("xyz", turn, degrees=True).as_matrix()
+    nominal = np.eye(4)
+    nominal[:3, :3], nominal[:3, 3] = R, [1500.0, 0.0, 300.0]
+    table = make_turntable(nominal_root=nominal)
+    values = np.array([-150.0, -90.0, -30.0, 30.0, 90.0, 150.0])
+    P = table.touch_mark(MARK, values, SIGMA_MM, np.random.default_rng(3)).points_mm
+    P[3] += 1.0 * R[:, 2]  # lifted 1 mm off the table
+    res = root_point(P, values, nominal_axis=R[:, 2])
+    bad = res.report.bad_point
+    assert bad is not None and bad.index == 3
+    T = bad.refit_frame
+    assert np.allclose(T[:3, :3].T @ T[:3, :3], np.eye(3), atol=1e-9)
+    assert np.linalg.det(T[:3, :3]) == pytest.approx(1.0)
+    assert angle_deg(T[:3, 2], res.frame[:3, 2]) < 1.0  # about the same axis, turned alike
+    assert np.linalg.norm(T[:3, 3] - res.frame[:3, 3]) < 2.0
+    Pose.from_matrix(T)  # what the API shows: a pose
+
+
 def test_root_point_numeric_and_offset_numeric_take_typed_frames():
     assert np.allclose(root_point_numeric(Pose(1500, 0, 300, 0, 0, 0)).frame[:3, 3], [1500, 0, 300])
     T = offset_numeric([0, 100, 50, 90, 0, 0]).frame

@@ -301,7 +301,8 @@ def root_point(points_mm: object, axis_values_deg: object, *,
                                 (points_loc,), "info"))
 
     phi_u = s * np.radians(theta) + phi0 + ang["residuals_rad"]
-    bad = None if axis_wrong else circle_bad_point(P, phi_u, np.radians(theta), touch_sigma_mm)
+    bad = None if axis_wrong else circle_bad_point(P, phi_u, np.radians(theta), touch_sigma_mm,
+                                                   frame=T)
     next_value, next_C = _next_axis_value(fit, phi0, s, limits)
     if bad is not None:
         warnings.append(Finding("bad_point", bad.message(), (points_loc, bad.index)))
@@ -334,8 +335,24 @@ def root_point(points_mm: object, axis_values_deg: object, *,
     return CalibrationResult("ext.root_point", T, report)
 
 
+def _refit_frame(centre: FloatArray, normal: FloatArray, frame: FloatArray | None) -> FloatArray:
+    """A root frame at ``centre`` with z along ``normal`` (turned as ``frame``'s z) and x as
+    ``frame``'s x projected into the plane (any perpendicular without ``frame``): a rotation."""
+    ref = np.eye(4) if frame is None else np.asarray(frame, dtype=float)
+    z = normal if normal @ ref[:3, 2] >= 0 else -normal
+    x = ref[:3, 0] - (ref[:3, 0] @ z) * z
+    if np.linalg.norm(x) < 1e-9:  # the reference x along the axis: any perpendicular
+        x, _ = _basis(z)
+    x = x / np.linalg.norm(x)
+    T = np.eye(4)
+    T[:3, :3] = np.column_stack([x, cross(z, x), z])
+    T[:3, 3] = centre
+    return T
+
+
 def circle_bad_point(points_mm: FloatArray, phi_rad: FloatArray, theta_rad: FloatArray,
-                     touch_sigma_mm: float, false_alarm: float = 0.01) -> BadPoint | None:
+                     touch_sigma_mm: float, false_alarm: float = 0.01,
+                     frame: FloatArray | None = None) -> BadPoint | None:
     """The one touch-up that disagrees with the others (N >= 5), by leave-one-out prediction.
 
     For each k the others give the circle (:func:`~solvers.external.circle.fit_circle_algebraic`)
@@ -346,7 +363,9 @@ def circle_bad_point(points_mm: FloatArray, phi_rad: FloatArray, theta_rad: Floa
     when
     ``e_kᵀ S⁻¹ e_k / σ²`` exceeds the ``1 - false_alarm / N`` quantile of ``3 F(3, dof)``
     (``chi2(3)`` when σ is the nominal one): the externally studentised residual with a
-    Bonferroni correction over the N points [1]_. The worst such point is named.
+    Bonferroni correction over the N points [1]_. The worst such point is named, with the
+    root frame the others give (``refit_frame``: their centre, z along their normal turned as
+    ``frame``'s z, x as ``frame``'s x in their plane; a rotation, whatever way the axis points).
 
     References
     ----------
@@ -388,8 +407,7 @@ def circle_bad_point(points_mm: FloatArray, phi_rad: FloatArray, theta_rad: Floa
         crit = outlier_critical(3, dof if estimated else 0, q)
         if stat > crit and (worst is None or stat / crit > worst[0]):
             allow = float(sigma * np.sqrt(crit * np.linalg.eigvalsh(S).max()))
-            T = np.eye(4)
-            T[:3, 2], T[:3, 3] = nrm, c
+            T = _refit_frame(c, nrm, frame)
             worst = (stat / crit, k, float(np.linalg.norm(e)), allow, T,
                      float(np.sqrt(np.mean((res**2).sum(axis=1)))))
     if worst is None or worst[2] <= SIGMA_FLOOR_MM:
