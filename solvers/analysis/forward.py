@@ -244,7 +244,10 @@ def forward(y, base: Baseline, cands: list[Candidate], cv: CV, groups, alpha: fl
         if not tests:
             break
         passed = holm_pass([t[2] for t in tests], alpha)
-        order = sorted([t for t, ok in zip(tests, passed) if ok], key=lambda t: -(t[1] - t[3] * sigma2))
+        # every tested candidate by its gain less its size's share of the noise; the step
+        # takes from those passing its Holm test, the alternatives come from all of them
+        ranked = sorted(zip(tests, passed), key=lambda tp: -(tp[0][1] - tp[0][3] * sigma2))
+        order = [t for t, ok in ranked if ok]
         if not order:
             break
         gg = group_gains(y_perp, Q, groups, n_rows)
@@ -292,11 +295,8 @@ def forward(y, base: Baseline, cands: list[Candidate], cv: CV, groups, alpha: fl
         # a1 it was named as) is as good an explanation as the margin says
         s2 = max(rss0 - gain, 1e-300) / max(n_rows - Q.shape[1] - k, 1)
         # (not one whose value is physically impossible: that is no explanation)
-        impossible = {d.key for d, _, _ in refused}
-        ranked = sorted(tests, key=lambda t: -(t[1] - t[3] * sigma2))
-        alternatives = [t[0] for t in ranked if t[0] is not c and t[0] not in same
+        alternatives = [t[0] for t, _ in ranked if t[0] is not c and t[0] not in same
                         and t[0].family != c.family and (gain - t[1]) / s2 < ALTERNATIVE_LR
-                        and t[0].key not in impossible
                         and not _unresolved(t, Q, y_perp, n_rows, yard)
                         and plausible(t[0], fitted(y, M, t[0])[0])]
         periodogram = {}
