@@ -50,7 +50,7 @@ import numpy as np
 from server import __version__
 from server.cli.analysis import add_analysis_commands
 from server.service.backup import add_backup_commands
-from server.service.transaction import unavailable
+from server.service.transaction import retry_reason
 from server.auth.cli import add_auth_commands
 from server.cli.slot import add_slot_command
 from server.menus import METHODS
@@ -845,9 +845,7 @@ def main(argv: Sequence[str] | None = None) -> int:
         print("pendant: interrupted", file=sys.stderr)
         return 130
     except Exception as err:  # the database busy or gone: one line, to try again (EX_TEMPFAIL)
-        why = unavailable(err)
-        if why is None:
-            raise
+        why = retry_reason(err)
         print(f"pendant: {why}", file=sys.stderr)
         return EX_TEMPFAIL
 

@@ -27,7 +27,7 @@ from typing import TYPE_CHECKING
 
 from server.kvp import variables
 from server.rws import ops
-from server.service.transaction import unavailable
+from server.service.transaction import retry_reason
 
 if TYPE_CHECKING:
     from server.rws.service import Running
@@ -149,9 +149,7 @@ class KvpFace:
                 return str(err), False
             return variables.answer(face, name, value)
         except Exception as err:  # the database busy or gone: refused, the connection kept
-            why = unavailable(err)
-            if why is None:
-                raise
+            why = retry_reason(err)
             log.warning("kvp: %s from %s: %s", name, client, why)
             return why, False
 

@@ -20,7 +20,7 @@ from server.formats import kuka
 from server.formats.model import FormatError
 from server.rws import ops
 from server.api.schemas import EntryIn
-from server.service.transaction import unavailable
+from server.service.transaction import retry_reason
 from solvers.errors import CalibrationError
 from solvers.frames import Pose, kuka_from_matrix
 
@@ -191,9 +191,7 @@ def _read_back(face: Face, name: str, sent: str) -> str:
     try:
         return read(face, name, after_write=True)
     except Exception as err:
-        why = unavailable(err)
-        if why is None:
-            raise
+        why = retry_reason(err)
         log.warning("kvp: %s written; reading it back failed: %s", name, why)
         return sent
 

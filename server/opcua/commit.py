@@ -56,9 +56,7 @@ def commit_frame(make_session: sessionmaker[Session], controller_id: int, table:
     except PreconditionFailed:
         return ua.StatusCode(ua.StatusCodes.BadInvalidState)
     except Exception as err:
-        why = transaction.unavailable(err)
-        if why is None:
-            raise
+        why = transaction.retry_reason(err)
         log.warning("opcua: CommitFrame of %s %d: %s", table, number, why)
         return ua.StatusCode(ua.StatusCodes.BadResourceUnavailable)
     return int(e.version)

@@ -30,7 +30,7 @@ from db import crud
 from server.opcua import access, commit, pki, space
 from server.opcua.state import CellReader, ControllerState, events_after, latest_event_id
 from server.service.export import export_text
-from server.service.transaction import unavailable
+from server.service.transaction import retry_reason
 from server.settings import LOOPBACK_HOSTS
 
 log = logging.getLogger("pendant.opcua")
@@ -274,9 +274,7 @@ class PendantOpcUa:
             try:
                 text = await asyncio.to_thread(self._export, cid, fmt)
             except Exception as err:  # the database cannot answer now: REST's 503
-                why = unavailable(err)
-                if why is None:
-                    raise
+                why = retry_reason(err)
                 log.warning("opcua: ExportFile %s: %s", fmt, why)
                 return ua.StatusCode(ua.StatusCodes.BadResourceUnavailable)
             return [ua.Variant(text, S)]

@@ -47,7 +47,7 @@ from db import crud
 from server.auth.web import SiteGuard
 from server.formats import abb
 from server.rws import digest, ops, rapid
-from server.service.transaction import unavailable
+from server.service.transaction import retry_reason
 from server.api.schemas import EntryIn
 from solvers.errors import CalibrationError
 from solvers.frames import abb_from_matrix, invert
@@ -244,9 +244,7 @@ def guarded(face: RwsFace, handler):
                 headers = {"WWW-Authenticate": digest.challenge(isinstance(err, _Stale))}
             return error(request, err, headers)
         except Exception as err:  # the database busy or gone: REST's 503, in RWS's shape
-            why = unavailable(err)
-            if why is None:
-                raise
+            why = retry_reason(err)
             log.warning("rws: %s %s: %s", request.method, request.url.path, why)
             return error(request, RwsError(503, E_BUSY, why), {"Retry-After": "1"})
         cookie = face.login(request.cookies.get("ABBCX"), who.name)

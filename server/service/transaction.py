@@ -290,6 +290,15 @@ def unavailable(exc: BaseException) -> str | None:
     return None
 
 
+def retry_reason(exc: BaseException) -> str:
+    """:func:`unavailable`'s reason for ``exc``, for a face's ``except Exception`` that answers
+    it with its protocol's "retry"; anything else is raised again, as it was."""
+    why = unavailable(exc)
+    if why is None:
+        raise exc
+    return why
+
+
 def commit(db: Session, operation: str, **ids: int | None) -> None:
     """Commit, with the operation's audit record (``op.<operation>``, naming ``ids``:
     controller_id, session_id) when it changed rows no row hook recorded: every write leaves
