@@ -25,7 +25,7 @@ from dataclasses import dataclass
 import numpy as np
 from scipy.spatial.transform import Rotation
 
-from solvers.base import base_3point, base_indirect, pose_difference
+from solvers.base import base_3point, base_indirect, perturbed, pose_difference
 from solvers.beam_cycle import plan_cycle, trigger_events
 from solvers.fixed_tool import R_FLANGE_FIXEDTOOL, fixed_tool_5d, fixed_tool_6d
 from solvers.light_barrier import tcp_light_barrier, tool_frame
@@ -381,7 +381,6 @@ def scene_offset_on_root_by_tool(rng: np.random.Generator) -> Trial:
     from solvers.dh import tcp_of
     from solvers.external import offset, root_point
     from solvers.external.chain import combined_bounds, own_covariance, propagate, report_dofs
-    from solvers.external.offset import _perturbed
     from solvers.external_sim import make_turntable
 
     t, t_hat, C_t, nu_t = _calibrated_tool(rng)
@@ -404,7 +403,7 @@ def scene_offset_on_root_by_tool(rng: np.random.Generator) -> Trial:
                       root_dof=rp.report.extras["dof"], root_sigma_mm=rp.report.sigma_mm,
                       touch_sigma_mm=AIM_SIGMA_MM)
     res = solve(rp.frame)
-    term = propagate(lambda d: solve(_perturbed(rp.frame, d)).frame, np.zeros(6), C_root_tool)
+    term = propagate(lambda d: solve(perturbed(rp.frame, d)).frame, np.zeros(6), C_root_tool)
     rep = res.report
     b = combined_bounds(rep.position_bound95_mm, rep.angle_bound95_deg, {"root tool": term},
                         report_dofs(rep), own_covariance(rep), {"root tool": nu_t})

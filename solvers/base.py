@@ -122,6 +122,24 @@ def pose_difference(T_ref: FloatArray, T: FloatArray) -> FloatArray:
     return np.concatenate([T[:3, 3] - T_ref[:3, 3], drot])
 
 
+def perturbed(T: FloatArray, d: FloatArray) -> FloatArray:
+    """T moved by the pose parameters ``d`` (:data:`POSE_PARAMETERS`): origin + ``d[:3]``
+    (parent frame, mm), rotation about T's own axes by the rotation vector ``d[3:]`` (deg).
+    The inverse of :func:`pose_difference`; the step of the numeric Jacobians that carry a
+    frame's covariance through a solver.
+
+    Examples
+    --------
+    >>> d = np.array([1.0, -2.0, 0.5, 0.3, -0.2, 0.1])
+    >>> np.allclose(pose_difference(np.eye(4), perturbed(np.eye(4), d)), d)
+    True
+    """
+    Tp = np.array(T, dtype=float, copy=True)
+    Tp[:3, 3] += d[:3]
+    Tp[:3, :3] = Tp[:3, :3] @ Rotation.from_rotvec(d[3:], degrees=True).as_matrix()
+    return Tp
+
+
 def three_point_report(points_mm: FloatArray, locs: Sequence[Loc], touch_sigma_mm: float,
                        frame: FloatArray | None = None) -> QualityReport:
     """Report of a 3-point frame: no residual (3 points fix 6 parameters exactly, the residual

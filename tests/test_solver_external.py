@@ -11,7 +11,7 @@ import numpy as np
 import pytest
 from scipy.spatial.transform import Rotation
 
-from solvers.base import pose_difference
+from solvers.base import perturbed, pose_difference
 from solvers.errors import CalibrationError
 from solvers.external import (linear_unit, offset, offset_numeric, positioner_2axis, root_point,
                               root_point_numeric)
@@ -482,7 +482,6 @@ def test_positioner_reports_the_plain_covariance_with_the_welch_satterthwaite_do
     dof of the two shares weighed at one touch sigma, between 2 and 4 at 4 + 4 positions."""
     from scipy import stats
 
-    from solvers.external.offset import _perturbed
     from solvers.external.positioner import _axes_geometry
     from solvers.report import bound95
 
@@ -504,7 +503,7 @@ def test_positioner_reports_the_plain_covariance_with_the_welch_satterthwaite_do
             g = []
             for sgn in (1.0, -1.0):
                 T = [roots[0].frame, roots[1].frame]
-                T[k] = _perturbed(T[k], sgn * d)
+                T[k] = perturbed(T[k], sgn * d)
                 Xd, L, a = _axes_geometry(T[0], T[1], 20.0)
                 rot = Rotation.from_matrix(X[:3, :3].T @ Xd[:3, :3]).as_rotvec(degrees=True)
                 g.append(np.r_[L, a, Xd[:3, 3] - X[:3, 3], rot])

@@ -24,9 +24,9 @@ from db.outbox import emit
 from emulator import external as ext_emu
 from server.api.schemas import EXT_AXIS_LIMIT, ExtAxis
 from server.auth import audit
+from solvers.base import perturbed
 from solvers.errors import CalibrationError
 from solvers.external.chain import propagate
-from solvers.external.offset import _perturbed
 from solvers.frames import Pose
 
 TABLE = "extkin"  # entry_history.entry_table and calib_session.target_table of these slots
@@ -559,7 +559,7 @@ def _root_terms(db: Session, k: ExternalKinematic, spec: Any, pts: list, inputs:
         root = np.asarray(ex.root, dtype=float)
 
         def moved(d: np.ndarray) -> np.ndarray:
-            r = replace(ex, root=_perturbed(root, d))
+            r = replace(ex, root=perturbed(root, d))
             return spec.solve(pts, replace(inputs, external=r), params).frame
         try:
             terms[label] = propagate(moved, np.zeros(6), np.array(term["covariance"], float))

@@ -11,24 +11,13 @@ from __future__ import annotations
 from dataclasses import replace
 
 import numpy as np
-from scipy.spatial.transform import Rotation
 
 from solvers.base import (BASE_3POINT_LOCS, POSE_PARAMETERS, as_transform, base_numeric,
-                          frame_from_three_points,
-                          three_point_report)
+                          frame_from_three_points, three_point_report)
 from solvers.external.common import TOUCH_SIGMA_MM, block_dof, rz
 from solvers.frames import Pose
 from solvers.report import CalibrationResult, Finding, QualityReport, bound95
 from solvers.validate import FloatArray, as_array
-
-def _perturbed(T: FloatArray, d: FloatArray) -> FloatArray:
-    """T moved by pose parameters d: origin + d[:3] (parent frame, mm), rotation about its own
-    axes by d[3:] (deg) -- the parameters of :data:`POSE_PARAMETERS`."""
-    Tp = T.copy()
-    Tp[:3, 3] += d[:3]
-    Tp[:3, :3] = T[:3, :3] @ Rotation.from_rotvec(d[3:], degrees=True).as_matrix()
-    return Tp
-
 
 def root_jacobian(T_root: FloatArray, T_base_wb: FloatArray, theta_deg: float) -> FloatArray:
     """d(pose parameters of T)/d(pose parameters of T_root) for ``T = Rz(θ)⁻¹ T_root⁻¹ W``.

@@ -19,9 +19,8 @@ from __future__ import annotations
 import numpy as np
 from scipy.spatial.transform import Rotation
 
-from solvers.base import POSE_PARAMETERS
+from solvers.base import POSE_PARAMETERS, perturbed
 from solvers.external.common import TOUCH_SIGMA_MM, block_dof, cross, line_distance, rz, unit
-from solvers.external.offset import _perturbed
 from solvers.external.root_point import root_point
 from solvers.report import CalibrationResult, Finding, QualityReport, bound95
 from solvers.validate import FloatArray, as_array
@@ -63,7 +62,7 @@ def _geometry_jacobian(T_tilt: FloatArray, T_turn: FloatArray, tau_deg: float,
         for sgn in (1.0, -1.0):
             d = np.zeros(12)
             d[i] = sgn * h[i]
-            Xd, Ld, ad = _axes_geometry(_perturbed(T_tilt, d[:6]), _perturbed(T_turn, d[6:]),
+            Xd, Ld, ad = _axes_geometry(perturbed(T_tilt, d[:6]), perturbed(T_turn, d[6:]),
                                         tau_deg)
             rows.append([Ld, ad, *(Xd[:3, 3] - X[:3, 3])])
             Xs.append(X[:3, :3].T @ Xd[:3, :3])
