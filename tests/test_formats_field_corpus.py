@@ -160,6 +160,9 @@ CHANGES = [  # file, slot, field, new value, (the needle of the line that change
     ("abb_rw6_task_pers_cp1252_crlf.mod", ("tool", 3), "x", 1.5, ("[ [ 0.5,", "0.5", "1.5")),
     ("abb_rw6_task_pers_cp1252_crlf.mod", ("tool", 3), "mass", 0.35, ("[ 0.3,", "0.3", "0.35")),
     ("abb_rw6_task_pers_cp1252_crlf.mod", ("base", 2), "x", 451.0, ("wTable", "450", "451")),
+    # a work object with both uframe and oframe turned (public "U_kal", 6-digit quaternion):
+    # a new X moves the uframe's x by as much; its quaternion keeps its text
+    ("abb_rw6_task_pers_cp1252_crlf.mod", ("base", 1), "x", 1051.0, ("U_kal", "1000", "1001")),
     ("abb_sysmodule_utf8_bom_lf.sys", ("tool", 2), "z", 151.0, ("tRef", "150", "151")),
     ("fanuc_sysframe_one_group_lf.va", ("tool", 2), "x", 13.125, ("12.125", "12.125", "13.125")),
 ]

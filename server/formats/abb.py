@@ -743,6 +743,11 @@ def _target_leaves(f: _Found, old_entry: FrameEntry, e: FrameEntry) -> list[obje
         if old_entry.pose != e.pose and _is_identity(old[3:10]) and not _is_identity(old[10:]):
             # a work object defined by its oframe (uframe the identity): the change goes there
             oframe_leaves = _pose_leaves(e.pose.as_matrix(), old[10:17], same_rot)
+        elif old_entry.pose != e.pose and same_rot and not _is_identity(old[10:]):
+            # uframe and oframe both set, the rotation kept: the uframe keeps its rotation
+            # (and its quaternion's text) and its origin moves as the pose's does (no inverse)
+            shift = e.pose.as_array()[:3] - old_entry.pose.as_array()[:3]
+            uframe = [_clean(round(u + d, 9)) for u, d in zip(old[3:6], shift)] + list(old[6:10])
         elif old_entry.pose != e.pose:
             oframe = np.eye(4) if f.oframe is None else f.oframe
             T = e.pose.as_matrix() @ np.linalg.inv(oframe)
