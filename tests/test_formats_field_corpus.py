@@ -81,7 +81,8 @@ def test_kss5_file_reads_six_digit_reals_kinds_names_and_loads():
     MACHINE_TOOL_DAT, MACHINE_FRAME_DAT with PARENT[] "WORLD") are left alone."""
     es = entries("kuka_kss5_6digit_cp1252_crlf.dat")
     assert [(e.kind, e.number) for e in es] == [("tool", 1), ("tool", 2), ("workpiece", 3),
-                                                ("base", 1), ("fixed_tool", 2)]
+                                                ("tool", 4), ("base", 1), ("fixed_tool", 2),
+                                                ("base", 11)]
     t1, t2 = slot(es, "tool", 1), slot(es, "tool", 2)
     assert t1.name == "Schweißzange Öl" and t1.pose.as_array().tolist() == [0, 0, 380.79, -90, -90, -90]
     assert t1.load.mass_kg == 21.0 and t1.load.inertia_kgm2 == (1.05, 1.05, 0.55)
@@ -90,6 +91,9 @@ def test_kss5_file_reads_six_digit_reals_kinds_names_and_loads():
     b1 = slot(es, "base", 1)
     assert b1.mech_unit is None and b1.name == "Vorrichtung 10A"  # PARENT[] "WORLD": no unit
     assert slot(es, "fixed_tool", 2).pose.as_array().tolist() == [21.84, 1866.09, 658.47, 90, 0, 180]
+    t4 = slot(es, "tool", 4)  # #NONE, but a frame, a name and a load: a tool
+    assert t4.name == "Fräser alt" and t4.pose.y == 3.01155138 and t4.load.mass_kg == 42.0494804
+    assert slot(es, "base", 11).pose.c == -0.0897579566 and slot(es, "base", 11).name == ""
 
 
 def test_hand_edited_kuka_file_reads_lower_case_no_decl_and_e_notation():
@@ -152,6 +156,9 @@ CHANGES = [  # file, slot, field, new value, (the needle of the line that change
     ("kuka_kss5_6digit_cp1252_crlf.dat", ("tool", 1), "a", -89.5, ("TOOL_DATA[1]=", "-90.0000", "-89.5")),
     ("kuka_kss5_6digit_cp1252_crlf.dat", ("base", 1), "z", -215.0, ("BASE_DATA[1]=", "-215.137", "-215.0")),
     ("kuka_kss5_6digit_cp1252_crlf.dat", ("tool", 2), "mass", 13.5, ("LOAD_DATA[2]=", "12.9297", "13.5")),
+    # a #NONE slot with a frame: the new number goes in, its TYPE stays #NONE
+    ("kuka_kss5_6digit_cp1252_crlf.dat", ("tool", 4), "z", 170.0, ("TOOL_DATA[4]=", "166.257782", "170.0")),
+    ("kuka_kss5_6digit_cp1252_crlf.dat", ("base", 11), "b", 0.25, ("BASE_DATA[11]=", "0.254145205", "0.25")),
     ("kuka_hand_edited_utf8_bom.dat", ("tool", 1), "x", 101.0, ("tool_data[1]", "1.0E+02", "101.0")),
     ("kuka_hand_edited_utf8_bom.dat", ("tool", 1), "y", 0.25, ("tool_data[1]", "-0.0", "0.25")),
     ("kuka_hand_edited_utf8_bom.dat", ("workpiece", 2), "z", 251.0, ("tool_data[2]", "2.5E+2", "251.0")),
@@ -221,6 +228,25 @@ def test_api_import_export_keeps_the_bytes_and_a_put_changes_one_number(client, 
     assert float(change[2]) == x + 2
     back = {(e.kind, e.number): e for e in formats.READERS[fmt](new_text).entries}
     assert back[("tool", tool.number)].pose.x == x + 2
+
+
+def test_api_preview_names_each_slots_own_line(client):
+    """The preview (dry_run) gives each slot the line it starts on: a tab-indented KUKA line
+    after a BOM, a RAPID declaration over five lines, a TASK PERS after a RECORD."""
+    for name, path, want in (
+            ("kuka_hand_edited_utf8_bom.dat", C, {("tool", 1): "tool_data[1]",
+                                                  ("tool", 2): "tool_data[2]",
+                                                  ("base", 1): "base_data[1]"}),
+            ("abb_rw6_task_pers_cp1252_crlf.mod", None, {("tool", 1): "tWeldGun",
+                                                         ("tool", 3): "tProbe",
+                                                         ("base", 1): "U_kal"})):
+        raw, text, encoding = load(name)
+        path = path or controller_for(client, "abb")
+        r = ok(client.post(f"{path}/import", json={"format": FILES[name], "text": text,
+                                                    "encoding": encoding, "dry_run": True}))
+        lines = {(s["table"], s["number"]): s["line"] for s in r["slots"]}
+        for (table, number), needle in want.items():
+            assert lines[(table, number)] == line_of(text.lstrip("\ufeff"), needle), (name, needle)
 
 
 # ------------------------------------------------------------------ 5. refused, naming the line

@@ -9,6 +9,9 @@ kuka_kss5_6digit_cp1252_crlf.dat -- the layout of a real KR C2 / KSS 5 $config.d
   tables (E6AXIS XHOME with E1..E6, STRUC / ENUM IPO_M_T definitions, SIGNAL ... TO ...,
   'B0001' bit strings, DEF_GROUP[n]=... ; comment, DECL LOAD LOAD_A1_DATA, REF_PT[16]),
   MACHINE_DEF / MACHINE_TOOL_DAT / MACHINE_FRAME_DAT with PARENT[] "WORLD", ;FOLD/;ENDFOLD;
+  a used tool and a base left #NONE with a frame (a KR C4 $config.dat, GitHub
+  HugoDanielson/ChinaMilling KRC/R1/System/$config.dat: TOOL_TYPE[3]=#NONE on a named tool with
+  a frame and a load, BASE_TYPE[11]=#NONE on a frame with a blank name, nine-digit reals);
   plus CR LF and Windows-1252 comments and names with umlauts (KSS writes on Windows).
 kuka_hand_edited_utf8_bom.dat -- a $config.dat edited in a text editor: UTF-8 with a byte
   order mark, LF, lower-case keywords (KRL is case-insensitive), DECL left out ("FRAME
@@ -46,9 +49,14 @@ def kss5() -> list[str]:
              2: ("{X 420.390,Y 195.500,Z 259.650,A 0.0,B 0.0,C 0.0}", "Greifer groß",
                  "{M 12.9297,CM {X 38.8040,Y -94.4510,Z 136.873,A 89.7770,B -0.721000,C 0.991000},J {X 0.525000,Y 0.557200,Z 0.765800}}",
                  "#BASE"),
-             3: ("{X -186.740,Y 93.0000,Z 420.740,A -180.000,B 0.0,C 0.0}", "Teil Tür", NOLOAD6, "#TCP")}
+             3: ("{X -186.740,Y 93.0000,Z 420.740,A -180.000,B 0.0,C 0.0}", "Teil Tür", NOLOAD6, "#TCP"),
+             4: ("{X 409.434326,Y 3.01155138,Z 166.257782,A -90.0000,B 0.0,C 90.0000}", "Fräser alt",
+                 "{M 42.0494804,CM {X -14.1015730,Y 6.26803398,Z 117.189,A -90.0347900,B -0.200267,C 0.849656},J {X 5.25000,Y 5.25000,Z 5.25000}}",
+                 "#NONE")}
     bases = {1: ("{X 1333.94,Y -175.000,Z -215.137,A -90.0000,B 0.0,C 0.0}", "Vorrichtung 10A", "#BASE"),
-             2: ("{X 21.8400,Y 1866.09,Z 658.470,A 90.0000,B 0.0,C 180.000}", "Klebedüse", "#TCP")}
+             2: ("{X 21.8400,Y 1866.09,Z 658.470,A 90.0000,B 0.0,C 180.000}", "Klebedüse", "#TCP"),
+             11: ("{X 1197.28235,Y 883.007,Z 776.392395,A -90.8298,B 0.254145205,C -0.0897579566}", " ",
+                  "#NONE")}
     out = ["&ACCESS  RV", r"&PARAM DISKPATH = KRC:\R1\System", "&REL 1", "DEFDAT  $CONFIG",
            ";FOLD BASISTECH GLOBALS", ";==================================",
            "; VORGABEWERTE FÜR BEWEGUNGEN – nicht ändern", ";==================================",
