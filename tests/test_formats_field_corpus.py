@@ -297,3 +297,20 @@ def test_api_names_the_line_of_a_bad_file_and_changes_nothing(client):
     (err,) = r.json()["detail"]
     assert f"line {line_of(text, 'TOOL_DATA[2]=')}" in err["loc"] and "TOOL_DATA[2].Z" in err["loc"]
     assert client.get(f"{C}/export", params={"format": "json"}).json()["entries"] == before
+
+
+@pytest.mark.parametrize("brk", ["\u2028", "\x85", "\x0c"], ids=["U+2028", "NEL", "form-feed"])
+def test_kuka_line_numbers_count_only_real_line_ends(brk):
+    """A comment pasted into a UTF-8 $config.dat can hold U+2028 (from a web page or a PDF),
+    U+0085 or a form feed: characters Python's str.splitlines() takes for line ends, a
+    controller and an editor do not. The line named in an error (and the preview's slot
+    line) is the one an editor shows."""
+    text = load("kuka_hand_edited_utf8_bom.dat")[1].lstrip("\ufeff")
+    text = text.replace("von Hand bearbeitet – Prüfstand", f"von Hand bearbeitet{brk}Prüfstand")
+    p = formats.READERS["kuka"](text)
+    assert p.slot_lines[("robot_held", 2)] == line_of(text, "tool_data[2]")
+    bad = text.replace("2.5E+2", "2.5E+7")
+    with pytest.raises(FormatError) as err:
+        formats.READERS["kuka"](bad)
+    assert err.value.loc == ("file", f"line {line_of(bad, 'tool_data[2]')}", "TOOL_DATA[2].Z")
+    assert formats.PATCHERS["kuka"](p.entries, text) == text

@@ -238,6 +238,7 @@ _DEFDAT = re.compile(r"^\s*DEFDAT\b", re.IGNORECASE)
 _MACHINE_DEF = re.compile(r'^\s*MACHINE_DEF\[([0-9]{1,6})\]\s*=\s*\{\s*NAME\[\]\s*"([^"]*)"',
                           re.IGNORECASE | re.MULTILINE)
 _ENDDAT = re.compile(r"^\s*ENDDAT\b", re.IGNORECASE)
+_LINES = re.compile(r"[^\r\n]*(?:\r\n|\r|\n)|[^\r\n]+\Z")  # each line with its end
 _UNITS = {"X": "mm", "Y": "mm", "Z": "mm", "A": "deg", "B": "deg", "C": "deg"}
 
 
@@ -411,7 +412,7 @@ def _scan(text: str) -> _Parsed:
     """Every slot value of a whole ``$config.dat`` with its line; the file must be complete."""
     if not isinstance(text, str):
         raise FormatError(("file",), f"expected text, got {type(text).__name__}")
-    lines = text.splitlines(keepends=True)
+    lines = _LINES.findall(text)  # not splitlines(): U+2028, U+0085, \f end no line
     sizes: dict[str, tuple[int, int]] = {}
     widths: dict[str, int] = {}
     values: dict[str, dict[int, _Value]] = {name: {} for name in _ARRAYS}
