@@ -140,6 +140,25 @@ def test_one_group_sysframe_reads_tools_and_frames():
     assert slot(es, "base", 1).pose.as_array().tolist() == [1200.0, -350.25, 0, 90, 0, 0]
 
 
+def test_pendants_own_files_as_a_person_keeps_them_read_whole():
+    """pendant's UR script and FANUC listing with a comment line added, a hand-spaced line
+    and no line end after the last line read as the files they came from."""
+    data = Path(__file__).parent / "data"
+    for name, fmt, src in (("ur_commented_bom_no_final_eol.script", "ur", "ur_cell7.script"),
+                           ("fanuc_listing_commented_no_final_eol.txt", "fanuc", "fanuc_cell7.txt")):
+        text = load(name)[1]
+        assert formats.READERS[fmt](text).entries == formats.READERS[fmt]((data / src).read_text()).entries
+
+
+def test_ur_payload_line_that_cannot_be_read_is_refused_not_dropped():
+    """A set_payload line the reader cannot take is named, never read as "no load"."""
+    text = load("ur_commented_bom_no_final_eol.script")[1]
+    bad = text.replace("set_payload(6.8,  [", "set_payload(6.8 [")
+    with pytest.raises(FormatError) as err:
+        formats.READERS["ur"](bad)
+    assert err.value.loc == ("file", f"line {line_of(bad, 'set_payload(6.8 [')}", "tool_2.payload")
+
+
 # ------------------------------------------------------------------ 2. byte for byte
 
 @pytest.mark.parametrize("name", FILES)

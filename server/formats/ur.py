@@ -137,7 +137,7 @@ _NUM = r"[+-]?(?:[0-9]+\.?[0-9]*|\.[0-9]+)(?:[eE][+-]?[0-9]+)?"  # ASCII digits
 _TAG = re.compile(r'^# (tool|workpiece|base|fixed_tool|coordinated_base) (\d+) "(.*?)"'
                   r'(?: on "([^"]*)")?\s*$')
 _GLOBAL = re.compile(r"^global (\w+) = p\[(.*)\]\s*$")
-_PAYLOAD = re.compile(r"set_payload\((" + _NUM + r"), \[(.*)\]\)")
+_PAYLOAD = re.compile(r"set_payload\(\s*(" + _NUM + r")\s*,\s*\[([^\]]*)\]\s*\)")  # any spacing
 _INERTIA = re.compile(r"^# principal inertia (.*) kg m\^2 \(axes at KUKA A, B, C = (.*) deg\)$")
 
 
@@ -196,6 +196,9 @@ def read_ur(text: str) -> ParsedFile:
         if g and g.group(1) == var:
             v = _numbers(g.group(2), 6, ("mm",) * 3 + ("deg",) * 3, n, var)
             cur["pose"] = Pose.from_matrix(matrix_from_ur(v))
+        elif "set_payload(" in raw.split("#", 1)[0] and _PAYLOAD.search(raw) is None:
+            raise FormatError.at_line(n, f"{var}.payload", "expected set_payload(mass, [cx, cy, "
+                                      f"cz]), got {raw.strip()[:60]!r}")
         elif (m := _PAYLOAD.search(raw)) is not None:
             cur["mass"] = _numbers(m.group(1), 1, ("kg",), n, f"{var}.payload")[0]
             com = _numbers(m.group(2), 3, ("mm",) * 3, n, f"{var}.payload")

@@ -30,6 +30,11 @@ abb_rw6_task_pers_cp1252_crlf.mod -- RobotWare 6 program module: %%% header, TAS
 abb_sysmodule_utf8_bom_lf.sys -- a system module written by a UTF-8 editor: BOM, LF,
   MODULE name(SYSMODULE,NOSTEPIN), lower-case "pers", "!" inside a string, CONST tooldata,
   and a last line (ENDMODULE) without a line end.
+ur_commented_bom_no_final_eol.script, fanuc_listing_commented_no_final_eol.txt -- pendant's own
+  UR script and FANUC listing (tests/data/ur_cell7.script, fanuc_cell7.txt) as a person keeps
+  them: opened in a Windows editor that saved a UTF-8 BOM (UR) or CR LF (FANUC), a comment
+  line of their own added near the top, a hand-spaced line, and no line end after the last
+  line (Notepad does not add one).
 fanuc_sysframe_one_group_lf.va -- SYSFRAME.VA of a one-group controller (ARRAY[1,n], as in the
   public FANUC post-processors that write it: "$MNUFRAME  Storage: SHADOW  Access: RW  :
   ARRAY[1,9] OF POSITION"), LF, Config F U T, and a last line without a line end.
@@ -198,6 +203,15 @@ def main() -> None:
     write("abb_rw6_task_pers_cp1252_crlf.mod", abb_rw6(), "\r\n", "cp1252")
     write("abb_sysmodule_utf8_bom_lf.sys", abb_sys(), "\n", "utf-8", bom=True)
     write("fanuc_sysframe_one_group_lf.va", sysframe(), "\n", "ascii")
+    data = HERE.parent
+    ur = (data / "ur_cell7.script").read_text().rstrip("\n").split("\n")
+    ur.insert(3, "# Zelle 7: kalibriert von J. Müller, 2024-03-12 (nicht löschen)")
+    ur = [s.replace("set_payload(6.8, [0.0425, 0.0, 0.1183])", "set_payload(6.8,  [0.0425, 0.0, 0.1183])  # Brenner")
+          for s in ur]
+    write("ur_commented_bom_no_final_eol.script", ur, "\n", "utf-8", bom=True)
+    fanuc = (data / "fanuc_cell7.txt").read_text().rstrip("\n").split("\n")
+    fanuc.insert(3, "! Zelle 7: kalibriert von J. Mueller, 2024-03-12")
+    write("fanuc_listing_commented_no_final_eol.txt", fanuc, "\r\n", "ascii")
 
 
 if __name__ == "__main__":
