@@ -31,6 +31,8 @@ FILES = {  # file -> format
     "abb_rw6_task_pers_cp1252_crlf.mod": "abb",
     "abb_sysmodule_utf8_bom_lf.sys": "abb",
     "fanuc_sysframe_one_group_lf.va": "fanuc",
+    "ur_commented_bom_no_final_eol.script": "ur",
+    "fanuc_listing_commented_no_final_eol.txt": "fanuc",
 }
 NUM = re.compile(r"[+-]?(?:\d+\.?\d*|\.\d+)(?:[eE][+-]?\d+)?")
 ABB_ARM = "abb_irb120"
@@ -191,6 +193,11 @@ CHANGES = [  # file, slot, field, new value, (the needle of the line that change
     ("abb_rw6_task_pers_cp1252_crlf.mod", ("base", 1), "x", 1051.0, ("U_kal", "1000", "1001")),
     ("abb_sysmodule_utf8_bom_lf.sys", ("tool", 2), "z", 151.0, ("tRef", "150", "151")),
     ("fanuc_sysframe_one_group_lf.va", ("tool", 2), "x", 13.125, ("12.125", "12.125", "13.125")),
+    # pendant's own files with a comment line of the user's, a hand-spaced line and no line
+    # end after the last line: the comment, the spacing and the missing line end stay
+    ("ur_commented_bom_no_final_eol.script", ("tool", 4), "z", 314.0, ("global tool_4", "0.313237", "0.314")),
+    ("fanuc_listing_commented_no_final_eol.txt", ("base", 1), "x", 1334.5,  # the row, the listing
+     [("UFRAME   1", "1333.940000", "1334.500000"), ("1333.940000   Y:", "1333.940000", "1334.500000")]),
 ]
 
 
@@ -210,8 +217,8 @@ def test_one_changed_value_changes_only_its_text(name, key, fld, value, expect):
     new[i] = changed(es[i], fld, value)
     out = formats.PATCHERS[FILES[name]](new, text)
     formats.encode_file(out, encoding)  # still fits the file's encoding
-    needle, old_text, new_text = expect
-    assert changed_numbers(text, out) == [(line_of(text, needle), old_text, new_text)]
+    expect = expect if isinstance(expect, list) else [expect]
+    assert changed_numbers(text, out) == [(line_of(text, needle), o, n) for needle, o, n in expect]
     assert formats.READERS[FILES[name]](out).entries == formats.canonical_order(new)
 
 
@@ -243,8 +250,10 @@ def test_api_import_export_keeps_the_bytes_and_a_put_changes_one_number(client, 
     out = client.get(f"{path}/export", params={"format": fmt}).content
     assert out.startswith(b"\xef\xbb\xbf") == raw.startswith(b"\xef\xbb\xbf")
     new_text = formats.decode_file(out)[0]
-    (change,) = changed_numbers(text, new_text)
-    assert float(change[2]) == x + 2
+    changes = changed_numbers(text, new_text)  # pendant's FANUC listing has X twice
+    assert len(changes) == (2 if name.startswith("fanuc_listing") else 1), changes
+    scale = 1000.0 if fmt == "ur" else 1.0  # URScript is in metres
+    assert all(float(c[2]) * scale == pytest.approx(x + 2, abs=1e-9) for c in changes)
     back = {(e.kind, e.number): e for e in formats.READERS[fmt](new_text).entries}
     assert back[("tool", tool.number)].pose.x == x + 2
 

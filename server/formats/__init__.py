@@ -67,13 +67,33 @@ def _bom_read(read: Callable[[str], ParsedFile]) -> Callable[[str], ParsedFile]:
     return reader
 
 
+def _file_lines(was: list[str], lines: list[str]) -> dict[int, int]:
+    """Line i of pendant's listing -> the file's line that holds it: the same text, or a line
+    in its place that a person edited (respaced); a line a person added maps from none."""
+    out: dict[int, int] = {}
+    match = difflib.SequenceMatcher(a=was, b=lines, autojunk=False)
+    for op, a0, a1, b0, b1 in match.get_opcodes():
+        if op == "equal" or (op == "replace" and a1 - a0 == b1 - b0):
+            out.update(zip(range(a0, a1), range(b0, b1)))
+        elif op == "replace":  # edited lines among added ones: each takes its closest
+            free = list(range(b0, b1))
+            for i in range(a0, a1):
+                ratio, j = max(((difflib.SequenceMatcher(a=was[i], b=lines[k]).ratio(), k)
+                                for k in free), default=(0.0, -1))
+                if ratio >= 0.6:
+                    out[i] = j
+                    free = [k for k in free if k > j]
+    return out
+
+
 def _regenerating(export: Callable[[Iterable[FrameEntry]], str],
                   read: Callable[[str], ParsedFile]) -> Callable[[Iterable[FrameEntry], str], str]:
     """A patcher for a format pendant writes whole (FANUC's listing, UR's script): with no
-    change the imported text itself; else pendant's listing of the new entries, in which
-    every line that the listing of the imported entries also has, in the same place, keeps
-    the imported file's text and line ending (a hand-edited line of an unchanged slot stays
-    too), and a new or changed line takes the ending of the line it replaces."""
+    change the imported text itself; else the imported file with the lines of pendant's
+    listing that changed replaced (each taking the ending of the line it replaces) and new
+    ones added where the listing has them. Every other line keeps the file's text and ending:
+    a hand-edited line of an unchanged slot, a comment line a person added, a last line
+    without a line end."""
     def patch(entries: Iterable[FrameEntry], text: str) -> str:
         entries = canonical_order(entries)
         old = read(text).entries
@@ -84,18 +104,30 @@ def _regenerating(export: Callable[[Iterable[FrameEntry]], str],
         common = max(("\n", "\r\n", "\r"), key=ends.count)
         was = export(old).split("\n")
         now = export(entries).split("\n")
-        out: list[str] = []
-        same = difflib.SequenceMatcher(a=was, b=now, autojunk=False)
-        mapped = len(was) == len(lines)  # the file is pendant's listing, line for line
-        for op, a0, a1, b0, b1 in same.get_opcodes():
-            if op == "equal" and mapped:
-                out += [lines[i] + ends[i] for i in range(a0, a1)]
-                continue
-            for k, j in enumerate(range(b0, b1)):
-                i = min(a0 + k, len(ends) - 1)
-                end = (ends[i] or common) if mapped else common
-                out.append(now[j] + (end if j < len(now) - 1 else ""))
-        return "".join(out)
+        at = _file_lines(was, lines)
+        instead: dict[int, list[str]] = {}  # file line -> what stands in its place
+        after: dict[int, list[str]] = {}  # file line (-1: the start) -> new lines after it
+        prev = -1
+        for op, a0, a1, b0, b1 in difflib.SequenceMatcher(a=was, b=now, autojunk=False
+                                                          ).get_opcodes():
+            held = [at[i] for i in range(a0, a1) if i in at]
+            if op != "equal":
+                new = [now[j] for j in range(b0, b1) if j < len(now) - 1 or now[j]]
+                for k in held:
+                    instead[k] = []
+                if held:
+                    own = [ends[k] or (common if k < len(lines) - 1 else "") for k in held]
+                    instead[held[0]] = [x + own[min(n, len(own) - 1)] for n, x in enumerate(new)]
+                else:
+                    after.setdefault(prev, []).extend(x + common for x in new)
+            prev = held[-1] if held else prev
+        out = after.get(-1, [])
+        for k, (line, end) in enumerate(zip(lines, ends)):
+            out += instead.get(k, [line + end]) + after.get(k, [])
+        patched, listing = "".join(out), "\n".join(now)
+        if read(patched).entries != read(listing).entries:  # too far from pendant's listing
+            return listing
+        return patched
     return patch
 
 
