@@ -342,3 +342,34 @@ def test_kuka_line_numbers_count_only_real_line_ends(brk):
         formats.READERS["kuka"](bad)
     assert err.value.loc == ("file", f"line {line_of(bad, 'tool_data[2]')}", "TOOL_DATA[2].Z")
     assert formats.PATCHERS["kuka"](p.entries, text) == text
+
+
+# ------------------------------------------------------------------ 6. very long files
+
+def test_very_long_files_come_back_whole_and_in_seconds():
+    """A $config.dat whose user globals run to 50 000 points (E6POS with E1..E6, ~6 MB) and a
+    RobotWare backup module with 999 tooldata, 999 wobjdata and 999 robtargets: read, a
+    no-change export and a one-value change each take seconds at most, and only the value
+    changes."""
+    import time
+
+    text = load(KUKA5)[1]
+    points = "".join(f"DECL E6POS XP{n}={{X {n}.5,Y -2.0,Z 3.0,A 0.0,B 90.0,C 0.0,S 6,T 27,E1 0.0,"
+                     f"E2 0.0,E3 0.0,E4 0.0,E5 0.0,E6 0.0}} ; Punkt {n}\r\n" for n in range(50_000))
+    kuka = text.replace(";FOLD USER GLOBALS\r\n", ";FOLD USER GLOBALS\r\n" + points)
+    abb = "\r\n".join(
+        ["MODULE user(SYSMODULE)"]
+        + [f"  PERS tooldata t{n}:=[TRUE,[[{n}.5,0,100],[1,0,0,0]],[1,[0,0,1],[1,0,0,0],0,0,0]];\r\n"
+           f"  PERS wobjdata w{n}:=[FALSE,TRUE,\"\",[[{n},0,0],[1,0,0,0]],[[0,0,0],[1,0,0,0]]];\r\n"
+           f"  CONST robtarget p{n}:=[[1,2,3],[1,0,0,0],[0,0,0,0],[9E+09,9E+09,9E+09,9E+09,9E+09,9E+09]];"
+           for n in range(1, 1000)] + ["ENDMODULE", ""])
+    for fmt, big, key, needle in (("kuka", kuka, ("tool", 2), "TOOL_DATA[2]="),
+                                  ("abb", abb, ("tool", 500), "PERS tooldata t500:=")):
+        start = time.monotonic()
+        es = formats.READERS[fmt](big).entries
+        assert formats.PATCHERS[fmt](es, big) == big
+        i = next(j for j, e in enumerate(es) if (e.kind, e.number) == key)
+        es[i] = changed(es[i], "x", es[i].pose.x + 1)
+        out = formats.PATCHERS[fmt](es, big)
+        assert time.monotonic() - start < 30, fmt
+        assert [c[0] for c in changed_numbers(big, out)] == [line_of(big, needle)]
