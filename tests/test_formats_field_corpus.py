@@ -258,6 +258,24 @@ def test_api_import_export_keeps_the_bytes_and_a_put_changes_one_number(client, 
     assert back[("tool", tool.number)].pose.x == x + 2
 
 
+@pytest.mark.parametrize("name", FILES)
+def test_cli_import_by_suffix_and_export_give_the_files_bytes(client, db_url, tmp_path, capsysbinary,
+                                                               name):
+    """``pendant import FILE`` finds the format by the suffix and the encoding by the bytes (a
+    BOM, Windows-1252); ``pendant export`` writes the same bytes back."""
+    from server.cli.main import main
+
+    controller = "cell-1"
+    if FILES[name] == "abb":
+        controller = ok(client.post("/controllers", json={"name": "abb-cli", "robot": ABB_ARM}))["name"]
+    f = tmp_path / name
+    f.write_bytes((CORPUS / name).read_bytes())
+    assert main(["import", str(f), "--controller", controller, "--db", db_url]) == 0
+    capsysbinary.readouterr()
+    assert main(["export", controller, "--format", FILES[name], "--db", db_url]) == 0
+    assert capsysbinary.readouterr().out == (CORPUS / name).read_bytes()
+
+
 def test_api_preview_names_each_slots_own_line(client):
     """The preview (dry_run) gives each slot the line it starts on: a tab-indented KUKA line
     after a BOM, a RAPID declaration over five lines, a TASK PERS after a RECORD."""
