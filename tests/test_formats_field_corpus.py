@@ -152,13 +152,19 @@ def test_pendants_own_files_as_a_person_keeps_them_read_whole():
         assert formats.READERS[fmt](text).entries == formats.READERS[fmt]((data / src).read_text()).entries
 
 
-def test_ur_payload_line_that_cannot_be_read_is_refused_not_dropped():
-    """A set_payload line the reader cannot take is named, never read as "no load"."""
+@pytest.mark.parametrize("old,new,field", [
+    ("set_payload(6.8,  [", "set_payload(6.8 [", "tool_2.payload"),
+    ("global tool_6 =  p[", "global tool_6 = [", "tool_6"),
+])
+def test_ur_line_that_cannot_be_read_is_refused_naming_it_not_dropped(old, new, field):
+    """A set_payload or global line the reader cannot take is named at its own line, never
+    read as "no load" (nor blamed on the tool's comment line)."""
     text = load("ur_commented_bom_no_final_eol.script")[1]
-    bad = text.replace("set_payload(6.8,  [", "set_payload(6.8 [")
+    bad = text.replace(old, new)
+    assert bad != text
     with pytest.raises(FormatError) as err:
         formats.READERS["ur"](bad)
-    assert err.value.loc == ("file", f"line {line_of(bad, 'set_payload(6.8 [')}", "tool_2.payload")
+    assert err.value.loc == ("file", f"line {line_of(bad, new)}", field)
 
 
 # ------------------------------------------------------------------ 2. byte for byte

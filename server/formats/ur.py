@@ -136,7 +136,8 @@ END_LINE = "# end of pendant frames"
 _NUM = r"[+-]?(?:[0-9]+\.?[0-9]*|\.[0-9]+)(?:[eE][+-]?[0-9]+)?"  # ASCII digits
 _TAG = re.compile(r'^# (tool|workpiece|base|fixed_tool|coordinated_base) (\d+) "(.*?)"'
                   r'(?: on "([^"]*)")?\s*$')
-_GLOBAL = re.compile(r"^global (\w+) = p\[(.*)\]\s*$")
+_GLOBAL = re.compile(r"^\s*global\s+(\w+)\s*=\s*p\[([^\]]*)\]\s*(?:#.*)?$")  # any spacing, a comment
+_GLOBAL_NAME = re.compile(r"^\s*global\s+(\w+)\s*=")
 _PAYLOAD = re.compile(r"set_payload\(\s*(" + _NUM + r")\s*,\s*\[([^\]]*)\]\s*\)")  # any spacing
 _INERTIA = re.compile(r"^# principal inertia (.*) kg m\^2 \(axes at KUKA A, B, C = (.*) deg\)$")
 
@@ -193,6 +194,10 @@ def read_ur(text: str) -> ParsedFile:
         cur = found[-1]
         var = f"{cur['kind']}_{cur['number']}"
         g = _GLOBAL.match(raw)
+        named = _GLOBAL_NAME.match(raw)
+        if named and named.group(1) == var and not g:
+            raise FormatError.at_line(n, var, f"expected 'global {var} = p[x, y, z, rx, ry, rz]', "
+                                      f"got {raw.strip()[:60]!r}")
         if g and g.group(1) == var:
             v = _numbers(g.group(2), 6, ("mm",) * 3 + ("deg",) * 3, n, var)
             cur["pose"] = Pose.from_matrix(matrix_from_ur(v))

@@ -207,7 +207,8 @@ def main() -> None:
     ur = (data / "ur_cell7.script").read_text().rstrip("\n").split("\n")
     ur.insert(3, "# Zelle 7: kalibriert von J. Müller, 2024-03-12 (nicht löschen)")
     ur = [s.replace("set_payload(6.8, [0.0425, 0.0, 0.1183])", "set_payload(6.8,  [0.0425, 0.0, 0.1183])  # Brenner")
-          for s in ur]
+          .replace("global tool_6 = p[", "global tool_6 =  p[").replace(
+              "3.14159265359, 0.0, 0.0]", "3.14159265359, 0.0, 0.0]  # alte Messspitze") for s in ur]
     write("ur_commented_bom_no_final_eol.script", ur, "\n", "utf-8", bom=True)
     fanuc = (data / "fanuc_cell7.txt").read_text().rstrip("\n").split("\n")
     fanuc.insert(3, "! Zelle 7: kalibriert von J. Mueller, 2024-03-12")
