@@ -12,6 +12,7 @@ kuka_kss5_6digit_cp1252_crlf.dat -- the layout of a real KR C2 / KSS 5 $config.d
   a used tool and a base left #NONE with a frame (a KR C4 $config.dat, GitHub
   HugoDanielson/ChinaMilling KRC/R1/System/$config.dat: TOOL_TYPE[3]=#NONE on a named tool with
   a frame and a load, BASE_TYPE[11]=#NONE on a frame with a blank name, nine-digit reals);
+  a comment line with trailing spaces ("; CP - MOVEMENTS" and 49 spaces in that file);
   plus CR LF and Windows-1252 comments and names with umlauts (KSS writes on Windows).
 kuka_hand_edited_utf8_bom.dat -- a $config.dat edited in a text editor: UTF-8 with a byte
   order mark, LF, lower-case keywords (KRL is case-insensitive), DECL left out ("FRAME
@@ -66,6 +67,7 @@ def kss5() -> list[str]:
            ";FOLD BASISTECH GLOBALS", ";==================================",
            "; VORGABEWERTE FÜR BEWEGUNGEN – nicht ändern", ";==================================",
            "INT DEF_OV_PRO=100", "INT DEF_VEL_PTP=100 ; PTP-Geschwindigkeit [%]",
+           "; CP - BEWEGUNGEN" + " " * 49,
            "ENUM IPO_M_T NONE,TCP,BASE",
            "STRUC FDAT INT TOOL_NO,BASE_NO,IPO_MODE IPO_FRAME,CHAR POINT2[24],BOOL TQ_STATE",
            "STRUC MACHINE_TOOL_T INT MACH_DEF_INDEX,CHAR PARENT[24],CHAR GEOMETRY[255]",
