@@ -397,3 +397,16 @@ def test_very_long_files_come_back_whole_and_in_seconds():
         out = formats.PATCHERS[fmt](es, big)
         assert time.monotonic() - start < 30, fmt
         assert [c[0] for c in changed_numbers(big, out)] == [line_of(big, needle)]
+
+
+def test_kuka_machine_dat_line_numbers_count_only_real_line_ends():
+    """The same for the external kinematics' $machine.dat / $config.dat reader: a comment
+    with U+2028 before a bad value does not shift the line the error names."""
+    from server.formats.external import kuka_external_kinematics, read_kuka_external, turntable
+    from solvers.frames import Pose
+
+    files = kuka_external_kinematics([turntable(1, "TABLE", Pose(0, 0, 300, 0, 0, 0))])
+    md = "; Fahrachse\u2028Drehtisch\n" + files.machine_dat.replace("TR_A2 #NONE", "TR_A2 #E7")
+    with pytest.raises(FormatError) as err:
+        read_kuka_external(md, files.config_dat)
+    assert err.value.loc == ("machine_dat", f"line {line_of(md, 'TR_A2 #E7')}", "$ET1_AX.TR_A2")

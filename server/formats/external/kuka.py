@@ -202,7 +202,7 @@ def _patch_krl(template: str, items: list[_Item], what: str) -> str:
     """``template`` (a whole KRL data file) with each item's values patched into its line,
     and the lines of items it lacks added before ``ENDDAT``; other bytes kept."""
     found = _krl_values(template, what)
-    lines = template.splitlines(keepends=True)
+    lines = _kuka._LINES.findall(template)  # the lines _krl_values counts
     eol = "\r\n" if lines and lines[0].endswith("\r\n") else "\n"
     added = []
     for key, line, target in items:
@@ -291,7 +291,8 @@ def _krl_values(text: str, what: str) -> dict[str, _Found]:
     if not isinstance(text, str):
         raise FormatError((what,), f"expected text, got {type(text).__name__}")
     out: dict[str, _Found] = {}
-    for number, raw in enumerate(text.splitlines(), 1):
+    for number, raw in enumerate(_kuka._LINES.findall(text), 1):  # CR LF, CR, LF only
+        raw = raw.rstrip("\r\n")
         code = _kuka._strip_comment(raw)
         if not code.strip() or code.lstrip().startswith("&"):
             continue
