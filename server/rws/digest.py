@@ -118,6 +118,9 @@ def verify(params: dict[str, str], method: str, ha1_of, seen: Seen) -> Verdict:
     if not hmac.compare_digest(want.encode(), params["response"].lower().encode()):
         return Verdict(None, "wrong user name or password (or no RWS secret set: pendant "
                              "users rws-password)")
-    if not seen.first_use((params["nonce"], params.get("cnonce", ""), params.get("nc", ""))):
+    # without qop the response covers no cnonce nor nc: they are no part of the key, or a
+    # captured request replays with any cnonce added
+    key = (params["nonce"], params["cnonce"], params["nc"]) if qop else (params["nonce"], "", "")
+    if not seen.first_use(key):
         return Verdict(None, "nonce count used before (a replay)", stale=True)
     return Verdict(params["username"], "ok")
