@@ -68,3 +68,19 @@ def test_a_digest_without_qop_cannot_be_replayed_with_a_new_cnonce(cell: dict) -
         replay = header + f', cnonce="replay{k}", nc=0000000{k + 1}'
         r = requests.get(cell["url"] + STATE, headers={"Authorization": replay})
         assert r.status_code == 401, (replay, r.status_code)
+
+
+def test_logout_leaves_no_live_login_cookie(cell: dict) -> None:
+    """``GET /logout`` ends the ABBCX login; its own answer set a new live cookie for the same
+    user (the guard logged the request in again after the handler ended the session), so a
+    client that "logged out" still held a cookie that opens subscription sockets."""
+    s = requests.Session()
+    s.auth = requests.auth.HTTPDigestAuth("expert", PASSWORD["expert"])
+    assert s.get(cell["url"] + STATE).status_code == 200
+    before = s.cookies.get("ABBCX")
+    assert cell["face"].session_user(before) == "expert"
+    r = s.get(cell["url"] + "/logout")
+    assert r.status_code == 204
+    assert cell["face"].session_user(before) is None
+    after = s.cookies.get("ABBCX")
+    assert after is None or cell["face"].session_user(after) is None, r.headers.get("set-cookie")

@@ -247,7 +247,7 @@ def guarded(face: RwsFace, handler):
             why = retry_reason(err)
             log.warning("rws: %s %s: %s", request.method, request.url.path, why)
             return error(request, RwsError(503, E_BUSY, why), {"Retry-After": "1"})
-        cookie = face.login(request.cookies.get("ABBCX"), who.name)
+        cookie = None if handler is logout else face.login(request.cookies.get("ABBCX"), who.name)
         if cookie is not None:
             response.set_cookie("ABBCX", cookie, httponly=True, samesite="strict",
                                 max_age=SESSION_IDLE_S)
@@ -486,7 +486,9 @@ async def panel(face: RwsFace, request: Request, who: ops.Caller) -> Response:
 
 async def logout(face: RwsFace, request: Request, who: ops.Caller) -> Response:
     face.sessions.pop(request.cookies.get("ABBCX", ""), None)
-    return Response(status_code=204)
+    response = Response(status_code=204)
+    response.delete_cookie("ABBCX")  # and no new login is set (guarded skips it here)
+    return response
 
 
 # ------------------------------------------------------------------------- file service
