@@ -6,11 +6,13 @@ the unmodified clients (abb-robot-client, py-openshowvar) where they can say it.
 from __future__ import annotations
 
 import hashlib
+import queue
+import time
 from collections.abc import Iterator
 
 import pytest
 import requests
-from api_helpers import make_client, ok
+from api_helpers import edit_slot, make_client, ok, wait_for
 from browser_helpers import free_port
 
 from server.rws import digest, ops
@@ -84,3 +86,36 @@ def test_logout_leaves_no_live_login_cookie(cell: dict) -> None:
     assert cell["face"].session_user(before) is None
     after = s.cookies.get("ABBCX")
     assert after is None or cell["face"].session_user(after) is None, r.headers.get("set-cookie")
+
+
+def test_a_revoked_users_open_subscription_stops(cell: dict) -> None:
+    """Revoking a user ends their RWS access at once (docs/rws.md): a PERS subscription socket
+    they had opened went on sending every new value of the symbol, with the permissions read
+    when it opened."""
+    got: queue.Queue = queue.Queue()
+    c = rws.RWS(cell["url"], "leaver", PASSWORD["leaver"])
+    sub = c.subscribe([rws.SubscriptionResourceRequest(rws.SubscriptionResourceType.PersVar,
+                                                       rws.SubscriptionResourcePriority.High,
+                                                       "tool5")], got.put)
+    path = f"/controllers/{cell['cid']}/tools/5"
+    try:
+        wait_for(lambda: any(s.opened for s in cell["face"].subscriptions.values()
+                             if s.owner == "leaver"))
+        time.sleep(0.6)  # the socket's first look (every 0.2 s) has the value to compare
+        ok(edit_slot(cell["rest"], path, {"pose": {"z": 10.0}}))
+        assert isinstance(got.get(timeout=5.0), rws.VariableValue), "the socket sends"
+        assert cell["rest"].delete("/users/leaver").status_code == 204
+        time.sleep(0.6)  # the socket's next look (every 0.2 s)
+        while not got.empty():
+            got.get_nowait()
+        ok(edit_slot(cell["rest"], path, {"pose": {"z": 999.5}}))
+        deadline = time.monotonic() + 2.0
+        while time.monotonic() < deadline:
+            try:
+                event = got.get(timeout=max(deadline - time.monotonic(), 0.01))
+            except queue.Empty:
+                break
+            assert not isinstance(event, rws.VariableValue), \
+                f"a revoked user's socket sent {event.value}"
+    finally:
+        sub.close()

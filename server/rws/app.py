@@ -583,8 +583,12 @@ async def poll(face: RwsFace, ws: WebSocket) -> None:
     try:
         first = True
         while True:
-            try:
-                syms = await run_in_threadpool(_symbols, face, who)
+            try:  # the user as the database has them now: a revocation ends the socket
+                now = who if not face.auth else await run_in_threadpool(
+                    ops.caller, face.make_session, who.name, "rws", who.client)
+                if now is None:
+                    raise ops.Refused("frames:read", who)
+                syms = await run_in_threadpool(_symbols, face, now)
             except (ops.Refused, crud.NotFound):
                 await ws.close(code=1008)
                 return
