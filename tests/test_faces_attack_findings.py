@@ -7,6 +7,8 @@ from __future__ import annotations
 
 import hashlib
 import queue
+import socket
+import struct
 import time
 from collections.abc import Iterator
 
@@ -15,6 +17,7 @@ import requests
 from api_helpers import edit_slot, make_client, ok, wait_for
 from browser_helpers import free_port
 
+from server.kvp.server import KvpFace, serve_in_thread
 from server.rws import digest, ops
 from server.rws.app import RwsFace, create_rws_app
 from server.rws.service import serve_asgi
@@ -27,7 +30,8 @@ STATE = "/rw/panel/ctrlstate?json=1"
 
 @pytest.fixture(scope="module")
 def cell(fresh_db) -> Iterator[dict]:
-    """REST and the RWS face on one database: an ABB controller, users with RWS secrets."""
+    """REST, the RWS face (an ABB controller, users with RWS secrets) and the KVP face (the
+    demo KUKA controller, acting as the Expert) on one database."""
     with make_client(fresh_db()) as rest:
         cid = ok(rest.post("/controllers", json={"name": "abb-1", "robot": "abb_irb120"}))["id"]
         maker = rest.app.state.sessionmaker
@@ -37,13 +41,16 @@ def cell(fresh_db) -> Iterator[dict]:
             with maker() as db:
                 ops.set_rws_ha1(db, name, digest.ha1(name, PASSWORD[name]))
                 db.commit()
-        port = free_port()
+        port, kvp_port = free_port(), free_port()
         face = RwsFace(maker)
         running = serve_asgi(create_rws_app(face), "127.0.0.1", port, "rws-attack")
+        kvp = serve_in_thread(KvpFace(maker, "expert"), "127.0.0.1", kvp_port)
         try:
-            yield {"rest": rest, "cid": cid, "url": f"http://127.0.0.1:{port}", "face": face}
+            yield {"rest": rest, "cid": cid, "url": f"http://127.0.0.1:{port}", "face": face,
+                   "kvp_port": kvp_port}
         finally:
             running.stop()
+            kvp.stop()
 
 
 def _md5(text: str) -> str:
@@ -119,3 +126,69 @@ def test_a_revoked_users_open_subscription_stops(cell: dict) -> None:
                 f"a revoked user's socket sent {event.value}"
     finally:
         sub.close()
+
+
+def test_a_deeply_nested_literal_is_a_400_not_a_500(cell: dict) -> None:
+    """A RAPID literal of 1500 '[' (within the 2000-character limit; an Operator's login is
+    enough, the literal is read before the permission is checked) or a module holding one made
+    the ABB reader recurse past Python's stack: a 500 without RWS's error body, a traceback in
+    the log and the connection reset. It is a 400 naming the reason, nothing is written, and
+    the face goes on."""
+    auth = requests.auth.HTTPDigestAuth("expert", PASSWORD["expert"])
+    operator = requests.auth.HTTPDigestAuth("operator", PASSWORD["operator"])
+    path = f"/controllers/{cell['cid']}/tools/1"
+    before = cell["rest"].get(path).headers["etag"]
+    url = cell["url"] + "/rw/rapid/symbol/data/RAPID/T_ROB1/tool1?action=set&json=1"
+    r = requests.post(url, data={"value": "[" * 1500}, auth=operator)
+    assert r.status_code == 400, (r.status_code, r.text[:200])
+    assert "nested" in r.json()["_embedded"]["status"]["msg"]
+    module = "MODULE M\n  PERS tooldata t1:=" + "[" * 1500 + ";\nENDMODULE\n"
+    r = requests.put(cell["url"] + "/fileservice/$HOME/M.mod?json=1", data=module.encode(),
+                     auth=auth)
+    assert r.status_code == 400, (r.status_code, r.text[:200])
+    assert cell["rest"].get(path).headers["etag"] == before
+    assert requests.get(cell["url"] + STATE, auth=auth).status_code == 200
+
+
+def _kvp_message(msg_id: int, name: str, value: str | None = None) -> bytes:
+    """A KUKAVARPROXY request as py-openshowvar packs it (mode 0 read, 1 write)."""
+    n = name.encode()
+    if value is None:
+        return struct.pack("!HHBH", msg_id, 3 + len(n), 0, len(n)) + n
+    v = value.encode()
+    return (struct.pack("!HHBH", msg_id, 5 + len(n) + len(v), 1, len(n)) + n
+            + struct.pack("!H", len(v)) + v)
+
+
+def _kvp_answer(sock: socket.socket) -> tuple[int, bytes, int]:
+    """(msg_id, value, ok) of one answer; the connection closing before it is an error."""
+    def exactly(k: int) -> bytes:
+        data = b""
+        while len(data) < k:
+            chunk = sock.recv(k - len(data))
+            assert chunk, "the face closed the connection without an answer"
+            data += chunk
+        return data
+
+    msg_id, length = struct.unpack("!HH", exactly(4))
+    body = exactly(length)
+    (value_len,) = struct.unpack_from("!H", body, 1)
+    return msg_id, body[3:3 + value_len], body[-1]
+
+
+def test_a_deeply_nested_kvp_value_is_a_refusal_and_the_connection_goes_on(cell: dict) -> None:
+    """A write of ``{X {X {X ...`` (1300 levels, 3.9 KB: within the 4096-byte message) made the
+    KRL reader recurse past Python's stack: the connection was closed without an answer (and
+    a traceback logged), where every other bad value is a refusal (ok 0) saying why. Now a
+    refusal; nothing is written and the same connection answers the next message."""
+    path = "/controllers/1/bases/1"
+    before = cell["rest"].get(path).headers["etag"]
+    with socket.create_connection(("127.0.0.1", cell["kvp_port"]), timeout=10) as sock:
+        for nested in ("{X " * 1300, "{M " * 1300):
+            var = "BASE_DATA[1]" if nested.startswith("{X") else "LOAD_DATA[1]"
+            sock.sendall(_kvp_message(11, var, nested))
+            msg_id, value, ok_ = _kvp_answer(sock)
+            assert (msg_id, ok_) == (11, 0) and b"nested" in value, value
+        sock.sendall(_kvp_message(12, "$OV_PRO"))
+        assert _kvp_answer(sock) == (12, b"100", 1)
+    assert cell["rest"].get(path).headers["etag"] == before
