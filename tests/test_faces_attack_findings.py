@@ -192,3 +192,25 @@ def test_a_deeply_nested_kvp_value_is_a_refusal_and_the_connection_goes_on(cell:
         sock.sendall(_kvp_message(12, "$OV_PRO"))
         assert _kvp_answer(sock) == (12, b"100", 1)
     assert cell["rest"].get(path).headers["etag"] == before
+
+
+def test_a_captured_request_stays_refused_after_others_fill_the_replay_memory(
+        cell: dict, monkeypatch) -> None:
+    """The face remembers the used (nonce, cnonce, nc) up to SEEN_MAX and forgot the oldest
+    first, while their nonces were still honoured: any login (an Operator's) sending SEEN_MAX
+    requests pushed a captured Expert request out, which then replayed (measured with
+    SEEN_MAX 4: 200). A nonce older than one forgotten is now refused as stale."""
+    monkeypatch.setattr(digest, "SEEN_MAX", 4)
+    nonce, user = _nonce(cell), "expert"
+    ha2 = _md5("GET:" + STATE)
+    response = _md5(f"{digest.ha1(user, PASSWORD[user])}:{nonce}:00000001:captured:auth:{ha2}")
+    header = (f'Digest username="{user}", realm="validusers", nonce="{nonce}", uri="{STATE}", '
+              f'response="{response}", qop=auth, nc=00000001, cnonce="captured"')
+    assert requests.get(cell["url"] + STATE, headers={"Authorization": header}).status_code == 200
+    operator = requests.Session()
+    operator.auth = requests.auth.HTTPDigestAuth("operator", PASSWORD["operator"])
+    for _ in range(6):
+        assert operator.get(cell["url"] + STATE).status_code == 200
+    r = requests.get(cell["url"] + STATE, headers={"Authorization": header})
+    assert r.status_code == 401 and "stale=true" in r.headers["WWW-Authenticate"]
+    assert operator.get(cell["url"] + STATE).status_code == 200  # a new nonce is honoured

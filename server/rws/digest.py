@@ -4,10 +4,11 @@ A user's RWS secret is stored only as its HA1, ``MD5(name ":" realm ":" password
 (``pendant users rws-password NAME``): the digest needs nothing else, and the password itself
 is never stored. The realm is RWS's own, ``validusers``, so an HA1 is bound to it.
 
-Nonces are stateless: ``<unix time>.<HMAC-SHA256(key, time)>`` with a key made per process;
-a nonce is honoured for :data:`NONCE_TTL_S`, after which the answer is a 401 with
+Nonces are stateless: ``<unix time in µs>.<HMAC-SHA256(key, time)>`` with a key made per
+process; a nonce is honoured for :data:`NONCE_TTL_S`, after which the answer is a 401 with
 ``stale=true`` (clients sign again without asking the user). A (nonce, cnonce, nc) seen
-once is refused the second time, so a captured request cannot be replayed.
+once is refused the second time, so a captured request cannot be replayed; past
+:data:`SEEN_MAX` the oldest are forgotten, and with them every nonce made up to theirs.
 """
 
 from __future__ import annotations
@@ -37,7 +38,7 @@ def ha1(name: str, password: str) -> str:
 
 
 def new_nonce(now: float | None = None) -> str:
-    t = f"{int(now if now is not None else time.time())}"
+    t = f"{int((now if now is not None else time.time()) * 1e6)}"  # µs: see Seen.floor
     return t + "." + hmac.new(_KEY, t.encode(), hashlib.sha256).hexdigest()[:32]
 
 
@@ -47,7 +48,7 @@ def nonce_age_s(nonce: str, now: float | None = None) -> float | None:
     good = hmac.new(_KEY, t.encode(), hashlib.sha256).hexdigest()[:32]
     if not (t.isascii() and t.isdigit()) or not hmac.compare_digest(mac.encode(), good.encode()):
         return None
-    return (now if now is not None else time.time()) - int(t)
+    return (now if now is not None else time.time()) - int(t) / 1e6
 
 
 def challenge(stale: bool = False) -> str:
@@ -66,19 +67,25 @@ def parse(header: str) -> dict[str, str] | None:
 
 
 class Seen:
-    """The (nonce, cnonce, nc) triples already used (replays are refused)."""
+    """The (nonce, cnonce, nc) triples already used (replays are refused).
+
+    A triple forgotten to keep :data:`SEEN_MAX` could be replayed while its nonce is honoured,
+    so ``floor`` is the newest nonce time of those forgotten and a nonce made at or before it
+    is refused (stale: the client signs again with a new nonce)."""
 
     def __init__(self) -> None:
-        self._seen: OrderedDict[tuple[str, str, str], float] = OrderedDict()
+        self._seen: OrderedDict[tuple[str, str, str], int] = OrderedDict()
         self._lock = threading.Lock()
+        self.floor = -1  # µs
 
     def first_use(self, key: tuple[str, str, str]) -> bool:
+        minted = int(key[0].partition(".")[0])  # a nonce verify() checked: its digits
         with self._lock:
-            if key in self._seen:
+            if key in self._seen or minted <= self.floor:
                 return False
-            self._seen[key] = time.monotonic()
+            self._seen[key] = minted
             while len(self._seen) > SEEN_MAX:
-                self._seen.popitem(last=False)
+                self.floor = max(self.floor, self._seen.popitem(last=False)[1])
             return True
 
 
@@ -122,5 +129,6 @@ def verify(params: dict[str, str], method: str, ha1_of, seen: Seen) -> Verdict:
     # captured request replays with any cnonce added
     key = (params["nonce"], params["cnonce"], params["nc"]) if qop else (params["nonce"], "", "")
     if not seen.first_use(key):
-        return Verdict(None, "nonce count used before (a replay)", stale=True)
+        return Verdict(None, "nonce count used before (a replay), or the nonce is older than "
+                             "the replays remembered", stale=True)
     return Verdict(params["username"], "ok")
