@@ -214,3 +214,19 @@ def test_a_captured_request_stays_refused_after_others_fill_the_replay_memory(
     r = requests.get(cell["url"] + STATE, headers={"Authorization": header})
     assert r.status_code == 401 and "stale=true" in r.headers["WWW-Authenticate"]
     assert operator.get(cell["url"] + STATE).status_code == 200  # a new nonce is honoured
+
+
+def test_a_set_keeps_the_name_the_client_wrote_an_unnamed_slot_under(cell: dict) -> None:
+    """A client fills the empty base slot 6 through its default symbol ``wobj6`` with a
+    coordinated wobjdata (ufprog FALSE, ufmec "STN1"): 204, but the export names an unnamed
+    coordinated base ``cwobj6``, so ``wobj6`` was gone right after the set (404 to
+    abb-robot-client's get, a subscription to it silent). The slot now keeps the name the
+    client wrote it under, and the symbol reads back."""
+    c = rws.RWS(cell["url"], "expert", PASSWORD["expert"])
+    value = '[FALSE,FALSE,"STN1",[[500,10,5],[1,0,0,0]],[[0,0,0],[1,0,0,0]]]'
+    c.set_rapid_variable("wobj6", value)
+    assert c.get_rapid_variable("wobj6") == value
+    slot = ok(cell["rest"].get(f"/controllers/{cell['cid']}/bases/6"))
+    assert (slot["kind"], slot["mech_unit"], slot["name"]) == ("coordinated_base", "STN1", "wobj6")
+    c.set_rapid_variable("wobj6", value.replace("FALSE,FALSE,\"STN1\"", "FALSE,TRUE,\"\""))
+    assert c.get_rapid_variable("wobj6").startswith("[FALSE,TRUE,")

@@ -359,7 +359,13 @@ def _set_symbol(face: RwsFace, who: ops.Caller, sym: rapid.Symbol, value: str) -
                 "inertia_axes_deg": list(ld.inertia_axes_deg)}), False
     else:
         rapid.kind_allowed(sym, parsed.kind)  # type: ignore[attr-defined]
-        body, clear = ops.entry_body(parsed)  # type: ignore[arg-type]
+        # an unnamed slot's symbol is named after its kind (wobj6, a coordinated cwobj6): one
+        # whose kind the set changes keeps the name the client wrote it under
+        name = None
+        if parsed.kind != sym.kind:  # type: ignore[attr-defined]
+            now = ops.slot(face.make_session, who, cid, sym.table, sym.number, for_write=True)
+            name = sym.name if now.entry is None or not now.entry.name else None
+        body, clear = ops.entry_body(parsed, name)  # type: ignore[arg-type]
         clear = clear and sym.dtype == "tooldata"  # a wobjdata's load is its own symbol
     ops.commit_slot(face.make_session, who, cid, sym.table, sym.number, body, clear_load=clear)
 
