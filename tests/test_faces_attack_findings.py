@@ -230,3 +230,21 @@ def test_a_set_keeps_the_name_the_client_wrote_an_unnamed_slot_under(cell: dict)
     assert (slot["kind"], slot["mech_unit"], slot["name"]) == ("coordinated_base", "STN1", "wobj6")
     c.set_rapid_variable("wobj6", value.replace("FALSE,FALSE,\"STN1\"", "FALSE,TRUE,\"\""))
     assert c.get_rapid_variable("wobj6").startswith("[FALSE,TRUE,")
+
+
+def test_a_long_name_does_not_put_py_openshowvar_out_of_step(cell: dict) -> None:
+    """REST takes a slot name of 64 characters; 64 four-byte characters made TOOL_NAME[n,]'s
+    answer 268 bytes, past the 256 py-openshowvar reads at once: it answered None (the byte it
+    took for the status was inside the name) and left the tail for the next read. A
+    KRC4's TOOL_NAME is CHAR[24] (and the face's KUKA export cuts names to 24 characters):
+    the face answers the first 24, and the client stays in step."""
+    from py_openshowvar import openshowvar
+
+    name = "\U0001F527" * 64  # a wrench, 4 bytes in UTF-8
+    ok(edit_slot(cell["rest"], "/controllers/1/tools/7", {"name": name}))
+    krc = openshowvar("127.0.0.1", cell["kvp_port"])
+    try:
+        assert krc.read("TOOL_NAME[7,]", debug=False) == ('"' + name[:24] + '"').encode()
+        assert krc.read("$OV_PRO", debug=False) == b"100"
+    finally:
+        krc.close()

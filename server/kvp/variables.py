@@ -111,7 +111,9 @@ def read(face: Face, name: str, after_write: bool = False) -> str:
             return frame(s.entry.pose if s.entry else None)
         if array == "LOAD_DATA":
             return load(s.entry)
-        return '"' + (s.entry.name if s.entry else "") + '"'
+        # CHAR[24] on a KRC4 (the KUKA export cuts so too): 64 four-byte characters made an
+        # answer past the 256 bytes a client reads at once
+        return '"' + (s.entry.name[:kuka.KRL_NAME_CHARS] if s.entry else "") + '"'
     if var not in SYSTEM:
         raise KvpError(f"{name}: not a variable pendant serves ({', '.join(SYSTEM)}, "
                        "TOOL_DATA[n], BASE_DATA[n], LOAD_DATA[n], TOOL_NAME[n,], BASE_NAME[n,])")
