@@ -543,6 +543,7 @@ async def subscribe(face: RwsFace, request: Request, who: ops.Caller) -> Respons
     fields = {k: v[-1] for k, v in values.items()}
     resources = [r for r in values.get("resources", []) if r]
     paths = []
+    syms = await symbols_of(face, who) if resources else []  # once, not once per resource
     for r in resources:
         res = fields.get(r, "")
         prefix = "/rw/rapid/symbol/data/RAPID/"
@@ -551,7 +552,7 @@ async def subscribe(face: RwsFace, request: Request, who: ops.Caller) -> Respons
                            "PERS values (/rw/rapid/symbol/data/RAPID/T_ROB1/<name>;value)")
         sym_path = res[len(prefix):-len(";value")]
         try:
-            rapid.find(await symbols_of(face, who), sym_path)
+            rapid.find(syms, sym_path)
         except LookupError as err:
             raise RwsError(400, E_NOT_FOUND, str(err)) from None
         paths.append(sym_path)
