@@ -305,10 +305,12 @@ async def form(request: Request) -> dict[str, str]:
 
 # ----------------------------------------------------------------------------- symbols
 
-def _symbols(face: RwsFace, who: ops.Caller) -> list[rapid.Symbol]:
+def _symbols(face: RwsFace, who: ops.Caller, for_write: bool = False) -> list[rapid.Symbol]:
+    """The symbols; ``for_write``: looked up by a set, which needs no read permission (REST's
+    PUT of a slot needs frames:commit only)."""
     cid = face.controller_id()
-    text = ops.export(face.make_session, who, cid, "abb")
-    all_slots = ops.slots(face.make_session, who, cid)
+    text = ops.export(face.make_session, who, cid, "abb", for_write=for_write)
+    all_slots = ops.slots(face.make_session, who, cid, for_write=for_write)
     numbers: dict[str, list[int]] = {}
     for s in all_slots:
         numbers.setdefault(s.table, []).append(s.number)
@@ -325,7 +327,9 @@ def _state_of(sym: rapid.Symbol) -> dict[str, Any]:
 
 async def symbol_data(face: RwsFace, request: Request, who: ops.Caller) -> Response:
     path = request.path_params["path"]
-    syms = await symbols_of(face, who)
+    writer = request.method == "POST" and any(p in who.permissions
+                                              for p in ops.EDIT_SLOT.values())
+    syms = await call(_symbols, face, who, writer)
     try:
         sym = rapid.find(syms, path)
     except LookupError as err:
@@ -510,20 +514,10 @@ def _module_file(face: RwsFace, who: ops.Caller) -> tuple[str, str]:
 
 async def fileservice(face: RwsFace, request: Request, who: ops.Caller) -> Response:
     path = request.path_params.get("path", "").strip("/")
-    name, text = await call(_module_file, face, who)
     home = [HOME, "HOME:", "HOME"]
-    if path in home or path == "":
-        listing = [{"_type": "fs-file", "_title": name, "fs-size": str(len(text.encode())),
-                    "fs-readonly": "false"}]
-        return answer(request, listing)
     folder, _, file = path.rpartition("/")
-    if folder not in home or not file.lower().endswith(".mod"):
-        raise RwsError(404, E_NOT_FOUND, f"no file {path!r}; pendant serves {HOME}/{name}")
-    if request.method == "GET":
-        if file.lower() != name.lower():
-            raise RwsError(404, E_NOT_FOUND, f"no file {path!r}; pendant serves {HOME}/{name}")
-        return Response(text.encode("utf-8"), media_type="text/plain; charset=utf-8")
-    if request.method == "PUT":
+    if request.method == "PUT" and folder in home and file.lower().endswith(".mod"):
+        # an import: data:import, as POST .../import (the module is not read first)
         body = await body_of(request, "the file")
         try:
             new = body.decode("utf-8")
@@ -532,6 +526,17 @@ async def fileservice(face: RwsFace, request: Request, who: ops.Caller) -> Respo
         await call(ops.import_file, face.make_session, who, await call(face.controller_id),
                    "abb", new)
         return Response(status_code=201)
+    name, text = await call(_module_file, face, who)
+    if path in home or path == "":
+        listing = [{"_type": "fs-file", "_title": name, "fs-size": str(len(text.encode())),
+                    "fs-readonly": "false"}]
+        return answer(request, listing)
+    if folder not in home or not file.lower().endswith(".mod"):
+        raise RwsError(404, E_NOT_FOUND, f"no file {path!r}; pendant serves {HOME}/{name}")
+    if request.method == "GET":
+        if file.lower() != name.lower():
+            raise RwsError(404, E_NOT_FOUND, f"no file {path!r}; pendant serves {HOME}/{name}")
+        return Response(text.encode("utf-8"), media_type="text/plain; charset=utf-8")
     raise RwsError(400, E_NOT_OFFERED, f"{request.method} {path}: pendant reads (GET) and "
                    "imports (PUT) the module")
 

@@ -132,8 +132,11 @@ class Slot:
     entry: formats.FrameEntry | None  # None when unused
 
 
-def slots(maker: Maker, caller_: Caller, cid: int, table: str | None = None) -> list[Slot]:
-    caller_.require(READ)
+def slots(maker: Maker, caller_: Caller, cid: int, table: str | None = None,
+          for_write: bool = False) -> list[Slot]:
+    """Every slot (of ``table``); ``for_write``: read by a write, as :func:`slot`."""
+    if not for_write:
+        caller_.require(READ)
     with maker() as db:
         crud.get_controller(db, cid)
         return [Slot(e.entry_table, e.number, e.version, controller_files.is_used(e),
@@ -154,9 +157,11 @@ def slot(maker: Maker, caller_: Caller, cid: int, table: str, number: int,
                     controller_files.to_frame_entry(e) if used else None)
 
 
-def export(maker: Maker, caller_: Caller, cid: int, fmt: str) -> str:
-    """The controller's file in ``fmt``, as ``GET /controllers/{id}/export`` gives it."""
-    caller_.require(required("GET", C + "/export"))
+def export(maker: Maker, caller_: Caller, cid: int, fmt: str, for_write: bool = False) -> str:
+    """The controller's file in ``fmt``, as ``GET /controllers/{id}/export`` gives it;
+    ``for_write``: read by a write to find its slot (RWS's set by symbol name), unanswered."""
+    if not for_write:
+        caller_.require(required("GET", C + "/export"))
     with maker() as db:
         crud.get_controller(db, cid)
         return controller_files.export_file(db, cid, fmt)
