@@ -296,3 +296,34 @@ def test_a_role_that_may_write_but_not_read_writes_through_rws_as_through_rest(
                      auth=auth)
     assert r.status_code == 201, r.text[-200:]
     assert requests.get(cell["url"] + "/fileservice/$HOME/Cell.mod", auth=auth).status_code == 403
+
+
+def test_a_partial_load_data_write_keeps_what_it_does_not_name(cell: dict) -> None:
+    """docs/kvp.md: a partial aggregate changes only the components it names, as a KRL
+    assignment does, and ``M -1`` clears a load. ``LOAD_DATA[n]={M 4.5}`` and
+    ``LOAD_DATA[n]={M -1}`` were refused ("missing CM, J; expected M, CM, J"): only a whole
+    load could be written. Now the mass changes and CM and J stay, ``{M -1}`` clears the load,
+    each write one audit record."""
+    from py_openshowvar import openshowvar
+
+    path = "/controllers/1/tools/11"
+    ok(edit_slot(cell["rest"], path, {"pose": {"z": 200.0}, "load": {
+        "mass_kg": 3.2, "com_mm": [0.0, 0.0, 90.0], "inertia_kgm2": [0.1, 0.1, 0.05]}}))
+
+    def audits() -> int:
+        return sum(1 for a in ok(cell["rest"].get("/audit", params={"controller_id": 1}))
+                   if (a["table"], a["number"], a["source"]) == ("tool", 11, "kvp"))
+
+    krc = openshowvar("127.0.0.1", cell["kvp_port"])
+    try:
+        back = krc.write("LOAD_DATA[11]", "{M 4.5}", debug=False)
+        assert back is not None and back.startswith(b"{LOAD: M 4.5, CM {FRAME: X 0.0, Y 0.0, "
+                                                    b"Z 90.0"), back
+        load = ok(cell["rest"].get(path))["load"]
+        assert (load["mass_kg"], load["com_mm"], load["inertia_kgm2"]) == \
+            (4.5, [0.0, 0.0, 90.0], [0.1, 0.1, 0.05])
+        assert audits() == 1
+        assert krc.write("LOAD_DATA[11]", "{M -1}", debug=False).startswith(b"{LOAD: M -1.0")
+        assert ok(cell["rest"].get(path))["load"] is None and audits() == 2
+    finally:
+        krc.close()

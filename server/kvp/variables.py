@@ -164,26 +164,78 @@ def _slot(face: Face, who: ops.Caller, table: str, n: int, var: str,
 MERGE_TRIES = 3  # a partial frame merged again when another writer changed the slot meanwhile
 
 
-def _write_frame(face: Face, who: ops.Caller, table: str, n: int, var: str, value: str) -> None:
-    """``TOOL_DATA[n]`` / ``BASE_DATA[n]`` := ``value``; a partial aggregate (``{X 12.5}``)
-    keeps the components it does not name, as a KRL assignment keeps them.
+def _write_merged(face: Face, who: ops.Caller, table: str, n: int, var: str,
+                  merge: Callable[[object], tuple[EntryIn, bool]]) -> None:
+    """Slot ``n`` := ``merge(its entry as read)`` (the edit and whether it clears the load): a
+    partial aggregate (``{X 12.5}``) keeps the components it does not name, as a KRL
+    assignment keeps them.
 
     The merge is made with the slot as read, and the write carries the version it read (the
     If-Match REST's PUT takes): a change another face or person committed between the two is
-    not overwritten with the old components; the merge is made again on the new frame, up to
+    not overwritten with the old components; the merge is made again on the new slot, up to
     :data:`MERGE_TRIES` times, then refused."""
     for _ in range(MERGE_TRIES):
         s = _slot(face, who, table, n, var, for_write=True)
-        p = _pose_write(value, s.entry.pose if s.entry else None, var)
-        body = EntryIn(pose={k.lower(): v for k, v in zip(FRAME_KEYS, p.as_array())})
+        body, clear = merge(s.entry)
         try:
             ops.commit_slot(face.maker, who, face.controller_id, table, n, body,
-                            expected_version=s.version)
+                            clear_load=clear, expected_version=s.version)
             return
         except ops.Stale:
             continue
     raise KvpError(f"{var}: changed by another writer {MERGE_TRIES} times while this write "
                    "merged with it; nothing written, send it again")
+
+
+def _frame_merge(value: str, var: str) -> Callable[[object], tuple[EntryIn, bool]]:
+    """``TOOL_DATA[n]`` / ``BASE_DATA[n]`` := ``value`` on the frame as it is."""
+    def merge(entry) -> tuple[EntryIn, bool]:  # noqa: ANN001
+        p = _pose_write(value, entry.pose if entry else None, var)
+        return EntryIn(pose={k.lower(): v for k, v in zip(FRAME_KEYS, p.as_array())}), False
+    return merge
+
+
+def _krl(agg: dict[str, object], fld: str) -> str:
+    """An aggregate of numbers back as KRL (exact reals)."""
+    parts = []
+    for k, v in agg.items():
+        if isinstance(v, dict):
+            parts.append(f"{k} {_krl(v, f'{fld}.{k}')}")
+        elif isinstance(v, float):
+            parts.append(f"{k} {kuka.krl_real(v)}")
+        else:
+            raise KvpError(f"{fld}.{k}: expected a number")
+    return "{" + ",".join(parts) + "}"
+
+
+def _load_merge(value: str, var: str) -> Callable[[object], tuple[EntryIn, bool]]:
+    """``LOAD_DATA[n]`` := ``value`` on the load as it is: ``{M 4.5}`` keeps CM and J;
+    ``M -1`` clears the load."""
+    given = _aggregate(value, var)
+
+    def merge(entry) -> tuple[EntryIn, bool]:  # noqa: ANN001
+        ld = entry.load if entry else None
+        if ld is None and given and "M" not in given:
+            raise KvpError(f"{var}.M: the tool has no load (M -1); a write of CM or J gives M")
+        now: dict[str, object] = {"M": -1.0, "CM": dict.fromkeys(FRAME_KEYS, 0.0),
+                                  "J": dict.fromkeys("XYZ", 0.0)}
+        if ld is not None:
+            now = {"M": ld.mass_kg,
+                   "CM": dict(zip(FRAME_KEYS, (*ld.com_mm, *ld.inertia_axes_deg))),
+                   "J": dict(zip("XYZ", ld.inertia_kgm2))}
+        for k, v in given.items():
+            old = now.get(k)
+            now[k] = {**old, **v} if isinstance(v, dict) and isinstance(old, dict) else v
+        try:
+            new = kuka.parse_load(_krl(now, var), 1, var)
+        except FormatError as err:
+            raise KvpError(f"{'.'.join(str(x) for x in err.loc[2:])}: {err.reason}") from None
+        if new is None:
+            return EntryIn(), True
+        return EntryIn(load={"mass_kg": new.mass_kg, "com_mm": list(new.com_mm),
+                             "inertia_kgm2": list(new.inertia_kgm2),
+                             "inertia_axes_deg": list(new.inertia_axes_deg)}), False
+    return merge
 
 
 def _read_back(face: Face, name: str, sent: str) -> str:
@@ -207,26 +259,13 @@ def write(face: Face, name: str, value: str) -> str:
     if m:
         array, n = m.group(1), int(m.group(2))
         table = "tool" if array in ("TOOL_DATA", "LOAD_DATA", "TOOL_NAME") else "base"
-        if array in ("TOOL_DATA", "BASE_DATA"):
-            _write_frame(face, who, table, n, var, value)
+        if array in ("TOOL_DATA", "BASE_DATA", "LOAD_DATA"):
+            _check_index(table, n, var)
+            merge = (_load_merge if array == "LOAD_DATA" else _frame_merge)(value, var)
+            _write_merged(face, who, table, n, var, merge)
             return _read_back(face, name, value)
         _check_index(table, n, var)
-        clear = False
-        if array == "LOAD_DATA":
-            try:
-                ld = kuka.parse_load(_PREFIX.sub("{", value.strip()), 1, var)
-            except FormatError as err:
-                raise KvpError(f"{'.'.join(str(x) for x in err.loc[2:])}: {err.reason}") \
-                    from None
-            if ld is None:
-                body, clear = EntryIn(), True
-            else:
-                body = EntryIn(load={"mass_kg": ld.mass_kg, "com_mm": list(ld.com_mm),
-                                     "inertia_kgm2": list(ld.inertia_kgm2),
-                                     "inertia_axes_deg": list(ld.inertia_axes_deg)})
-        else:
-            body = EntryIn(name=_name_write(value, var))
-        ops.commit_slot(face.maker, who, cid, table, n, body, clear_load=clear)
+        ops.commit_slot(face.maker, who, cid, table, n, EntryIn(name=_name_write(value, var)))
         return _read_back(face, name, value)
     if var in ("$ACT_TOOL", "$ACT_BASE"):
         if not re.fullmatch(r"\s*[0-9]+\s*", value):
