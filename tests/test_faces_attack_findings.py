@@ -327,3 +327,39 @@ def test_a_partial_load_data_write_keeps_what_it_does_not_name(cell: dict) -> No
         assert ok(cell["rest"].get(path))["load"] is None and audits() == 2
     finally:
         krc.close()
+
+
+def test_a_client_that_never_reads_its_answers_locks_no_client_out(cell: dict,
+                                                                   monkeypatch) -> None:
+    """A client that sends reads and never reads the answers fills the socket: the face's
+    write of the next answer waited for room with no time limit, so the connection stayed
+    "in the middle of a message" for ever and could not be closed to make room; as many such
+    clients as the face takes (here 2) locked every other client out until the service
+    restarted. An answer the client takes no room for within the message time limit now
+    ends that connection, and the next client is served."""
+    from py_openshowvar import openshowvar
+
+    from server.kvp import server as kvp
+
+    monkeypatch.setattr(kvp, "MAX_CONNECTIONS", 2)
+    monkeypatch.setattr(kvp, "FRAME_TIMEOUT_S", 1.0)
+    # 200 000 messages of 7 bytes whose name runs past them: each answered at once with a
+    # refusal of 45 bytes (9 MB), far more than the sockets hold; none is ever read
+    flood = struct.pack("!HHBH", 1, 3, 0, 200) * 200_000
+    hogs = []
+    try:
+        for _ in range(2):
+            s = socket.socket(socket.AF_INET, socket.SOCK_STREAM)
+            s.setsockopt(socket.SOL_SOCKET, socket.SO_RCVBUF, 4096)
+            s.connect(("127.0.0.1", cell["kvp_port"]))
+            s.sendall(flood)
+            hogs.append(s)
+        time.sleep(6.0)  # the face has answered what fits and waits for room
+        krc = openshowvar("127.0.0.1", cell["kvp_port"])
+        try:
+            assert krc.read("$OV_PRO", debug=False) == b"100"
+        finally:
+            krc.close()
+    finally:
+        for s in hogs:
+            s.close()

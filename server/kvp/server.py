@@ -194,20 +194,29 @@ class KvpFace:
             head = first + await asyncio.wait_for(reader.readexactly(3), FRAME_TIMEOUT_S)
             msg_id, length = struct.unpack("!HH", head)
             if length > MAX_CONTENT:
-                writer.write(pack(msg_id, 0, f"message of {length} bytes; at most "
-                                  f"{MAX_CONTENT}", False))
-                await writer.drain()
+                await _send(writer, pack(msg_id, 0, f"message of {length} bytes; at most "
+                                         f"{MAX_CONTENT}", False))
                 return  # the rest of it cannot be trusted to be read: close
             content = await asyncio.wait_for(reader.readexactly(length), FRAME_TIMEOUT_S)
             try:
                 mode, name, value = unpack(msg_id, content)
             except BadMessage as err:
-                writer.write(pack(err.msg_id, err.mode, err.reason, False))
-                await writer.drain()
+                await _send(writer, pack(err.msg_id, err.mode, err.reason, False))
                 continue
             text, ok = await asyncio.to_thread(self._answer, client, name, value)
-            writer.write(pack(msg_id, mode, text, ok))
-            await writer.drain()
+            await _send(writer, pack(msg_id, mode, text, ok))
+
+
+async def _send(writer: asyncio.StreamWriter, data: bytes) -> None:
+    """An answer, taken by the client within :data:`FRAME_TIMEOUT_S`: one that never reads
+    its answers fills the socket, and waiting for room without a limit held its connection
+    "in a message" for ever, a place no new client could have (TimeoutError ends it)."""
+    writer.write(data)
+    try:
+        await asyncio.wait_for(writer.drain(), FRAME_TIMEOUT_S)
+    except TimeoutError:
+        writer.transport.abort()  # what it holds would never be taken: dropped, not flushed
+        raise
 
 
 def serve_in_thread(face: KvpFace, host: str, port: int) -> Running:
