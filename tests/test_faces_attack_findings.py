@@ -363,3 +363,38 @@ def test_a_client_that_never_reads_its_answers_locks_no_client_out(cell: dict,
     finally:
         for s in hogs:
             s.close()
+
+
+def test_a_subscriber_sending_on_its_socket_does_not_make_it_look_faster(
+        cell: dict, monkeypatch) -> None:
+    """A subscription socket looks for changed values every 0.2 s, each look an export of the
+    module and the slots (tens of ms of a worker thread). Each message the client sent on the
+    socket ended the wait early and started a look: a client sending small frames as fast as
+    it could made its socket look hundreds of times a second (an Operator holds 64 such
+    sockets, the face's worker threads are 40). Messages now wait for the next look."""
+    from websockets.sync.client import connect
+
+    from server.rws import app as rws_app
+
+    looks: list[float] = []
+    real = rws_app._symbols
+
+    def counted(*args, **kwargs):  # noqa: ANN002, ANN003, ANN202
+        looks.append(time.monotonic())
+        return real(*args, **kwargs)
+
+    s = requests.Session()
+    s.auth = requests.auth.HTTPDigestAuth("operator", PASSWORD["operator"])
+    r = s.post(cell["url"] + "/subscription", data={
+        "resources": ["1"], "1": "/rw/rapid/symbol/data/RAPID/T_ROB1/tool4;value"})
+    assert r.status_code == 201, r.text
+    monkeypatch.setattr(rws_app, "_symbols", counted)
+    with connect(r.headers["Location"], subprotocols=["robapi2_subscription"],
+                 additional_headers={"Cookie": f"ABBCX={s.cookies['ABBCX']}"}) as ws:
+        started = time.monotonic()
+        while time.monotonic() - started < 1.0:
+            ws.send("x")
+            time.sleep(0.001)
+        time.sleep(0.3)
+    during = [t for t in looks if started <= t <= started + 1.0]
+    assert len(during) <= 1.0 / rws_app.POLL_S + 2, f"{len(during)} looks in 1 s"

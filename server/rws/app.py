@@ -616,10 +616,15 @@ async def poll(face: RwsFace, ws: WebSocket) -> None:
                     await ws.send_text(_event(sym))
                 last[p] = sym.value
             first = False
-            try:
-                await asyncio.wait_for(ws.receive_text(), POLL_S)
-            except TimeoutError:
-                pass
+            # the next look in POLL_S, whatever the client sends meanwhile (each message ended
+            # the wait early: a client sending frames fast made its socket look 37 times a
+            # second); receiving notices its leaving
+            next_look = time.monotonic() + POLL_S
+            while (left := next_look - time.monotonic()) > 0:
+                try:
+                    await asyncio.wait_for(ws.receive_text(), left)
+                except TimeoutError:
+                    break
     except WebSocketDisconnect:
         pass
     finally:
