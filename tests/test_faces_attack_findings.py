@@ -398,3 +398,18 @@ def test_a_subscriber_sending_on_its_socket_does_not_make_it_look_faster(
         time.sleep(0.3)
     during = [t for t in looks if started <= t <= started + 1.0]
     assert len(during) <= 1.0 / rws_app.POLL_S + 2, f"{len(during)} looks in 1 s"
+
+
+def test_a_long_authorization_header_does_not_stall_the_face(cell: dict) -> None:
+    """No login needed: ``Authorization: Digest aaaa...`` (60 000 letters, no '=') made the
+    Digest parameter pattern backtrack quadratically in the face's event loop: 18.7 s with
+    nothing answered, by the face, to anyone (2 s for 20 000 letters). The header is read in
+    linear time, and one longer than a Digest header has any need for is no credential."""
+    for header in ("Digest " + "a" * 60_000, "Digest x=\"" + "a" * 60_000,
+                   "Digest " + "a " * 30_000, "Digest " + "a" * 3000 + "=" + "b" * 3000):
+        started = time.monotonic()
+        r = requests.get(cell["url"] + STATE, headers={"Authorization": header}, timeout=60)
+        took = time.monotonic() - started
+        assert r.status_code == 401 and took < 1.0, (header[:20], r.status_code, took)
+    auth = requests.auth.HTTPDigestAuth("expert", PASSWORD["expert"])
+    assert requests.get(cell["url"] + STATE, auth=auth).status_code == 200
