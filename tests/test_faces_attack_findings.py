@@ -413,3 +413,46 @@ def test_a_long_authorization_header_does_not_stall_the_face(cell: dict) -> None
         assert r.status_code == 401 and took < 1.0, (header[:20], r.status_code, took)
     auth = requests.auth.HTTPDigestAuth("expert", PASSWORD["expert"])
     assert requests.get(cell["url"] + STATE, auth=auth).status_code == 200
+
+
+def test_a_face_serving_the_first_controller_stays_on_it_when_that_is_deleted(fresh_db) -> None:
+    """Without --rws-controller / --kvp-controller a face serves the first ABB (KUKA)
+    controller, and it looked that up at every request: once that controller was deleted, the
+    cell PC's next writes went into the next one, another robot's tool slots, without a word.
+    The face now keeps the controller it first served; when that is gone it refuses."""
+    from py_openshowvar import openshowvar
+    from starlette.testclient import TestClient
+    import httpx
+
+    with make_client(fresh_db()) as rest:
+        maker = rest.app.state.sessionmaker
+        first = ok(rest.post("/controllers", json={"name": "abb-a", "robot": "abb_irb120"}))
+        other = ok(rest.post("/controllers", json={"name": "abb-b", "robot": "abb_irb120"}))
+        kuka = ok(rest.get("/controllers/1"))["robot"]
+        kuka_other = ok(rest.post("/controllers", json={"name": "cell-2", "robot": kuka}))
+        ok(rest.post("/users", json={"name": "expert", "role": "Expert"}))
+        with maker() as db:
+            ops.set_rws_ha1(db, "expert", digest.ha1("expert", PASSWORD["expert"]))
+            db.commit()
+        auth = httpx.DigestAuth("expert", PASSWORD["expert"])
+        kvp_port = free_port()
+        kvp = serve_in_thread(KvpFace(maker, "expert"), "127.0.0.1", kvp_port)
+        tool = "[TRUE,[[0,0,123],[1,0,0,0]],[1,[0,0,50],[1,0,0,0],0,0,0]]"
+        set_ = "/rw/rapid/symbol/data/RAPID/T_ROB1/tool1?action=set&json=1"
+        try:
+            with TestClient(create_rws_app(RwsFace(maker)), base_url="http://127.0.0.1") as tc:
+                krc = openshowvar("127.0.0.1", kvp_port)
+                assert tc.post(set_, data={"value": tool}, auth=auth).status_code == 204
+                assert krc.write("TOOL_DATA[1]", "{Z 77}", debug=False) is not None
+                assert ok(rest.get(f"/controllers/{first['id']}/tools/1"))["pose"]["z"] == 123
+                assert ok(rest.get("/controllers/1/tools/1"))["pose"]["z"] == 77
+                assert rest.delete(f"/controllers/{first['id']}").status_code == 204
+                assert rest.delete("/controllers/1").status_code == 204
+                r = tc.post(set_, data={"value": tool}, auth=auth)
+                assert r.status_code == 404, r.text
+                assert krc.write("TOOL_DATA[1]", "{Z 77}", debug=False) is None
+                krc.close()
+            assert ok(rest.get(f"/controllers/{other['id']}/tools/1"))["pose"]["z"] == 0
+            assert ok(rest.get(f"/controllers/{kuka_other['id']}/tools/1"))["pose"]["z"] == 0
+        finally:
+            kvp.stop()

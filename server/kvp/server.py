@@ -143,7 +143,7 @@ class KvpFace:
     def _answer(self, client: str | None, name: str, value: str | None) -> tuple[str, bool]:
         try:
             try:
-                cid = ops.controller_id(self.make_session, self.controller, "kuka")
+                cid = ops.pinned(self, "kuka")
                 face = variables.Face(self.make_session, cid, lambda: self.who(client))
             except (ops.Refused, LookupError) as err:
                 return str(err), False

@@ -103,7 +103,7 @@ class RwsFace:
     next_sub: int = 1
 
     def controller_id(self) -> int:
-        return ops.controller_id(self.make_session, self.controller, "abb")
+        return ops.pinned(self, "abb")
 
     def login(self, cookie: str | None, user: str) -> str | None:
         """The ABBCX login ``cookie`` of ``user`` marked used; a new cookie to set when it is

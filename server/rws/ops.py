@@ -110,15 +110,27 @@ def set_rws_ha1(db: Session, name: str, ha1: str) -> None:
 # ------------------------------------------------------------------------------------ reads
 
 def controller_id(maker: Maker, name_or_id: str | int | None, prefix: str) -> int:
-    """The controller a face serves: the one named (or numbered), else the lowest id whose
-    robot is ``prefix``'s (``abb``, ``kuka``); NotFound when there is none."""
+    """The controller a face serves: the one named (or numbered; an int is an id only), else
+    the lowest id whose robot is ``prefix``'s (``abb``, ``kuka``); NotFound when there is
+    none. A face keeps the id it got for None (:func:`pinned`)."""
     with maker() as db:
+        if isinstance(name_or_id, int):
+            return crud.get_controller(db, name_or_id).id
         if name_or_id is not None:
             return crud.find_controller(db, str(name_or_id)).id
         for c in crud.list_controllers(db):
             if (c.robot_key or "").startswith(prefix):
                 return c.id
     raise crud.NotFound(("controller",), f"no {prefix.upper()} controller; create one or name it")
+
+
+def pinned(face: Any, prefix: str) -> int:
+    """``face.controller``'s id; without one, the first ``prefix`` controller's, kept in
+    ``face.controller``: looked up again at every request, a face went on to the next
+    controller (another robot's slots) once the first was deleted."""
+    if face.controller is None:
+        face.controller = controller_id(face.make_session, None, prefix)
+    return controller_id(face.make_session, face.controller, prefix)
 
 
 @dataclass(frozen=True)
