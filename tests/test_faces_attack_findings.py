@@ -456,3 +456,22 @@ def test_a_face_serving_the_first_controller_stays_on_it_when_that_is_deleted(fr
             assert ok(rest.get(f"/controllers/{kuka_other['id']}/tools/1"))["pose"]["z"] == 0
         finally:
             kvp.stop()
+
+
+def test_a_binary_frame_on_a_subscription_socket_is_ignored(cell: dict) -> None:
+    """A client's messages on its subscription socket are ignored; a binary one was read as
+    text (Starlette's receive_text: KeyError 'text'), an unhandled error in the log that
+    dropped the socket without a close frame. The socket now goes on sending values."""
+    from websockets.sync.client import connect
+
+    s = requests.Session()
+    s.auth = requests.auth.HTTPDigestAuth("expert", PASSWORD["expert"])
+    r = s.post(cell["url"] + "/subscription", data={
+        "resources": ["1"], "1": "/rw/rapid/symbol/data/RAPID/T_ROB1/tool12;value"})
+    assert r.status_code == 201, r.text
+    with connect(r.headers["Location"], subprotocols=["robapi2_subscription"],
+                 additional_headers={"Cookie": f"ABBCX={s.cookies['ABBCX']}"}) as ws:
+        ws.send(b"\x00\x01")
+        time.sleep(0.6)  # the socket's first look has the value to compare
+        ok(edit_slot(cell["rest"], f"/controllers/{cell['cid']}/tools/12", {"pose": {"z": 12.5}}))
+        assert "[[0,0,12.5]" in ws.recv(timeout=5)

@@ -618,13 +618,15 @@ async def poll(face: RwsFace, ws: WebSocket) -> None:
             first = False
             # the next look in POLL_S, whatever the client sends meanwhile (each message ended
             # the wait early: a client sending frames fast made its socket look 37 times a
-            # second); receiving notices its leaving
+            # second); receiving notices its leaving, and ignores text and binary alike
             next_look = time.monotonic() + POLL_S
             while (left := next_look - time.monotonic()) > 0:
                 try:
-                    await asyncio.wait_for(ws.receive_text(), left)
+                    message = await asyncio.wait_for(ws.receive(), left)
                 except TimeoutError:
                     break
+                if message["type"] == "websocket.disconnect":
+                    raise WebSocketDisconnect(message.get("code", 1000))
     except WebSocketDisconnect:
         pass
     finally:
