@@ -475,3 +475,28 @@ def test_a_binary_frame_on_a_subscription_socket_is_ignored(cell: dict) -> None:
         time.sleep(0.6)  # the socket's first look has the value to compare
         ok(edit_slot(cell["rest"], f"/controllers/{cell['cid']}/tools/12", {"pose": {"z": 12.5}}))
         assert "[[0,0,12.5]" in ws.recv(timeout=5)
+
+
+def test_the_replay_memory_does_not_grow_with_the_cnonce_a_client_chooses(cell: dict) -> None:
+    """The face remembers every used (nonce, cnonce, nc) for replays, up to 100 000 of them;
+    the cnonce is the client's choice, and the triple was kept as sent: a login sending
+    cnonces of 3 000 characters made each entry some 3 KB (measured 3.1 KB), 300 MB at the
+    limit. An entry is now a fixed-size digest of the triple."""
+    import sys
+
+    seen = cell["face"].seen
+    before = set(seen._seen)
+    ha1, ha2 = digest.ha1("operator", PASSWORD["operator"]), _md5("GET:" + STATE)
+    for k in range(20):
+        nonce, cnonce = _nonce(cell), f"{k:04d}" + "c" * 3000
+        response = _md5(f"{ha1}:{nonce}:00000001:{cnonce}:auth:{ha2}")
+        header = (f'Digest username="operator", realm="validusers", nonce="{nonce}", '
+                  f'uri="{STATE}", response="{response}", qop=auth, nc=00000001, '
+                  f'cnonce="{cnonce}"')
+        r = requests.get(cell["url"] + STATE, headers={"Authorization": header})
+        assert r.status_code == 200, r.text[:200]
+    new = [key for key in seen._seen if key not in before]
+    assert len(new) == 20
+    per_entry = sum(sys.getsizeof(key) + sum(sys.getsizeof(part) for part in key)
+                    if isinstance(key, tuple) else sys.getsizeof(key) for key in new) / 20
+    assert per_entry < 200, f"{per_entry:.0f} bytes per remembered use"

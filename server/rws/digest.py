@@ -79,12 +79,14 @@ class Seen:
     is refused (stale: the client signs again with a new nonce)."""
 
     def __init__(self) -> None:
-        self._seen: OrderedDict[tuple[str, str, str], int] = OrderedDict()
+        # a digest of the triple: the cnonce is the client's choice, of any length
+        self._seen: OrderedDict[bytes, int] = OrderedDict()
         self._lock = threading.Lock()
         self.floor = -1  # µs
 
-    def first_use(self, key: tuple[str, str, str]) -> bool:
-        minted = int(key[0].partition(".")[0])  # a nonce verify() checked: its digits
+    def first_use(self, triple: tuple[str, str, str]) -> bool:
+        minted = int(triple[0].partition(".")[0])  # a nonce verify() checked: its digits
+        key = hashlib.sha256("\n".join(triple).encode("utf-8", "surrogateescape")).digest()
         with self._lock:
             if key in self._seen or minted <= self.floor:
                 return False
