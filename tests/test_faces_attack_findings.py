@@ -266,38 +266,6 @@ def test_a_subscription_of_many_resources_costs_one_look_at_the_symbols(cell: di
     assert took < 5.0, f"{n} resources took {took:.1f} s"
 
 
-def test_a_role_that_may_write_but_not_read_writes_through_rws_as_through_rest(
-        cell: dict) -> None:
-    """One permission table on every face: a site role with frames:commit and data:import but
-    not frames:read may PUT a tool slot and POST an import on REST, and write BASE_DATA through
-    KVP; RWS refused its set and its fileservice PUT with 403 "needs permission frames:read"
-    (both read the module before writing). They now need what docs/rws.md says: frames:commit,
-    data:import; the set is audited under that user, and reading stays refused."""
-    from server.auth import tokens
-
-    with cell["face"].make_session() as db:
-        tokens.add_role(db, "Writer", ["frames:commit", "data:import"])
-        db.commit()
-    ok(cell["rest"].post("/users", json={"name": "writer", "role": "Writer"}))
-    with cell["face"].make_session() as db:
-        ops.set_rws_ha1(db, "writer", digest.ha1("writer", "writer-secret"))
-        db.commit()
-    auth = requests.auth.HTTPDigestAuth("writer", "writer-secret")
-    symbol = cell["url"] + "/rw/rapid/symbol/data/RAPID/T_ROB1/tool9"
-    r = requests.post(symbol + "?action=set&json=1", auth=auth,
-                      data={"value": "[TRUE,[[0,0,99.5],[1,0,0,0]],[2,[0,0,40],[1,0,0,0],0,0,0]]"})
-    assert r.status_code == 204, r.text[-200:]
-    slot = ok(cell["rest"].get(f"/controllers/{cell['cid']}/tools/9"))
-    assert (slot["pose"]["z"], slot["provenance"]["updated_by"]) == (99.5, "writer")
-    assert requests.get(symbol + "?json=1", auth=auth).status_code == 403
-    module = ("MODULE Cell\n  PERS tooldata gun:=[TRUE,[[0,0,100],[1,0,0,0]],"
-              "[1,[0,0,50],[1,0,0,0],0,0,0]];\nENDMODULE\n")
-    r = requests.put(cell["url"] + "/fileservice/$HOME/Cell.mod?json=1", data=module.encode(),
-                     auth=auth)
-    assert r.status_code == 201, r.text[-200:]
-    assert requests.get(cell["url"] + "/fileservice/$HOME/Cell.mod", auth=auth).status_code == 403
-
-
 def test_a_partial_load_data_write_keeps_what_it_does_not_name(cell: dict) -> None:
     """docs/kvp.md: a partial aggregate changes only the components it names, as a KRL
     assignment does, and ``M -1`` clears a load. ``LOAD_DATA[n]={M 4.5}`` and
@@ -500,3 +468,37 @@ def test_the_replay_memory_does_not_grow_with_the_cnonce_a_client_chooses(cell: 
     per_entry = sum(sys.getsizeof(key) + sum(sys.getsizeof(part) for part in key)
                     if isinstance(key, tuple) else sys.getsizeof(key) for key in new) / 20
     assert per_entry < 200, f"{per_entry:.0f} bytes per remembered use"
+
+
+def test_a_role_that_may_write_but_not_read_writes_through_rws_as_through_rest(
+        cell: dict) -> None:
+    """(Last in the file: its import replaces the module the symbols come from.)
+
+    One permission table on every face: a site role with frames:commit and data:import but
+    not frames:read may PUT a tool slot and POST an import on REST, and write BASE_DATA through
+    KVP; RWS refused its set and its fileservice PUT with 403 "needs permission frames:read"
+    (both read the module before writing). They now need what docs/rws.md says: frames:commit,
+    data:import; the set is audited under that user, and reading stays refused."""
+    from server.auth import tokens
+
+    with cell["face"].make_session() as db:
+        tokens.add_role(db, "Writer", ["frames:commit", "data:import"])
+        db.commit()
+    ok(cell["rest"].post("/users", json={"name": "writer", "role": "Writer"}))
+    with cell["face"].make_session() as db:
+        ops.set_rws_ha1(db, "writer", digest.ha1("writer", "writer-secret"))
+        db.commit()
+    auth = requests.auth.HTTPDigestAuth("writer", "writer-secret")
+    symbol = cell["url"] + "/rw/rapid/symbol/data/RAPID/T_ROB1/tool9"
+    r = requests.post(symbol + "?action=set&json=1", auth=auth,
+                      data={"value": "[TRUE,[[0,0,99.5],[1,0,0,0]],[2,[0,0,40],[1,0,0,0],0,0,0]]"})
+    assert r.status_code == 204, r.text[-200:]
+    slot = ok(cell["rest"].get(f"/controllers/{cell['cid']}/tools/9"))
+    assert (slot["pose"]["z"], slot["provenance"]["updated_by"]) == (99.5, "writer")
+    assert requests.get(symbol + "?json=1", auth=auth).status_code == 403
+    module = ("MODULE Cell\n  PERS tooldata gun:=[TRUE,[[0,0,100],[1,0,0,0]],"
+              "[1,[0,0,50],[1,0,0,0],0,0,0]];\nENDMODULE\n")
+    r = requests.put(cell["url"] + "/fileservice/$HOME/Cell.mod?json=1", data=module.encode(),
+                     auth=auth)
+    assert r.status_code == 201, r.text[-200:]
+    assert requests.get(cell["url"] + "/fileservice/$HOME/Cell.mod", auth=auth).status_code == 403
