@@ -7,10 +7,14 @@ import asyncio
 import datetime as dt
 import socket
 import threading
+from collections.abc import Iterator
+from contextlib import contextmanager
 from dataclasses import dataclass, field
 from pathlib import Path
 
+import pytest
 from asyncua import Client, ua
+from api_helpers import make_client, ok
 from asyncua.crypto.security_policies import SecurityPolicyBasic256Sha256
 from browser_helpers import free_port
 from cryptography import x509
@@ -115,6 +119,34 @@ def start_face(make_session, folder: Path, port: int | None = None,
     face = Face(server, folder / "pki", client, loop, thread)
     face.run(server.start())
     return face
+
+
+@contextmanager
+def rest_and_face(db_url: str, folder: Path, **kwargs) -> Iterator[dict]:
+    """REST (a TestClient, the Administrator) and the face (:func:`start_face`, ``kwargs``)
+    on one database: {rest, face, db_url, folder}."""
+    with make_client(db_url) as rest:
+        face = start_face(rest.app.state.sessionmaker, folder, **kwargs)
+        try:
+            yield {"rest": rest, "face": face, "db_url": db_url, "folder": folder}
+        finally:
+            face.stop()
+
+
+def module_cell(folder: str, **kwargs):  # noqa: ANN201
+    """A module's fixture ``cell``: :func:`rest_and_face` on a fresh database, the face's
+    files in a new folder named ``folder``, ``kwargs`` to :func:`start_face`."""
+    @pytest.fixture(scope="module")
+    def cell(fresh_db, tmp_path_factory: pytest.TempPathFactory) -> Iterator[dict]:  # noqa: ANN001
+        with rest_and_face(fresh_db(), tmp_path_factory.mktemp(folder), **kwargs) as running:
+            yield running
+    return cell
+
+
+def add_user(cell: dict, name: str, role: str) -> str:
+    """A new user of ``role`` made over REST (``cell["rest"]``); its API token."""
+    ok(cell["rest"].post("/users", json={"name": name, "role": role}))
+    return ok(cell["rest"].post(f"/users/{name}/tokens", json={}))["token"]
 
 
 async def secure_client(endpoint: str, cert: ClientCert, user: str | None = None,

@@ -15,38 +15,25 @@ import stat
 import subprocess
 import sys
 import time
-from collections.abc import Iterator
 from pathlib import Path
 
 import pytest
-from api_helpers import ADMIN_TOKEN, C, make_client, ok
+from api_helpers import ADMIN_TOKEN, C, ok
 from asyncua import Client, ua
 from asyncua.crypto.security_policies import SecurityPolicyBasic256Sha256
 from browser_helpers import free_port
 from cryptography import x509
-from opcua_helpers import (ClientCert, Face, client_certificate, namespaces, secure_client,
-                           start_face)
+from opcua_helpers import (ClientCert, Face, add_user, client_certificate, namespaces,
+                           module_cell, secure_client, start_face)
 
 from server.auth import tokens
 from server.opcua.pki import KEY_NAME
 from server.opcua.service import PendantOpcUa
 
 
-@pytest.fixture(scope="module")
-def cell(fresh_db, tmp_path_factory: pytest.TempPathFactory) -> Iterator[dict]:
-    """REST and the OPC UA face (with the optional None endpoint) on one SQLite file."""
-
-    folder = tmp_path_factory.mktemp("opcua-security")
-    db_url = fresh_db()
-    with make_client(db_url) as rest:
-        face = start_face(rest.app.state.sessionmaker, folder, none_endpoint=True)
-        yield {"rest": rest, "face": face, "db_url": db_url, "folder": folder}
-        face.stop()
-
-
-def user(cell: dict, name: str, role: str) -> str:
-    ok(cell["rest"].post("/users", json={"name": name, "role": role}))
-    return ok(cell["rest"].post(f"/users/{name}/tokens", json={}))["token"]
+# REST and the OPC UA face (with the optional None endpoint) on one SQLite file
+cell = module_cell("opcua-security", none_endpoint=True)
+user = add_user
 
 
 async def pendant_obj(client: Client, ns: dict):

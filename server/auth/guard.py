@@ -48,6 +48,9 @@ def _bearer_secret(header: str) -> str:
     if scheme.lower() != "bearer" or not secret.strip():
         raise _refuse(401, ("header", "authorization"),
                       "must be 'Bearer <token>' (pendant tokens create)", "unauthorized")
+    if tokens.is_certificate_secret(secret.strip()):  # a certificate's public fingerprint
+        raise _refuse(401, ("header", "authorization"),
+                      "unknown, expired or revoked token", "unauthorized")
     return secret.strip()
 
 

@@ -36,10 +36,19 @@ def sha256(secret: str) -> str:
     return hashlib.sha256(secret.encode("utf-8")).hexdigest()
 
 
+CERTIFICATE_PREFIX = "x509:sha256:"
+
+
 def certificate_secret(der: bytes) -> str:
     """The token secret that stands for an X.509 certificate (its SHA-256 fingerprint): an OPC UA
-    certificate login is a token of the user (``pendant users cert``), revocable and expiring."""
-    return "x509:sha256:" + hashlib.sha256(der).hexdigest()
+    certificate login is a token of the user (``pendant users cert``), revocable and expiring.
+    Anyone with the public certificate can compute it, so it is no bearer token or password:
+    only a login that proved the certificate's key looks it up (:func:`actor_of_token`)."""
+    return CERTIFICATE_PREFIX + hashlib.sha256(der).hexdigest()
+
+
+def is_certificate_secret(secret: str) -> bool:
+    return secret.startswith(CERTIFICATE_PREFIX)
 
 
 @dataclass(frozen=True)
@@ -167,8 +176,12 @@ def _active(u: User | None) -> bool:
     return u is not None and u.revoked_at is None
 
 
-def actor_of_token(db: Session, secret: str) -> tuple[User, Role] | None:
-    """The user and role of a valid (known, unexpired, unrevoked) bearer token, else None."""
+def actor_of_token(db: Session, secret: str, certificate: bool = False) -> tuple[User, Role] | None:
+    """The user and role of a valid (known, unexpired, unrevoked) bearer token, else None. A
+    certificate's secret (public data) only with ``certificate`` (a login that proved its key),
+    and a token only without."""
+    if is_certificate_secret(secret) != certificate:
+        return None
     found = _actor_of_digest(db, sha256(secret))
     return None if found is None else found[0]
 

@@ -252,8 +252,8 @@ class PendantUsers(UserManager):
             return None  # anonymous, or only a channel's certificate: not a login
         if not secret:
             return None
-        with self.make_session() as db:
-            found = tokens.actor_of_token(db, secret)
+        with self.make_session() as db:  # a password is never a certificate's fingerprint
+            found = tokens.actor_of_token(db, secret, certificate=username is None)
         if found is None or (username is not None and found[0].name != username):
             return None
         return PendantUser(role=UserRole.User, name=found[0].name, secret=secret)
@@ -276,8 +276,8 @@ class PendantRules(PermissionRuleset):
         hit = self._cache.get(secret)
         if not fresh and hit is not None and time.monotonic() - hit[0] < self.ttl_s:
             return hit[1]
-        with self.make_session() as db:
-            found = tokens.actor_of_token(db, secret)
+        with self.make_session() as db:  # a session's secret: its login checked it
+            found = tokens.actor_of_token(db, secret, tokens.is_certificate_secret(secret))
             caller = None if found is None else Caller(
                 found[0].name, found[0].role, tokens.role_permissions(db, found[0].role))
         if len(self._cache) > 10_000:
