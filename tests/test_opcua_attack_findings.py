@@ -4,6 +4,9 @@ its fix (the commit that added it says what was measured).
 1. A registered certificate's token secret is its SHA-256 fingerprint (public data): sent as
    a password (OPC UA), a bearer token or a browser login token (REST), it logged in as the
    certificate's user.
+2. A session's AuthenticationToken was a counter (1000, 1001, ...), and a failed
+   ActivateSession on a new secure channel left that channel holding the session named by
+   the token: a client with no login took over another user's session (and its rights).
 """
 
 from __future__ import annotations
@@ -14,6 +17,7 @@ from pathlib import Path
 import pytest
 from api_helpers import C, ok
 from asyncua import Client, ua
+from asyncua.crypto.security_policies import SecurityPolicyBasic256Sha256
 from opcua_helpers import add_user, client_certificate, namespaces, module_cell, secure_client
 
 from server.auth import tokens
@@ -60,3 +64,67 @@ def test_a_registered_certificates_fingerprint_is_no_password(cell: dict, tmp_pa
         async with client:
             return await read_frame(client)
     assert asyncio.run(certificate_login())[1] == "tool"
+
+
+# 2. a session stays on its channel -----------------------------------------------------------
+
+async def activate_on_new_channel(cell: dict, token: ua.NodeId, secure: bool) -> object:
+    """A client with no login opens its own channel (the trusted application certificate, or
+    no certificate on the None endpoint), sends ActivateSession naming ``token`` with a
+    signature it cannot make, then calls ReadFrame: the outcome (or the status raised)."""
+    face = cell["face"]
+    attacker = Client(face.endpoint, timeout=10)
+    if secure:
+        attacker.application_uri = face.client.uri
+        await attacker.set_security(SecurityPolicyBasic256Sha256, face.client.cert,
+                                    face.client.key)
+    await attacker.connect_socket()
+    try:
+        await attacker.send_hello()
+        await attacker.open_secure_channel()
+        attacker.uaclient.protocol.authentication_token = token
+        params = ua.ActivateSessionParameters()
+        params.ClientSignature.Algorithm = SecurityPolicyBasic256Sha256.AsymmetricSignatureURI
+        params.ClientSignature.Signature = b"\0" * 256
+        params.UserIdentityToken = ua.AnonymousIdentityToken()
+        try:
+            await attacker.uaclient.activate_session(params)
+        except ua.UaStatusCodeError:
+            pass
+        try:
+            return await read_frame(attacker)
+        except ua.UaStatusCodeError as err:
+            return err.code
+    finally:
+        attacker.disconnect_socket()
+
+
+@pytest.mark.parametrize("secure", [True, False], ids=["trusted-channel", "none-endpoint"])
+def test_a_failed_activation_on_another_channel_takes_no_session(cell: dict, secure: bool) -> None:
+    name = f"hij{int(secure)}"
+    secret = user(cell, name, "Expert")
+
+    async def scene() -> tuple[object, list]:
+        victim = await secure_client(cell["face"].endpoint, cell["face"].client, name, secret)
+        async with victim:
+            token = victim.uaclient.protocol.authentication_token
+            outcome = await activate_on_new_channel(cell, token, secure)
+            return outcome, await read_frame(victim)  # the victim's session still serves it
+
+    outcome, victims = asyncio.run(scene())
+    assert outcome == ua.StatusCodes.BadSessionIdInvalid, outcome
+    assert victims[1] == "tool"
+
+
+def test_authentication_tokens_are_not_counted_up(cell: dict) -> None:
+    secret = user(cell, "tok", "Operator")
+
+    async def token() -> ua.NodeId:
+        client = await secure_client(cell["face"].endpoint, cell["face"].client, "tok", secret)
+        async with client:
+            return client.uaclient.protocol.authentication_token
+
+    a, b = asyncio.run(token()), asyncio.run(token())
+    assert a != b
+    for t in (a, b):  # 128 random bits or more, not a small number
+        assert t.NodeIdType in (ua.NodeIdType.ByteString, ua.NodeIdType.Guid), t

@@ -215,6 +215,22 @@ def unguessable_subscription_ids(service: Any) -> None:
     service.create_subscription = create_subscription
 
 
+def unguessable_session_tokens(iserver: Any) -> None:
+    """Sessions' AuthenticationTokens of 32 random bytes (asyncua counts up from 1000: a
+    client that guessed one could name another client's session on a channel of its own)."""
+    create = iserver.create_session
+
+    def create_session(*args: Any, **kwargs: Any) -> Any:
+        session = create(*args, **kwargs)
+        if session.external:
+            iserver.unregister_external_session(session)
+            session.auth_token = ua.NodeId(secrets.token_bytes(32), 0, ua.NodeIdType.ByteString)
+            iserver.register_external_session(session)
+        return session
+
+    iserver.create_session = create_session
+
+
 def republish_with_status(service: Any) -> None:
     """Republish of a message the server no longer holds answers ``BadMessageNotAvailable``
     (of an unknown subscription ``BadSubscriptionIdInvalid``), as OPC 10000-4 §5.13.6 has it.

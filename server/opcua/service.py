@@ -66,6 +66,10 @@ async def _same_as_channel(cert: x509.Certificate, _app: ua.ApplicationDescripti
         raise ServiceError(ua.StatusCodes.BadCertificateInvalid)
 
 
+CREATE = ua.NodeId(ua.ObjectIds.CreateSessionRequest_Encoding_DefaultBinary)
+ACTIVATE = ua.NodeId(ua.ObjectIds.ActivateSessionRequest_Encoding_DefaultBinary)
+
+
 class SessionProcessor(UaProcessor):
     """A request on a channel without a (valid) session gets ``BadSessionIdInvalid``, as OPC
     10000-4 §7.29 has it, so a client makes a new session; a session whose login was revoked
@@ -76,6 +80,8 @@ class SessionProcessor(UaProcessor):
     async def _process_message(self, typeid, requesthdr, seqhdr, body):
         if self.session is None and typeid not in access.SESSIONLESS_TYPES:
             raise ServiceError(ua.StatusCodes.BadSessionIdInvalid)
+        if typeid == ACTIVATE and self.session is None:
+            return await self._activate_moved_session(typeid, requesthdr, seqhdr, body)
         rules = self._connection.security_policy.permissions
         if self.session is not None and typeid not in access.SESSION_TYPES and \
                 isinstance(rules, access.PendantRules) and rules.revoked(self.session.user):
@@ -84,7 +90,24 @@ class SessionProcessor(UaProcessor):
             await self.session.close_session(True)
             self.session = None
             raise ServiceError(ua.StatusCodes.BadSessionIdInvalid)
-        return await super()._process_message(typeid, requesthdr, seqhdr, body)
+        done = await super()._process_message(typeid, requesthdr, seqhdr, body)
+        if typeid == CREATE and self.session is not None:  # the client certificate it is bound to
+            self.session.pendant_peer = self._connection.security_policy.peer_certificate
+        return done
+
+    async def _activate_moved_session(self, typeid, requesthdr, seqhdr, body):
+        """A session moves to a new channel (a reconnect, OPC 10000-4 §5.6.3) only on a signed
+        channel of the client certificate it was made with, and a failed activation leaves the
+        channel without it (asyncua kept it there: the client went on as the session's user)."""
+        peer = self._connection.security_policy.peer_certificate
+        session = self.iserver.lookup_external_session(requesthdr.AuthenticationToken)
+        if session is None or peer is None or getattr(session, "pendant_peer", None) != peer:
+            raise ServiceError(ua.StatusCodes.BadSessionIdInvalid)
+        try:
+            return await super()._process_message(typeid, requesthdr, seqhdr, body)
+        except BaseException:
+            self.session = None
+            raise
 
 
 class SessionProtocol(OPCUAProtocol):
@@ -166,6 +189,7 @@ class PendantOpcUa:
         self.rules = access.PendantRules(self.make_session, self.auth, iserver=self.server.iserver)
         access.install_login_checks(self.server.iserver)
         access.unguessable_subscription_ids(self.server.iserver.subscription_service)
+        access.unguessable_session_tokens(self.server.iserver)
         access.republish_with_status(self.server.iserver.subscription_service)
         cert, key = await pki.server_certificate(self.pki_dir, space.PENDANT_URI)
         await self.server.load_certificate(str(cert))
