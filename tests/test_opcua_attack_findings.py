@@ -12,6 +12,7 @@ its fix (the commit that added it says what was measured).
 from __future__ import annotations
 
 import asyncio
+import time
 from pathlib import Path
 
 import pytest
@@ -128,3 +129,33 @@ def test_authentication_tokens_are_not_counted_up(cell: dict) -> None:
     assert a != b
     for t in (a, b):  # 128 random bits or more, not a small number
         assert t.NodeIdType in (ua.NodeIdType.ByteString, ua.NodeIdType.Guid), t
+
+
+# 3. sessions that are never activated do not pile up -----------------------------------------
+
+def test_sessions_never_activated_end_with_their_channel(cell: dict) -> None:
+    """CreateSession after CreateSession on one channel, with no certificate and no login (the
+    None endpoint): each new one left the one before registered for ever (asyncua watches a
+    session's timeout only once it is activated, and closes only the channel's last one)."""
+    face = cell["face"]
+    sessions = face.server.server.iserver._external_sessions
+
+    async def flood() -> int:
+        client = Client(face.endpoint, timeout=10)
+        await client.connect_socket()
+        try:
+            await client.send_hello()
+            await client.open_secure_channel()
+            for _ in range(50):
+                await client.create_session()
+            return len(sessions)
+        finally:
+            client.disconnect_socket()
+
+    before = face.run(asyncio.sleep(0, len(sessions)))
+    during = asyncio.run(flood())
+    deadline = time.monotonic() + 5
+    while time.monotonic() < deadline and face.run(asyncio.sleep(0, len(sessions))) > before:
+        time.sleep(0.1)
+    assert during <= before + 1
+    assert face.run(asyncio.sleep(0, len(sessions))) == before

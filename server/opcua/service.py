@@ -90,6 +90,10 @@ class SessionProcessor(UaProcessor):
             await self.session.close_session(True)
             self.session = None
             raise ServiceError(ua.StatusCodes.BadSessionIdInvalid)
+        if typeid == CREATE and self.session is not None and not self.session.is_activated():
+            # the channel's one session is replaced: asyncua kept the old one for ever (it
+            # times out only once activated), so one channel could register sessions unbounded
+            await self.session.close_session(True)
         done = await super()._process_message(typeid, requesthdr, seqhdr, body)
         if typeid == CREATE and self.session is not None:  # the client certificate it is bound to
             self.session.pendant_peer = self._connection.security_policy.peer_certificate
