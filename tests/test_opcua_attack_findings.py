@@ -22,6 +22,7 @@ from asyncua.crypto.security_policies import SecurityPolicyBasic256Sha256
 from opcua_helpers import add_user, client_certificate, namespaces, module_cell, secure_client
 
 from server.auth import tokens
+from server.opcua import access
 
 
 # REST and the OPC UA face (with the optional None endpoint) on one SQLite file
@@ -159,3 +160,27 @@ def test_sessions_never_activated_end_with_their_channel(cell: dict) -> None:
         time.sleep(0.1)
     assert during <= before + 1
     assert face.run(asyncio.sleep(0, len(sessions))) == before
+
+
+# 4. one user cannot take every subscription ---------------------------------------------------
+
+def test_one_user_cannot_take_the_servers_subscriptions(cell: dict) -> None:
+    """asyncua caps subscriptions at 1000 for the whole server: one Operator took them all,
+    and every other user's CreateSubscription was BadTooManySubscriptions."""
+    hog, other = add_user(cell, "hog", "Operator"), add_user(cell, "other", "Operator")
+
+    async def scene() -> tuple[int, object]:
+        a = await secure_client(cell["face"].endpoint, cell["face"].client, "hog", hog)
+        b = await secure_client(cell["face"].endpoint, cell["face"].client, "other", other)
+        async with a, b:
+            made = 0
+            with pytest.raises(ua.UaStatusCodeError) as err:
+                while made < 1000:
+                    await a.create_subscription(1000, None)
+                    made += 1
+            assert err.value.code == ua.StatusCodes.BadTooManySubscriptions
+            return made, await b.create_subscription(1000, None)
+
+    made, others = asyncio.run(scene())
+    assert made == access.SUBSCRIPTIONS_PER_USER
+    assert others.subscription_id

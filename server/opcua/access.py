@@ -94,6 +94,7 @@ SUBSCRIPTION_REQUESTS: dict[ua.NodeId, tuple[type, str]] = {
         (_R.SetTriggeringRequest_Encoding_DefaultBinary, ua.SetTriggeringParameters,
          "SubscriptionId"),
     )}
+SUBSCRIPTIONS_PER_USER = 100  # of the server's 1000 (asyncua's max_subscriptions)
 # standard methods a reader may call (OPC 10000-5 §9): they only read
 READ_METHODS = {ua.NodeId(m) for m in (_R.Server_GetMonitoredItems, _R.Server_ResendData)}
 
@@ -203,14 +204,23 @@ def install_login_checks(iserver: Any) -> None:
 
 
 def unguessable_subscription_ids(service: Any) -> None:
-    """Subscription ids drawn at random (asyncua counts up from 78: easy to guess)."""
+    """Subscription ids drawn at random (asyncua counts up from 78: easy to guess), and at most
+    :data:`SUBSCRIPTIONS_PER_USER` of one user (asyncua's one cap is the server's 1000: one
+    user took them all, and everyone else's were refused)."""
     create = service.create_subscription
 
-    async def create_subscription(*args: Any, **kwargs: Any) -> Any:
+    async def create_subscription(params: Any, callback: Any, session_id: ua.NodeId,
+                                  *args: Any, **kwargs: Any) -> Any:
+        users = {s.session_id: getattr(s.user, "name", None)
+                 for s in service.iserver._external_sessions.values()}
+        mine = [sub for sub in service.subscriptions.values()
+                if users.get(sub.session_id) == users.get(session_id)]
+        if users.get(session_id) is not None and len(mine) >= SUBSCRIPTIONS_PER_USER:
+            raise ServiceError(ua.StatusCodes.BadTooManySubscriptions)
         while True:
             service._sub_id_counter = secrets.randbelow(2 ** 31 - 2) + 1  # it adds one
             if service._sub_id_counter + 1 not in service.subscriptions:
-                return await create(*args, **kwargs)
+                return await create(params, callback, session_id, *args, **kwargs)
 
     service.create_subscription = create_subscription
 
