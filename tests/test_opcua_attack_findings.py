@@ -16,7 +16,7 @@ import time
 from pathlib import Path
 
 import pytest
-from api_helpers import C, ok
+from api_helpers import ADMIN_TOKEN, C, ok
 from asyncua import Client, ua
 from asyncua.crypto.security_policies import SecurityPolicyBasic256Sha256
 from opcua_helpers import add_user, client_certificate, namespaces, module_cell, secure_client
@@ -184,3 +184,35 @@ def test_one_user_cannot_take_the_servers_subscriptions(cell: dict) -> None:
     made, others = asyncio.run(scene())
     assert made == access.SUBSCRIPTIONS_PER_USER
     assert others.subscription_id
+
+
+# 5. one user cannot take every session ------------------------------------------------------
+
+def test_one_user_cannot_take_the_servers_sessions(cell: dict) -> None:
+    """asyncua caps activated sessions at 1000 for the whole server: one Operator made them
+    all on one channel (CreateSession and ActivateSession again and again, 4 s), and the
+    Administrator's login was then BadMaxConnectionsReached."""
+    hog = add_user(cell, "shog", "Operator")
+    face = cell["face"]
+
+    async def scene() -> tuple[int, int, str]:
+        client = await secure_client(face.endpoint, face.client, "shog", hog)
+        await client.connect_socket()
+        try:
+            await client.send_hello()
+            await client.open_secure_channel()
+            made = 0
+            with pytest.raises(ua.UaStatusCodeError) as err:
+                while made < 1000:
+                    await client.create_session()
+                    await client.activate_session("shog", hog)
+                    made += 1
+            admin = await secure_client(face.endpoint, face.client, "admin", ADMIN_TOKEN)
+            async with admin:
+                return made, err.value.code, (await admin.nodes.server.read_browse_name()).Name
+        finally:
+            client.disconnect_socket()
+
+    made, code, name = asyncio.run(scene())
+    assert (made, code) == (access.SESSIONS_PER_USER, ua.StatusCodes.BadTooManySessions)
+    assert name == "Server"

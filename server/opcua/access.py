@@ -95,6 +95,7 @@ SUBSCRIPTION_REQUESTS: dict[ua.NodeId, tuple[type, str]] = {
          "SubscriptionId"),
     )}
 SUBSCRIPTIONS_PER_USER = 100  # of the server's 1000 (asyncua's max_subscriptions)
+SESSIONS_PER_USER = 50  # activated at once, of the server's 1000 (InternalSession.max_connections)
 # standard methods a reader may call (OPC 10000-5 §9): they only read
 READ_METHODS = {ua.NodeId(m) for m in (_R.Server_GetMonitoredItems, _R.Server_ResendData)}
 
@@ -141,6 +142,9 @@ class Channel:
 
 CHANNEL: contextvars.ContextVar[Channel | None] = contextvars.ContextVar("pendant_opcua_channel",
                                                                         default=None)
+# the session an ActivateSession is for (set by the face's processor before asyncua's handling)
+ACTIVATING: contextvars.ContextVar[Any] = contextvars.ContextVar("pendant_opcua_activating",
+                                                                default=None)
 
 
 def _signed() -> bool:
@@ -282,6 +286,11 @@ class PendantUsers(UserManager):
             found = tokens.actor_of_token(db, secret, certificate=username is None)
         if found is None or (username is not None and found[0].name != username):
             return None
+        this = ACTIVATING.get()
+        others = [s for s in getattr(iserver, "_external_sessions", {}).values()
+                  if s is not this and s.is_activated() and getattr(s.user, "name", None) == found[0].name]
+        if len(others) >= SESSIONS_PER_USER:  # else one user's sessions locked everyone out
+            raise ServiceError(ua.StatusCodes.BadTooManySessions)
         return PendantUser(role=UserRole.User, name=found[0].name, secret=secret)
 
 

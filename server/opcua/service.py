@@ -90,6 +90,8 @@ class SessionProcessor(UaProcessor):
             await self.session.close_session(True)
             self.session = None
             raise ServiceError(ua.StatusCodes.BadSessionIdInvalid)
+        if typeid == ACTIVATE:
+            access.ACTIVATING.set(self.session)  # not counted among its user's other sessions
         if typeid == CREATE and self.session is not None and not self.session.is_activated():
             # the channel's one session is replaced: asyncua kept the old one for ever (it
             # times out only once activated), so one channel could register sessions unbounded
@@ -107,6 +109,7 @@ class SessionProcessor(UaProcessor):
         session = self.iserver.lookup_external_session(requesthdr.AuthenticationToken)
         if session is None or peer is None or getattr(session, "pendant_peer", None) != peer:
             raise ServiceError(ua.StatusCodes.BadSessionIdInvalid)
+        access.ACTIVATING.set(session)
         try:
             return await super()._process_message(typeid, requesthdr, seqhdr, body)
         except BaseException:
