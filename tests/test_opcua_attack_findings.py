@@ -216,3 +216,21 @@ def test_one_user_cannot_take_the_servers_sessions(cell: dict) -> None:
     made, code, name = asyncio.run(scene())
     assert (made, code) == (access.SESSIONS_PER_USER, ua.StatusCodes.BadTooManySessions)
     assert name == "Server"
+
+
+# 6. the application says who it is as its certificate does -----------------------------------
+
+def test_an_application_uri_not_in_the_certificate_is_refused(cell: dict) -> None:
+    """CreateSession's ApplicationUri must be the certificate's (OPC 10000-4 §5.6.2,
+    BadCertificateUriInvalid); any URI was accepted."""
+    async def login() -> list:
+        client = await secure_client(cell["face"].endpoint, cell["face"].client, "admin",
+                                     ADMIN_TOKEN)
+        client.application_uri = "urn:somebody:else"
+        async with client:
+            return await read_frame(client)
+
+    with pytest.raises(ua.UaStatusCodeError) as err:
+        asyncio.run(login())
+    assert err.value.code == ua.StatusCodes.BadCertificateUriInvalid
+

@@ -58,12 +58,22 @@ class CheckedPolicyFactory(security_policies.SecurityPolicyFactory):
         return super().create(peer_certificate)
 
 
-async def _same_as_channel(cert: x509.Certificate, _app: ua.ApplicationDescription) -> None:
-    """CreateSession's client certificate must be the one its signed channel was opened with."""
+async def _same_as_channel(cert: x509.Certificate, app: ua.ApplicationDescription) -> None:
+    """CreateSession's client certificate must be the one its signed channel was opened with,
+    and its ApplicationUri one the certificate names (OPC 10000-4 §5.6.2). (On a None channel
+    the certificate proves nothing and is dropped.)"""
     ch = access.CHANNEL.get()
-    if ch is not None and ch.peer_certificate is not None and \
-            cert.public_bytes(Encoding.DER) != ch.peer_certificate:
+    if ch is None or ch.peer_certificate is None:
+        return
+    if cert.public_bytes(Encoding.DER) != ch.peer_certificate:
         raise ServiceError(ua.StatusCodes.BadCertificateInvalid)
+    try:
+        uris = cert.extensions.get_extension_for_class(x509.SubjectAlternativeName).value \
+            .get_values_for_type(x509.UniformResourceIdentifier)
+    except x509.ExtensionNotFound:
+        uris = []
+    if app.ApplicationUri not in uris:
+        raise ServiceError(ua.StatusCodes.BadCertificateUriInvalid)
 
 
 CREATE = ua.NodeId(ua.ObjectIds.CreateSessionRequest_Encoding_DefaultBinary)
