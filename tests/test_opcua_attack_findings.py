@@ -234,3 +234,33 @@ def test_an_application_uri_not_in_the_certificate_is_refused(cell: dict) -> Non
         asyncio.run(login())
     assert err.value.code == ua.StatusCodes.BadCertificateUriInvalid
 
+
+# 7. nobody registers servers with the face ----------------------------------------------------
+
+def test_register_server_is_refused_without_a_session(cell: dict) -> None:
+    """access.ADMIN_TYPES meant RegisterServer for nobody, but asyncua serves it without a
+    session and asks no permission: a client with no certificate and no login (the None
+    endpoint) registered a server of its own, which FindServers then handed to every client."""
+    rogue = ua.RegisteredServer(ServerUri="urn:rogue:server", ProductUri="urn:rogue",
+                                ServerNames=[ua.LocalizedText("pendant")],
+                                ServerType=ua.ApplicationType.Server,
+                                DiscoveryUrls=["opc.tcp://rogue.example:4840/pendant/"],
+                                IsOnline=True)
+
+    async def scene() -> tuple[object, list[str]]:
+        client = Client(cell["face"].endpoint, timeout=10)
+        await client.connect_socket()
+        try:
+            await client.send_hello()
+            await client.open_secure_channel()
+            try:
+                outcome: object = await client.uaclient.register_server(rogue)
+            except ua.UaStatusCodeError as err:
+                outcome = err.code
+            return outcome, [s.ApplicationUri for s in await client.find_servers()]
+        finally:
+            client.disconnect_socket()
+
+    outcome, listed = asyncio.run(scene())
+    assert outcome == ua.StatusCodes.BadServiceUnsupported
+    assert "urn:rogue:server" not in listed

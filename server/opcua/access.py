@@ -54,11 +54,14 @@ SESSION_TYPES = {ua.NodeId(t) for t in (
     ua.ObjectIds.GetEndpointsRequest_Encoding_DefaultBinary,
     ua.ObjectIds.FindServersRequest_Encoding_DefaultBinary,
 )}
-# requests asyncua serves without a session (the rest need one: else BadSessionIdInvalid)
-SESSIONLESS_TYPES = SESSION_TYPES | {ua.NodeId(t) for t in (
+# a discovery server's registrations: asyncua serves them without a session or a permission
+# check, so the face refuses them itself (it is no discovery server)
+REGISTER_TYPES = {ua.NodeId(t) for t in (
     ua.ObjectIds.RegisterServerRequest_Encoding_DefaultBinary,
     ua.ObjectIds.RegisterServer2Request_Encoding_DefaultBinary,
 )}
+# requests asyncua serves without a session (the rest need one: else BadSessionIdInvalid)
+SESSIONLESS_TYPES = SESSION_TYPES | REGISTER_TYPES
 # changing the address space itself: nobody from outside
 ADMIN_TYPES = {ua.NodeId(t) for t in (
     ua.ObjectIds.AddNodesRequest_Encoding_DefaultBinary,

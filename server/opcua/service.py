@@ -88,6 +88,8 @@ class SessionProcessor(UaProcessor):
     Publish requests at once, forever (thousands a second)."""
 
     async def _process_message(self, typeid, requesthdr, seqhdr, body):
+        if typeid in access.REGISTER_TYPES:  # else anyone's server was listed by FindServers
+            raise ServiceError(ua.StatusCodes.BadServiceUnsupported)
         if self.session is None and typeid not in access.SESSIONLESS_TYPES:
             raise ServiceError(ua.StatusCodes.BadSessionIdInvalid)
         if typeid == ACTIVATE and self.session is None:
