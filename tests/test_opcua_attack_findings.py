@@ -264,3 +264,31 @@ def test_register_server_is_refused_without_a_session(cell: dict) -> None:
     outcome, listed = asyncio.run(scene())
     assert outcome == ua.StatusCodes.BadServiceUnsupported
     assert "urn:rogue:server" not in listed
+
+
+# 8. the audit says where a commit came from, as REST's and RWS's do ---------------------------
+
+def test_a_commit_is_one_audit_record_naming_the_user_and_the_client(cell: dict) -> None:
+    secret = add_user(cell, "auditee", "Expert")
+
+    async def commit() -> tuple[int, int]:
+        client = await secure_client(cell["face"].endpoint, cell["face"].client, "auditee",
+                                     secret)
+        async with client:
+            ns = await namespaces(client)
+            obj = await client.nodes.objects.get_child([f"{ns['pendant']}:Pendant",
+                                                        f"{ns['pendant']}:cell-1"])
+            name, _kind, frame, version = await obj.call_method(f"{ns['pendant']}:ReadFrame",
+                                                                "tool", 6)
+            frame[2] += 1.0
+            new = await obj.call_method(f"{ns['pendant']}:CommitFrame", "tool", 6,
+                                        ua.Variant(frame, ua.VariantType.Double), name,
+                                        ua.Variant(version, ua.VariantType.UInt64))
+            return version, new
+
+    version, new = asyncio.run(commit())
+    assert new == version + 1
+    (rec,) = ok(cell["rest"].get("/audit", params={"user": "auditee"}))
+    assert (rec["source"], rec["role"], rec["table"], rec["number"]) == ("opcua", "Expert",
+                                                                         "tool", 6)
+    assert rec["client"] == "127.0.0.1"

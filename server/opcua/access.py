@@ -145,6 +145,9 @@ class Channel:
 
 CHANNEL: contextvars.ContextVar[Channel | None] = contextvars.ContextVar("pendant_opcua_channel",
                                                                         default=None)
+# the address of the client a request comes from (the audit's client, as REST's and RWS's)
+PEER: contextvars.ContextVar[str | None] = contextvars.ContextVar("pendant_opcua_peer",
+                                                                 default=None)
 # the session an ActivateSession is for (set by the face's processor before asyncua's handling)
 ACTIVATING: contextvars.ContextVar[Any] = contextvars.ContextVar("pendant_opcua_activating",
                                                                 default=None)

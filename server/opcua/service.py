@@ -87,7 +87,10 @@ class SessionProcessor(UaProcessor):
     ``BadUserAccessDenied``: after a restart of the face, node-opcua then resent its
     Publish requests at once, forever (thousands a second)."""
 
+    peer_host: str | None = None  # the client's address (SessionProtocol sets it)
+
     async def _process_message(self, typeid, requesthdr, seqhdr, body):
+        access.PEER.set(self.peer_host)
         if typeid in access.REGISTER_TYPES:  # else anyone's server was listed by FindServers
             raise ServiceError(ua.StatusCodes.BadServiceUnsupported)
         if self.session is None and typeid not in access.SESSIONLESS_TYPES:
@@ -134,6 +137,8 @@ class SessionProtocol(OPCUAProtocol):
         super().connection_made(transport)
         if self.processor is not None:
             self.processor.__class__ = SessionProcessor
+            peer = self.peer_name
+            self.processor.peer_host = peer[0] if isinstance(peer, tuple) and peer else None
 
 
 class PendantBinaryServer(BinaryServer):
@@ -331,7 +336,7 @@ class PendantOpcUa:
             assert caller is not None  # checked by _method
             outcome = await asyncio.to_thread(
                 commit.commit_frame, self.make_session, cid, *key, frame, slot_name,
-                expected, caller.audit_actor())
+                expected, caller.audit_actor(access.PEER.get()))
             if isinstance(outcome, ua.StatusCode):
                 return outcome
             try:
