@@ -12,8 +12,10 @@ its fix (the commit that added it says what was measured).
 from __future__ import annotations
 
 import asyncio
+import socket
 import time
 from pathlib import Path
+from urllib.parse import urlparse
 
 import pytest
 from api_helpers import ADMIN_TOKEN, C, ok
@@ -292,3 +294,31 @@ def test_a_commit_is_one_audit_record_naming_the_user_and_the_client(cell: dict)
     assert (rec["source"], rec["role"], rec["table"], rec["number"]) == ("opcua", "Expert",
                                                                          "tool", 6)
     assert rec["client"] == "127.0.0.1"
+
+
+# 9. one host's idle connections do not lock everyone out --------------------------------------
+
+def test_idle_connections_of_one_host_leave_room_for_others(cell: dict) -> None:
+    """asyncua accepts 1000 connections in all, and one that never activates a session is
+    closed after 30 s: 1000 TCP connections that sent nothing (no certificate, no login) from
+    one host refused every other client's connection for those 30 s, again and again."""
+    face = cell["face"]
+    url = urlparse(face.endpoint)
+    idle: list[socket.socket] = []
+    try:
+        for _ in range(1000):
+            try:
+                idle.append(socket.create_connection((url.hostname, url.port), timeout=5,
+                                                     source_address=("127.0.0.2", 0)))
+            except OSError:
+                break
+
+        async def login() -> str:
+            client = await secure_client(face.endpoint, face.client, "admin", ADMIN_TOKEN)
+            async with client:
+                return (await client.nodes.server.read_browse_name()).Name
+
+        assert asyncio.run(login()) == "Server"
+    finally:
+        for s in idle:
+            s.close()

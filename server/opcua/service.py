@@ -133,12 +133,31 @@ class SessionProcessor(UaProcessor):
 
 
 class SessionProtocol(OPCUAProtocol):
+    """A connection; at most :data:`PENDING_PER_HOST` of one host without an activated session
+    (asyncua's one cap is 1000 connections in all: one host's idle sockets, no certificate
+    needed, refused everyone else's for the 30 s asyncua gives a connection to log in)."""
+
     def connection_made(self, transport) -> None:
+        host = _host(transport.get_extra_info("peername"))
+        pending = [c for c in self.clients if _host(c.peer_name) == host and not (
+            c.processor is not None and c.processor.session is not None
+            and c.processor.session.is_activated())]
+        if len(pending) >= PENDING_PER_HOST:
+            log.warning("OPC UA: refused a connection from %s: %d not logged in yet", host,
+                        len(pending))
+            transport.close()
+            return
         super().connection_made(transport)
         if self.processor is not None:
             self.processor.__class__ = SessionProcessor
-            peer = self.peer_name
-            self.processor.peer_host = peer[0] if isinstance(peer, tuple) and peer else None
+            self.processor.peer_host = host
+
+
+PENDING_PER_HOST = 20
+
+
+def _host(peer: object) -> str | None:
+    return peer[0] if isinstance(peer, tuple) and peer else None
 
 
 class PendantBinaryServer(BinaryServer):
