@@ -98,6 +98,7 @@ SUBSCRIPTION_REQUESTS: dict[ua.NodeId, tuple[type, str]] = {
          "SubscriptionId"),
     )}
 SUBSCRIPTIONS_PER_USER = 100  # of the server's 1000 (asyncua's max_subscriptions)
+MIN_PUBLISHING_MS = 50.0  # a subscription's fastest publishing interval (asyncua grants any)
 SESSIONS_PER_USER = 50  # activated at once, of the server's 1000 (InternalSession.max_connections)
 # standard methods a reader may call (OPC 10000-5 §9): they only read
 READ_METHODS = {ua.NodeId(m) for m in (_R.Server_GetMonitoredItems, _R.Server_ResendData)}
@@ -214,9 +215,10 @@ def install_login_checks(iserver: Any) -> None:
 
 
 def unguessable_subscription_ids(service: Any) -> None:
-    """Subscription ids drawn at random (asyncua counts up from 78: easy to guess), and at most
+    """Subscription ids drawn at random (asyncua counts up from 78: easy to guess), at most
     :data:`SUBSCRIPTIONS_PER_USER` of one user (asyncua's one cap is the server's 1000: one
-    user took them all, and everyone else's were refused)."""
+    user took them all, and everyone else's were refused), publishing every
+    :data:`MIN_PUBLISHING_MS` at the fastest (at 0.001 ms, 100 of them took a core)."""
     create = service.create_subscription
 
     async def create_subscription(params: Any, callback: Any, session_id: ua.NodeId,
@@ -227,6 +229,8 @@ def unguessable_subscription_ids(service: Any) -> None:
                 if users.get(sub.session_id) == users.get(session_id)]
         if users.get(session_id) is not None and len(mine) >= SUBSCRIPTIONS_PER_USER:
             raise ServiceError(ua.StatusCodes.BadTooManySubscriptions)
+        params.RequestedPublishingInterval = max(params.RequestedPublishingInterval or 0.0,
+                                                 MIN_PUBLISHING_MS)
         while True:
             service._sub_id_counter = secrets.randbelow(2 ** 31 - 2) + 1  # it adds one
             if service._sub_id_counter + 1 not in service.subscriptions:
