@@ -298,7 +298,8 @@ class PendantUsers(UserManager):
             return None
         this = ACTIVATING.get()
         others = [s for s in getattr(iserver, "_external_sessions", {}).values()
-                  if s is not this and s.is_activated() and getattr(s.user, "name", None) == found[0].name]
+                  if s is not this and s.is_activated()
+                  and getattr(s.user, "name", None) == found[0].name]
         if len(others) >= SESSIONS_PER_USER:  # else one user's sessions locked everyone out
             raise ServiceError(ua.StatusCodes.BadTooManySessions)
         return PendantUser(role=UserRole.User, name=found[0].name, secret=secret)

@@ -129,7 +129,16 @@ class SessionProcessor(UaProcessor):
             return await super()._process_message(typeid, requesthdr, seqhdr, body)
         except BaseException:
             self.session = None
+            if self._session_watchdog_task is not None:  # asyncua's, for the session it took
+                self._session_watchdog_task.cancel()
             raise
+
+
+PENDING_PER_HOST = 20  # connections of one host without an activated session
+
+
+def _host(peer: object) -> str | None:
+    return peer[0] if isinstance(peer, tuple) and peer else None
 
 
 class SessionProtocol(OPCUAProtocol):
@@ -151,13 +160,6 @@ class SessionProtocol(OPCUAProtocol):
         if self.processor is not None:
             self.processor.__class__ = SessionProcessor
             self.processor.peer_host = host
-
-
-PENDING_PER_HOST = 20
-
-
-def _host(peer: object) -> str | None:
-    return peer[0] if isinstance(peer, tuple) and peer else None
 
 
 class PendantBinaryServer(BinaryServer):
