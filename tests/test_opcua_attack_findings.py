@@ -341,3 +341,32 @@ def test_a_publishing_interval_below_the_minimum_is_revised_up(cell: dict) -> No
             return result.RevisedPublishingInterval
 
     assert asyncio.run(revised()) == access.MIN_PUBLISHING_MS
+
+
+# 11. a Publish acknowledges only its own user's notifications ---------------------------------
+
+def test_a_publish_cannot_acknowledge_another_users_notifications(cell: dict) -> None:
+    """A Publish's SubscriptionAcknowledgements were applied to any subscription: an Operator
+    naming an Expert's subscription dropped the notifications the Expert's client had not
+    acknowledged yet (what it would Republish after a lost message)."""
+    expert, operator = add_user(cell, "acked", "Expert"), add_user(cell, "acker", "Operator")
+    face = cell["face"]
+    subs = face.server.server.iserver.subscription_service.subscriptions
+
+    async def scene() -> object:
+        ex = await secure_client(face.endpoint, face.client, "acked", expert)
+        op = await secure_client(face.endpoint, face.client, "acker", operator)
+        async with ex, op:
+            sid = (await ex.create_subscription(60_000, None)).subscription_id
+            subs[sid]._not_acknowledged_results[4242] = "kept for a Republish"  # noqa: SLF001
+            publish = ua.PublishRequest(Parameters=ua.PublishParameters(
+                SubscriptionAcknowledgements=[ua.SubscriptionAcknowledgement(sid, 4242)]))
+            try:
+                await op.uaclient.protocol.send_request(publish, timeout=2)
+            except ua.UaStatusCodeError as err:
+                return err.code, 4242 in subs[sid]._not_acknowledged_results  # noqa: SLF001
+            except TimeoutError:
+                pass
+            return None, 4242 in subs[sid]._not_acknowledged_results  # noqa: SLF001
+
+    assert asyncio.run(scene()) == (ua.StatusCodes.BadUserAccessDenied, True)

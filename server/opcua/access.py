@@ -96,6 +96,8 @@ SUBSCRIPTION_REQUESTS: dict[ua.NodeId, tuple[type, str]] = {
          ua.SetMonitoringModeParameters, "SubscriptionId"),
         (_R.SetTriggeringRequest_Encoding_DefaultBinary, ua.SetTriggeringParameters,
          "SubscriptionId"),
+        (_R.PublishRequest_Encoding_DefaultBinary, ua.PublishParameters,
+         "SubscriptionAcknowledgements"),  # asyncua applied any subscription's acks
     )}
 SUBSCRIPTIONS_PER_USER = 100  # of the server's 1000 (asyncua's max_subscriptions)
 MIN_PUBLISHING_MS = 50.0  # a subscription's fastest publishing interval (asyncua grants any)
@@ -353,7 +355,9 @@ class PendantRules(PermissionRuleset):
         """Every subscription the request names belongs to a session of the same user."""
         params_type, attr = SUBSCRIPTION_REQUESTS[action_type]
         ids = getattr(struct_from_binary(params_type, body.copy()), attr)
-        ids = ids if isinstance(ids, list) else [ids]
+        ids = [getattr(i, "SubscriptionId", i) for i in (ids if isinstance(ids, list) else [ids])]
+        if not ids:  # a Publish that acknowledges nothing
+            return True
         if self.iserver is None:
             return False
         subs = self.iserver.subscription_service.subscriptions
