@@ -1,12 +1,16 @@
 """Findings of an attacker's review of the OPC UA face: each test failed on the code before
 its fix (the commit that added it says what was measured).
 
-1. A registered certificate's token secret is its SHA-256 fingerprint (public data): sent as
-   a password (OPC UA), a bearer token or a browser login token (REST), it logged in as the
-   certificate's user.
-2. A session's AuthenticationToken was a counter (1000, 1001, ...), and a failed
-   ActivateSession on a new secure channel left that channel holding the session named by
-   the token: a client with no login took over another user's session (and its rights).
+1. A certificate's token secret (its public fingerprint) logged in as a password or bearer.
+2. A guessed AuthenticationToken and a failed ActivateSession took over another's session.
+3. Sessions never activated piled up (CreateSession again and again on one channel).
+4. and 5. One user took all of the face's subscriptions, or all of its sessions.
+6. CreateSession's ApplicationUri was not checked against the certificate.
+7. Anyone registered a server that FindServers then listed.
+8. A CommitFrame's audit record had no client address.
+9. One host's idle connections locked every client out.
+10. A 0.001 ms publishing interval was granted (a core for 100 subscriptions).
+11. A Publish acknowledged another user's notifications.
 """
 
 from __future__ import annotations
