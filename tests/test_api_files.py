@@ -255,3 +255,20 @@ def test_pendant_slot_changes_one_component_and_keeps_every_digit_of_the_others(
         assert main(["slot", "tool", "1", "--url", url, "--x", "2.5"]) == 0
         pose = httpx.get(f"{url}{C}/tools/1", headers=auth).json()["pose"]
         assert pose == {"x": 2.5, "y": 3.01155138, "z": 357.125, "a": 0.0, "b": 0.238999218, "c": 0.0}
+
+
+def test_a_deeply_nested_value_is_refused_naming_its_line(client):
+    """A module or $config.dat whose value nests 1500 brackets (or braces) made the readers,
+    which recurse per level, pass Python's stack: POST .../import answered 500. Each is a 422
+    naming the line and the reason, and nothing is written (formats.abb/kuka MAX_NESTING)."""
+    before = client.get(f"{C}/tools/1").headers["etag"]
+    abb = "MODULE M\n  PERS tooldata t1:=" + "[" * 1500 + ";\nENDMODULE\n"
+    kuka = ("DEFDAT $CONFIG\nDECL FRAME TOOL_DATA[16]\nTOOL_DATA[1]=" + "{X " * 1500 +
+            "\nENDDAT\n")
+    for fmt, text, line in (("abb", abb, 2), ("kuka", kuka, 3)):
+        r = client.post(f"{C}/import", json={"format": fmt, "text": text})
+        assert r.status_code == 422, (fmt, r.status_code, r.text[:300])
+        detail = r.json()["detail"][0]
+        assert detail["loc"][:3] == ["body", "file", f"line {line}"], detail
+        assert "nests" in detail["msg"] and "more than 16 deep" in detail["msg"], detail
+    assert client.get(f"{C}/tools/1").headers["etag"] == before

@@ -342,18 +342,24 @@ def _tokens(text: str, start: int, line_of, decl_line: int, name: str) -> tuple[
         toks.append(_Tok(kind, m.group(k), line_of(m.start(k)), m.start(k), m.end(k)))
 
 
+MAX_NESTING = 16  # brackets a value nests (a tooldata 3, an array of them 4): the reader recurses
+
+
 def _parse_value(toks: list[_Tok], name: str, decl_line: int) -> object:
-    def value(i: int) -> tuple[object, int]:
+    def value(i: int, depth: int = 1) -> tuple[object, int]:
         if i >= len(toks):
             raise FormatError.at_line(decl_line, name, "value ends early")
         t = toks[i]
+        if t.kind == "[" and depth > MAX_NESTING:
+            raise FormatError.at_line(t.line, name, f"the value nests brackets more than "
+                                      f"{MAX_NESTING} deep (RAPID data nests a few levels)")
         if t.kind == "[":
             items: list[object] = []
             i += 1
             if i < len(toks) and toks[i].kind == "]":
                 return items, i + 1
             while True:
-                item, i = value(i)
+                item, i = value(i, depth + 1)
                 items.append(item)
                 if i < len(toks) and toks[i].kind == ",":
                     i += 1

@@ -288,14 +288,20 @@ def _tokens(text: str, line: int, fld: str) -> list[tuple[str, str, int, int]]:
     return out
 
 
+MAX_NESTING = 16  # braces an aggregate nests (a LOAD_DATA 2): the reader recurses
+
+
 def parse_aggregate(text: str, line: int, fld: str) -> dict[str, object]:
     """``{X 1.0,Y 2.0,...}`` (nested, any spacing) -> {"X": 1.0, ...} with upper-case keys;
     every number checked against server/service/bounds.py."""
     tokens = _tokens(text, line, fld)
 
-    def agg(i: int, path: str) -> tuple[dict[str, object], int]:
+    def agg(i: int, path: str, depth: int = 1) -> tuple[dict[str, object], int]:
         if i >= len(tokens) or tokens[i][0] != "{":
             raise FormatError.at_line(line, path, "expected '{'")
+        if depth > MAX_NESTING:
+            raise FormatError.at_line(line, path, f"the aggregate nests braces more than "
+                                      f"{MAX_NESTING} deep (KRL data nests a few levels)")
         out: dict[str, object] = {}
         i += 1
         while True:
@@ -308,7 +314,7 @@ def parse_aggregate(text: str, line: int, fld: str) -> dict[str, object]:
                 raise FormatError.at_line(line, f"{path}.{key}", "component given twice")
             i += 1
             if i < len(tokens) and tokens[i][0] == "{":
-                out[key], i = agg(i, f"{path}.{key}")
+                out[key], i = agg(i, f"{path}.{key}", depth + 1)
             elif i < len(tokens) and tokens[i][0] in ("num", "str", "enum"):
                 kind, tok = tokens[i][0], tokens[i][1]
                 out[key] = float(tok) if kind == "num" else tok

@@ -294,9 +294,6 @@ def answer(face: Face, name: str, value: str | None) -> tuple[str, bool]:
         return f"{'.'.join(str(x) for x in err.loc)}: {err.reason}", False
     except LookupError as err:  # crud.NotFound: the controller is gone
         return str(err), False
-    except RecursionError:  # the KRL reader recurses per brace: {X {X ... passed the stack
-        return f"{name}: the value is nested too deeply (a KRL aggregate nests a few levels)", \
-            False
     except ValidationError as err:  # the API's own bounds (a name too long, ...)
         e = err.errors()[0]
         return f"{name}.{'.'.join(str(x) for x in e['loc'])}: {e['msg']}", False

@@ -272,9 +272,6 @@ async def call(fn, *args: Any, **kw: Any) -> Any:
     except CalibrationError as err:  # FormatError too: the field and the reason
         loc = ".".join(str(x) for x in err.loc)
         raise RwsError(400, E_VALUE, f"{loc}: {err.reason}") from None
-    except RecursionError:  # the RAPID reader recurses per bracket: 1500 '[' passed the stack
-        raise RwsError(400, E_VALUE, "the literal is nested too deeply (RAPID data nests a few "
-                       "levels)") from None
 
 
 async def body_of(request: Request, what: str = "the body") -> bytes:
