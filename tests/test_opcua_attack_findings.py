@@ -11,6 +11,7 @@ its fix (the commit that added it says what was measured).
 9. One host's idle connections locked every client out.
 10. A 0.001 ms publishing interval was granted (a core for 100 subscriptions).
 11. A Publish acknowledged another user's notifications.
+12. A role with frames:commit but not frames:read could commit on REST, not on OPC UA.
 """
 
 from __future__ import annotations
@@ -36,10 +37,15 @@ cell = module_cell("opcua-attack", none_endpoint=True)
 user = add_user
 
 
-async def read_frame(client: Client) -> list:
+async def cell_1(client: Client) -> tuple[dict, object]:
+    """pendant's namespaces and the object of cell-1 under Pendant (its methods)."""
     ns = await namespaces(client)
-    obj = await client.nodes.objects.get_child([f"{ns['pendant']}:Pendant",
-                                                f"{ns['pendant']}:cell-1"])
+    return ns, await client.nodes.objects.get_child([f"{ns['pendant']}:Pendant",
+                                                     f"{ns['pendant']}:cell-1"])
+
+
+async def read_frame(client: Client) -> list:
+    ns, obj = await cell_1(client)
     return await obj.call_method(f"{ns['pendant']}:ReadFrame", "tool", 1)
 
 
@@ -281,9 +287,7 @@ def test_a_commit_is_one_audit_record_naming_the_user_and_the_client(cell: dict)
         client = await secure_client(cell["face"].endpoint, cell["face"].client, "auditee",
                                      secret)
         async with client:
-            ns = await namespaces(client)
-            obj = await client.nodes.objects.get_child([f"{ns['pendant']}:Pendant",
-                                                        f"{ns['pendant']}:cell-1"])
+            ns, obj = await cell_1(client)
             name, _kind, frame, version = await obj.call_method(f"{ns['pendant']}:ReadFrame",
                                                                 "tool", 6)
             frame[2] += 1.0
@@ -374,3 +378,58 @@ def test_a_publish_cannot_acknowledge_another_users_notifications(cell: dict) ->
             return None, 4242 in subs[sid]._not_acknowledged_results  # noqa: SLF001
 
     assert asyncio.run(scene()) == (ua.StatusCodes.BadUserAccessDenied, True)
+
+
+# 12. one permission table: a commit needs frames:commit, as REST's PUT does ------------------
+
+def test_a_role_that_may_commit_but_not_read_commits_as_on_rest(cell: dict) -> None:
+    """A site role with frames:commit but not frames:read may PUT a slot on REST; on OPC UA
+    every request needed frames:read first, so its CommitFrame was refused
+    (BadUserAccessDenied) while its REST PUT of the same slot passed. pendant's methods check
+    their own permission: its CommitFrame commits (with NodeIds stored before, as the docs
+    allow: browsing still needs frames:read), and its ReadFrame is still refused."""
+    from sqlalchemy.orm import sessionmaker
+
+    from db.session import make_engine
+
+    maker = sessionmaker(bind=make_engine(cell["db_url"]))
+    with maker() as db:
+        tokens.add_role(db, "Committer", ["frames:commit"])
+        db.commit()
+    secret = add_user(cell, "committer", "Committer")
+    admin = add_user(cell, "nodeids", "Administrator")
+
+    async def stored_ids() -> tuple:
+        client = await secure_client(cell["face"].endpoint, cell["face"].client, "nodeids",
+                                     admin)
+        async with client:
+            ns, obj = await cell_1(client)
+            commit = await obj.get_child(f"{ns['pendant']}:CommitFrame")
+            read = await obj.get_child(f"{ns['pendant']}:ReadFrame")
+            return obj.nodeid, commit.nodeid, read.nodeid, await obj.call_method(read, "tool", 7)
+
+    obj_id, commit_id, read_id, (name, _kind, frame, version) = asyncio.run(stored_ids())
+
+    async def as_committer() -> tuple[object, object]:
+        client = await secure_client(cell["face"].endpoint, cell["face"].client, "committer",
+                                     secret)
+        async with client:
+            obj = client.get_node(obj_id)
+            frame[2] += 1.0
+            new = await obj.call_method(commit_id, "tool", 7,
+                                        ua.Variant(frame, ua.VariantType.Double), name,
+                                        ua.Variant(version, ua.VariantType.UInt64))
+            try:
+                read = await obj.call_method(read_id, "tool", 7)
+            except ua.UaStatusCodeError as err:
+                read = err.code
+            return new, read
+
+    new, read = asyncio.run(as_committer())
+    assert new == version + 1
+    assert read == ua.StatusCodes.BadUserAccessDenied
+    (rec,) = ok(cell["rest"].get("/audit", params={"user": "committer"}))
+    assert (rec["source"], rec["table"], rec["number"]) == ("opcua", "tool", 7)
+    rest = cell["rest"]
+    headers = {"Authorization": f"Bearer {secret}"}
+    assert rest.get(f"{C}/tools/7", headers=headers).status_code == 403  # as on REST

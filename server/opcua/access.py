@@ -342,13 +342,15 @@ class PendantRules(PermissionRuleset):
         """What the request needs; ``body`` is the undecoded request (asyncua's Buffer), so a
         call is decoded from a copy to see which methods it names. pendant's methods check
         their own permission (a refusal fails only that call's result); a standard method that
-        only reads needs ``frames:read``, any other ``controllers:admin``."""
-        need = {"frames:read"}
-        if action_type == CALL:
-            call = struct_from_binary(ua.CallParameters, body.copy())
-            for m in call.MethodsToCall or []:
-                if m.MethodId not in self.method_names and m.MethodId not in READ_METHODS:
-                    need.add("controllers:admin")
+        only reads needs ``frames:read``, any other ``controllers:admin``. A call of pendant's
+        methods alone needs nothing more here, so a role with ``frames:commit`` but not
+        ``frames:read`` commits as REST's PUT lets it; any other request needs ``frames:read``."""
+        if action_type != CALL:
+            return {"frames:read"}
+        need: set[str] = set()
+        for m in struct_from_binary(ua.CallParameters, body.copy()).MethodsToCall or []:
+            if m.MethodId not in self.method_names:
+                need.add("frames:read" if m.MethodId in READ_METHODS else "controllers:admin")
         return need
 
     def owners_ok(self, action_type: ua.NodeId, body: Any, caller: Caller) -> bool:
