@@ -12,6 +12,7 @@ its fix (the commit that added it says what was measured).
 10. A 0.001 ms publishing interval was granted (a core for 100 subscriptions).
 11. A Publish acknowledged another user's notifications.
 12. A role with frames:commit but not frames:read could commit on REST, not on OPC UA.
+13. One user's monitored items had no bound (143 MB for 100 000).
 """
 
 from __future__ import annotations
@@ -433,3 +434,31 @@ def test_a_role_that_may_commit_but_not_read_commits_as_on_rest(cell: dict) -> N
     rest = cell["rest"]
     headers = {"Authorization": f"Bearer {secret}"}
     assert rest.get(f"{C}/tools/7", headers=headers).status_code == 403  # as on REST
+
+
+# 13. one user's monitored items are bounded ---------------------------------------------------
+
+def test_one_users_monitored_items_are_bounded(cell: dict, monkeypatch) -> None:  # noqa: ANN001
+    """asyncua has no cap on monitored items: ~1.5 KB each, 100 000 from one Operator took
+    143 MB of the face (and 12 s). One user's subscriptions hold at most
+    MONITORED_ITEMS_PER_USER items in all (here lowered to 30); another user's are not
+    counted against it."""
+    monkeypatch.setattr(access, "MONITORED_ITEMS_PER_USER", 30, raising=False)
+    hog, other = add_user(cell, "ihog", "Operator"), add_user(cell, "iother", "Operator")
+
+    async def scene() -> tuple[int, object, int]:
+        a = await secure_client(cell["face"].endpoint, cell["face"].client, "ihog", hog)
+        b = await secure_client(cell["face"].endpoint, cell["face"].client, "iother", other)
+        async with a, b:
+            node = a.get_node(ua.NodeId(ua.ObjectIds.Server_ServerStatus_CurrentTime))
+            first = await a.create_subscription(1000, None)
+            second = await a.create_subscription(1000, None)
+            made = len(await first.subscribe_data_change([node] * 20))
+            with pytest.raises(ua.UaStatusCodeError) as err:  # 20 + 11 > 30, across two
+                await second.subscribe_data_change([node] * 11)
+            made += len(await second.subscribe_data_change([node] * 10))  # 30: still allowed
+            others = await b.create_subscription(1000, None)
+            return made, err.value.code, len(await others.subscribe_data_change([node] * 30))
+
+    made, code, others = asyncio.run(scene())
+    assert (made, code, others) == (30, ua.StatusCodes.BadTooManyMonitoredItems, 30)

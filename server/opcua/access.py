@@ -102,6 +102,9 @@ SUBSCRIPTION_REQUESTS: dict[ua.NodeId, tuple[type, str]] = {
 SUBSCRIPTIONS_PER_USER = 100  # of the server's 1000 (asyncua's max_subscriptions)
 MIN_PUBLISHING_MS = 50.0  # a subscription's fastest publishing interval (asyncua grants any)
 SESSIONS_PER_USER = 50  # activated at once, of the server's 1000 (InternalSession.max_connections)
+# monitored items of one user's subscriptions (asyncua has no cap: ~1.5 KB each, so 100 000
+# of one Operator took 143 MB); a plant's MES watching 300 cells' axes and frames needs ~16 000
+MONITORED_ITEMS_PER_USER = 50_000
 # standard methods a reader may call (OPC 10000-5 §9): they only read
 READ_METHODS = {ua.NodeId(m) for m in (_R.Server_GetMonitoredItems, _R.Server_ResendData)}
 
@@ -220,13 +223,13 @@ def unguessable_subscription_ids(service: Any) -> None:
     """Subscription ids drawn at random (asyncua counts up from 78: easy to guess), at most
     :data:`SUBSCRIPTIONS_PER_USER` of one user (asyncua's one cap is the server's 1000: one
     user took them all, and everyone else's were refused), publishing every
-    :data:`MIN_PUBLISHING_MS` at the fastest (at 0.001 ms, 100 of them took a core)."""
+    :data:`MIN_PUBLISHING_MS` at the fastest (at 0.001 ms, 100 of them took a core), with at
+    most :data:`MONITORED_ITEMS_PER_USER` monitored items of one user in all."""
     create = service.create_subscription
 
     async def create_subscription(params: Any, callback: Any, session_id: ua.NodeId,
                                   *args: Any, **kwargs: Any) -> Any:
-        users = {s.session_id: getattr(s.user, "name", None)
-                 for s in service.iserver._external_sessions.values()}
+        users = _user_names(service)
         mine = [sub for sub in service.subscriptions.values()
                 if users.get(sub.session_id) == users.get(session_id)]
         if users.get(session_id) is not None and len(mine) >= SUBSCRIPTIONS_PER_USER:
@@ -239,6 +242,27 @@ def unguessable_subscription_ids(service: Any) -> None:
                 return await create(params, callback, session_id, *args, **kwargs)
 
     service.create_subscription = create_subscription
+    create_items = service.create_monitored_items
+
+    async def create_monitored_items(params: Any) -> Any:
+        """At most :data:`MONITORED_ITEMS_PER_USER` in all of a user's subscriptions."""
+        sub = service.subscriptions.get(params.SubscriptionId)
+        users = _user_names(service)
+        owner = None if sub is None else users.get(sub.session_id)
+        if owner is not None:
+            held = sum(len(s.monitored_item_srv._monitored_items)
+                       for s in service.subscriptions.values() if users.get(s.session_id) == owner)
+            if held + len(params.ItemsToCreate or []) > MONITORED_ITEMS_PER_USER:
+                raise ServiceError(ua.StatusCodes.BadTooManyMonitoredItems)
+        return await create_items(params)
+
+    service.create_monitored_items = create_monitored_items
+
+
+def _user_names(service: Any) -> dict[ua.NodeId, str | None]:
+    """Each session's user name, by session id."""
+    return {s.session_id: getattr(s.user, "name", None)
+            for s in service.iserver._external_sessions.values()}
 
 
 def unguessable_session_tokens(iserver: Any) -> None:
