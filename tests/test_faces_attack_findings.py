@@ -18,7 +18,7 @@ from api_helpers import edit_slot, make_client, ok, wait_for
 from browser_helpers import free_port
 
 from server.kvp.server import KvpFace, serve_in_thread
-from server.rws import digest, ops
+from server.rws import app as rws_app, digest, ops
 from server.rws.app import RwsFace, create_rws_app
 from server.rws.service import serve_asgi
 
@@ -360,8 +360,6 @@ def test_a_subscriber_sending_on_its_socket_does_not_make_it_look_faster(
     sockets, the face's worker threads are 40). Messages now wait for the next look."""
     from websockets.sync.client import connect
 
-    from server.rws import app as rws_app
-
     looks: list[float] = []
     real = rws_app._symbols
 
@@ -527,3 +525,19 @@ def test_a_role_that_may_write_but_not_read_writes_through_rws_as_through_rest(
                      auth=auth)
     assert r.status_code == 201, r.text[-200:]
     assert requests.get(cell["url"] + "/fileservice/$HOME/Cell.mod", auth=auth).status_code == 403
+
+
+def test_one_users_logins_do_not_push_out_another_users(monkeypatch) -> None:
+    """A Digest client that sends no cookie back (curl, a script) gets a new ABBCX login with
+    each request, and the face keeps SESSIONS_MAX of them, least recently used first: one
+    logged-in user's requests pushed every other user's login out (their subscription sockets
+    could no longer open). A user's own oldest login goes past LOGINS_PER_USER."""
+    monkeypatch.setattr(rws_app, "SESSIONS_MAX", 200)
+    face = RwsFace(make_session=None)  # type: ignore[arg-type]  (logins only)
+    eva = face.login(None, "eva")
+    flood = [face.login(None, "mallory") for _ in range(1000)]
+    assert face.session_user(eva) == "eva"
+    assert face.session_user(flood[-1]) == "mallory"
+    assert sum(user == "mallory" for user, _ in face.sessions.values()) <= 64
+    face.forget(eva)  # a logout
+    assert face.session_user(eva) is None and "eva" not in face.logins

@@ -57,6 +57,7 @@ MAX_BODY = 64 * 1024  # bytes of a form or a file a client may send
 POLL_S = 0.2  # how often a subscription looks for changed values
 SESSION_IDLE_S = 30 * 60  # an ABBCX login unused this long is forgotten (pendant's choice)
 SESSIONS_MAX = 10_000  # ABBCX logins kept at once; the least recently used goes first
+LOGINS_PER_USER = 64  # ABBCX logins of one user; past it, that user's least recently used goes
 SUB_OPEN_WITHIN_S = 60.0  # a subscription whose WebSocket was not opened by then is dropped
 SUBS_PER_USER = 64  # subscriptions a user holds at once (opened or waiting to be)
 EXTAX_NONE = "9E+09"  # RAPID's "no external axis"
@@ -99,6 +100,8 @@ class RwsFace:
     seen: digest.Seen = field(default_factory=digest.Seen)
     # ABBCX cookie -> (user, when last used), least recently used first
     sessions: OrderedDict[str, tuple[str, float]] = field(default_factory=OrderedDict)
+    # user -> that user's ABBCX cookies, least recently used first
+    logins: dict[str, OrderedDict[str, None]] = field(default_factory=dict)
     subscriptions: dict[int, Subscription] = field(default_factory=dict)
     next_sub: int = 1
 
@@ -112,12 +115,28 @@ class RwsFace:
         if cookie is not None and self.session_user(cookie, now) == user:
             self.sessions[cookie] = (user, now)
             self.sessions.move_to_end(cookie)
+            self.logins[user].move_to_end(cookie)
             return None
         cookie = secrets.token_urlsafe(24)
         self.sessions[cookie] = (user, now)
+        mine = self.logins.setdefault(user, OrderedDict())
+        mine[cookie] = None
+        # a client that sends no cookie back (curl, a script) makes a login per request: one
+        # user's requests pushed every other user's logins out of SESSIONS_MAX
+        while len(mine) > LOGINS_PER_USER:
+            self.forget(next(iter(mine)))
         while len(self.sessions) > SESSIONS_MAX:
-            self.sessions.popitem(last=False)
+            self.forget(next(iter(self.sessions)))
         return cookie
+
+    def forget(self, cookie: str) -> None:
+        """The ABBCX login ``cookie`` ended (logout, idle, room for others)."""
+        found = self.sessions.pop(cookie, None)
+        if found is not None:
+            mine = self.logins.get(found[0], {})
+            mine.pop(cookie, None)
+            if not mine:
+                self.logins.pop(found[0], None)
 
     def session_user(self, cookie: str, now: float | None = None) -> str | None:
         """The user of a live ABBCX login; a login unused for :data:`SESSION_IDLE_S` is
@@ -126,7 +145,7 @@ class RwsFace:
         if found is None:
             return None
         if (now if now is not None else time.monotonic()) - found[1] > SESSION_IDLE_S:
-            self.sessions.pop(cookie, None)
+            self.forget(cookie)
             return None
         return found[0]
 
@@ -495,7 +514,7 @@ async def panel(face: RwsFace, request: Request, who: ops.Caller) -> Response:
 
 
 async def logout(face: RwsFace, request: Request, who: ops.Caller) -> Response:
-    face.sessions.pop(request.cookies.get("ABBCX", ""), None)
+    face.forget(request.cookies.get("ABBCX", ""))
     response = Response(status_code=204)
     response.delete_cookie("ABBCX")  # and no new login is set (guarded skips it here)
     return response
