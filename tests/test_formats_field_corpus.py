@@ -410,3 +410,24 @@ def test_kuka_machine_dat_line_numbers_count_only_real_line_ends():
     with pytest.raises(FormatError) as err:
         read_kuka_external(md, files.config_dat)
     assert err.value.loc == ("machine_dat", f"line {line_of(md, 'TR_A2 #E7')}", "$ET1_AX.TR_A2")
+
+
+@pytest.mark.parametrize("name,key,fld,value,expect", [c for c in CHANGES if c[0].startswith(
+    ("ur_", "fanuc_listing"))], ids=["ur", "fanuc-listing"])
+def test_pendants_own_files_with_cr_line_ends_read_and_keep_them(name, key, fld, value, expect):
+    """Line ends of a lone CR (a file saved on a classic Mac, or by an editor set so): the UR
+    and FANUC readers split at LF only and refused the file as "cut short" (one long line),
+    while the KUKA reader and the patcher count CR as a line end. They read it, an export
+    without a change is the file byte for byte, and a change keeps the CRs."""
+    text = load(name)[1].replace("\r\n", "\n").replace("\n", "\r")
+    es = formats.READERS[FILES[name]](text).entries
+    assert es == entries(name)
+    assert formats.PATCHERS[FILES[name]](es, text) == text
+    i = next(j for j, e in enumerate(es) if (e.kind, e.number) == key)
+    new = list(es)
+    new[i] = changed(es[i], fld, value)
+    out = formats.PATCHERS[FILES[name]](new, text)
+    assert "\n" not in out and formats.READERS[FILES[name]](out).entries == \
+        formats.canonical_order(new)
+    expect = expect if isinstance(expect, list) else [expect]
+    assert changed_numbers(text, out) == [(line_of(text, needle), o, n) for needle, o, n in expect]

@@ -27,6 +27,7 @@ from server.formats.fanuc_sysframe import patch_sysframe
 from server.formats.kuka import export_kuka, import_kuka, read_kuka
 from server.formats.model import (
     FRAME_KINDS,
+    LINE_END,
     LOADED,
     FormatError,
     FrameEntry,
@@ -99,7 +100,7 @@ def _regenerating(export: Callable[[Iterable[FrameEntry]], str],
         old = read(text).entries
         if entries == old:
             return text
-        parts = re.split(r"(\r\n|\r|\n)", text)
+        parts = re.split(f"({LINE_END.pattern})", text)
         lines, ends = parts[0::2], parts[1::2] + [""]
         common = max(("\n", "\r\n", "\r"), key=ends.count)
         was = export(old).split("\n")

@@ -22,6 +22,7 @@ from solvers.frames import Pose, fanuc_from_matrix, matrix_from_fanuc
 from server.formats.fanuc_sysframe import is_sysframe, read_sysframe
 from server.service.bounds import check_value
 from server.formats.model import (
+    LINE_END,
     index_number,
     ROBOT_HELD,
     FormatError,
@@ -188,7 +189,7 @@ def read_fanuc(text: str) -> ParsedFile:
     """
     if not isinstance(text, str):
         raise FormatError(("file",), f"expected text, got {type(text).__name__}")
-    lines = text.replace("\r\n", "\n").split("\n")
+    lines = LINE_END.split(text)
     if is_controller_listing(text):
         return read_sysframe(text)
     at = next((i for i, s in enumerate(lines, 1) if s.startswith(HEADER)), None)

@@ -21,6 +21,7 @@ declaration a reader cannot use but that need not stop the file is a :class:`Ski
 from __future__ import annotations
 
 import math
+import re
 from dataclasses import dataclass, field
 from typing import Iterable, Literal, get_args
 
@@ -33,6 +34,9 @@ FRAME_KINDS: tuple[str, ...] = get_args(FrameKind)
 ROBOT_HELD: frozenset[str] = frozenset({"tool", "workpiece"})
 STATIONARY: frozenset[str] = frozenset({"base", "fixed_tool", "coordinated_base"})
 LOADED: frozenset[str] = frozenset({"tool", "workpiece", "fixed_tool"})
+# the line ends every reader and patcher counts: CR LF, a lone CR or LF (not U+2028, U+0085
+# or a form feed, which str.splitlines() would take)
+LINE_END = re.compile(r"\r\n|\r|\n")
 
 
 class FormatError(CalibrationError):

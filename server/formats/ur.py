@@ -20,6 +20,7 @@ from solvers.frames import Pose, matrix_from_ur, ur_from_matrix
 
 from server.service.bounds import check_value
 from server.formats.model import (
+    LINE_END,
     index_number,
     FormatError,
     FrameEntry,
@@ -171,7 +172,7 @@ def read_ur(text: str) -> ParsedFile:
     """
     if not isinstance(text, str):
         raise FormatError(("file",), f"expected text, got {type(text).__name__}")
-    lines = text.replace("\r\n", "\n").split("\n")
+    lines = LINE_END.split(text)
     if not lines[0].startswith("# pendant: Universal Robots"):
         raise FormatError.at_line(1, "header", "not a pendant URScript (its first line is "
                                   "'# pendant: Universal Robots TCP and feature data ...')")
