@@ -19,7 +19,8 @@ Markers sort the suite for ``tests/run`` (they are set here, at collection, not 
   out; passes 1 and 2 run it, beside other tests.
 - ``protocol``: a face's wire protocol and process handling as an outside party meets them
   (``PROTOCOL_MODULES``: node-opcua against the OPC UA face, the face's certificate
-  handshakes, ``serve``'s flags and restarts). What they prove does not depend on the database
+  handshakes, ``serve``'s flags and restarts, an attacker's probes of the OPC UA, RWS and KVP
+  faces: sessions, channels, Digest replays, sockets). What they prove does not depend on the database
   (each face's reads and writes run on PostgreSQL in that face's other tests) nor on a library
   floor the other tests do not reach (test_opcua.py opens encrypted channels,
   test_auth_certificates.py reads certificates): passes 2 and 3 leave them out.
@@ -103,7 +104,8 @@ def chromium():  # noqa: ANN201
 TESTS_DIR = Path(__file__).resolve().parent
 LOAD_MODULES = frozenset({"test_workers.py", "test_jobs_flood.py"})
 PROTOCOL_MODULES = frozenset({"test_opcua_node.py", "test_opcua_security.py",
-                              "test_rws_serve.py", "test_serve_restart.py"})
+                              "test_rws_serve.py", "test_serve_restart.py",
+                              "test_opcua_attack_findings.py", "test_faces_attack_findings.py"})
 
 
 def pytest_configure(config: pytest.Config) -> None:
