@@ -210,10 +210,12 @@ def _mount_web(app: FastAPI, web: Path) -> None:
     """
     index = web / "index.html"
     root = web.resolve()
+    revalidate = {"Cache-Control": "no-cache"}  # no user data; else SiteGuard says no-store
 
     @app.get("/", include_in_schema=False, response_model=None)
     def pendant_page() -> FileResponse | HTMLResponse:
-        return FileResponse(index) if index.is_file() else HTMLResponse(PLACEHOLDER)
+        return (FileResponse(index, headers=revalidate) if index.is_file()
+                else HTMLResponse(PLACEHOLDER, headers=revalidate))
 
     @app.api_route("/{name}", methods=["GET", "HEAD"], include_in_schema=False)
     def web_file(name: str) -> FileResponse:
@@ -222,7 +224,7 @@ def _mount_web(app: FastAPI, web: Path) -> None:
         path = (root / name).resolve()
         if path.parent != root or path.suffix not in WEB_SUFFIXES or not path.is_file():
             raise StarletteHTTPException(status_code=404)
-        return FileResponse(path)
+        return FileResponse(path, headers=revalidate)
 
 
 def __getattr__(name: str) -> FastAPI:

@@ -13,6 +13,9 @@ origins (then Starlette's ``CORSMiddleware`` answers for those only).
   ``Referrer-Policy: same-origin``; pages get a ``Content-Security-Policy`` allowing only this
   origin (FastAPI's /docs and /redoc, served from the installed fastapi-offline package with inline
   scripts, are left without one).
+- A response that sets no ``Cache-Control`` of its own (every API answer) gets ``no-store``: the
+  browser keeps no copy of a user's tool table or ``/auth/me`` once they log out (a shared
+  pendant PC). The page's own files say ``no-cache`` (server.api.app).
 """
 
 from __future__ import annotations
@@ -86,6 +89,8 @@ class SiteGuard:
         async def send_with_headers(message: Message) -> None:
             if message["type"] == "http.response.start":
                 extra = list(HEADERS) + [(b"x-request-id", rid.encode())]
+                if not any(k.lower() == b"cache-control" for k, _ in message.get("headers", [])):
+                    extra.append((b"cache-control", b"no-store"))
                 if csp:
                     extra.append((b"content-security-policy", CSP.encode()))
                 message["headers"] = list(message.get("headers", [])) + extra
