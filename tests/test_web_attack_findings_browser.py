@@ -4,12 +4,57 @@
    browser's HTTP cache: ``fetch(..., {cache: "only-if-cached"})`` on the login page read them
    back without any credential (the next person at a shared pendant PC). API answers are now
    ``Cache-Control: no-store``.
+2. A slot name with a right-to-left override (U+202E, which the API and the file readers take:
+   it is no control character) reversed the numbers that follow it on the same line: the
+   history row of tool 5 "pen" + U+202E at x, y, z = 111, 222, 333 read "000.222 000.111 000.0 /
+   000.333 ..." (measured with the rendered positions). The page now isolates such a name.
 """
 
 from __future__ import annotations
 
+import httpx
+
 from api_helpers import ADMIN_TOKEN
-from browser_helpers import browser_page, idle
+from browser_helpers import browser_page, idle, open_pendant
+
+RLO = "\u202e"
+
+
+def api(site: str) -> httpx.Client:
+    return httpx.Client(base_url=site, headers={"Authorization": f"Bearer {ADMIN_TOKEN}"})
+
+
+def test_a_right_to_left_override_in_a_name_does_not_reorder_the_numbers(chromium, site):
+    r = api(site).put("/controllers/1/tools/5", headers={"If-Match": "*"},
+                      json={"name": f"pen{RLO}", "pose": {"x": 111, "y": 222, "z": 333,
+                                                          "a": 0, "b": 0, "c": 0}})
+    assert r.status_code == 200, r.text
+    with browser_page(chromium, site) as page:
+        open_pendant(page, site)
+        page.locator("#tool-table tr[data-number='5']").click()
+        idle(page)
+        # where x, y and z of the history row's "after" are drawn: in reading order
+        xs = page.evaluate("""() => {
+          const td = [...document.querySelectorAll('#history-rows tbody td')]
+            .find((t) => t.textContent.includes('111.000'));
+          const at = {};
+          const walk = document.createTreeWalker(td, NodeFilter.SHOW_TEXT);
+          for (let n = walk.nextNode(); n; n = walk.nextNode()) {
+            for (const s of ['111.000', '222.000', '333.000']) {
+              const i = n.data.indexOf(s);
+              if (i < 0) continue;
+              const range = document.createRange();
+              range.setStart(n, i);
+              range.setEnd(n, i + s.length);
+              const box = range.getBoundingClientRect();
+              at[s] = [Math.round(box.y), box.x];  // line, then left to right
+            }
+          }
+          return at;
+        }""")
+        assert xs["111.000"] < xs["222.000"] < xs["333.000"], xs  # (line, x) pairs
+        title = page.locator("#history-title").inner_text()
+        assert title.endswith(": 1 change"), title  # the name does not swallow the rest
 
 
 def test_after_log_out_the_api_answers_are_not_in_the_browser_cache(chromium, site):

@@ -4,6 +4,8 @@
 // (web/api.js sends it). After the idle timeout the service treats the login as an Operator:
 // the badge says so, and a new login restores the user's role.
 
+import { isolate } from "/ui.js";
+
 const POLL_MS = 30_000;
 
 async function post(path, body) {
@@ -55,7 +57,7 @@ async function badge() {
     bar.append(who);
   }
   who.className = me.idle ? "who idle" : "who";
-  who.textContent = `${me.user} · ${me.role}${me.idle ? " (idle: log in again)" : ""}`;
+  who.textContent = `${isolate(me.user)} · ${isolate(me.role)}${me.idle ? " (idle: log in again)" : ""}`;
   if (me.source === "pendant") {
     const out = document.createElement("button");
     out.type = "button";

@@ -7,7 +7,7 @@
 // a slot someone changed since this page read it is refused (412), never overwritten.
 
 import { request, ApiError } from "/api.js";
-import { el, describeChange, describeSnapshot } from "/ui.js";
+import { el, describeChange, describeSnapshot, isolate } from "/ui.js";
 
 const $ = (s) => document.querySelector(s);
 const PATH = { tool: "tools", base: "bases", extkin: "external-kinematics" };
@@ -44,7 +44,7 @@ async function show(table, number) {
   const path = slotPath(table, number);
   const [slot, rows] = await Promise.all([request("GET", path, counted()), // keeps its ETag
                                           request("GET", `${path}/history`, counted())]);
-  const name = slot.name ? ` (${slot.name})` : "";
+  const name = slot.name ? ` (${isolate(slot.name)})` : "";
   $("#history-title").textContent = `${LABEL[table]} ${number}${name}: ${rows.length} change${rows.length === 1 ? "" : "s"}`;
   const body = $("#history-rows tbody");
   body.replaceChildren(...rows.slice().reverse().map((h) => {
@@ -72,7 +72,7 @@ async function restoreTo(h, c) {
     const path = slotPath(table, number);
     const out = await request("POST", `${path}/restore/${h.id}`, counted());
     await show(table, number);
-    $("#history-note").textContent = `Restored ${LABEL[table]} ${number}: ${out.name || "(no name)"}`;
+    $("#history-note").textContent = `Restored ${LABEL[table]} ${number}: ${isolate(out.name) || "(no name)"}`;
     await window.pendant?.reloadTables?.();
   } catch (err) { showError(err); }
 }

@@ -7,7 +7,7 @@
 // service is told which, so that its export writes the file back in the same encoding.
 
 import { request, ApiError } from "/api.js";
-import { backupChanges, describeSnapshot, jobText } from "/ui.js";
+import { backupChanges, describeSnapshot, isolate, jobText } from "/ui.js";
 
 const $ = (s) => document.querySelector(s);
 const SUFFIX = { json: "json", dat: "kuka", mod: "abb", modx: "abb", sys: "abb", txt: "fanuc", ls: "fanuc", script: "ur" };
@@ -38,8 +38,8 @@ function describe(slot) {
   const xyz = [p.x, p.y, p.z].map((v) => v.toFixed(3)).join(" ");
   const abc = [p.a, p.b, p.c].map((v) => v.toFixed(3)).join(" ");
   const load = slot.load ? `, ${slot.load.mass_kg} kg` : "";
-  const unit = slot.mech_unit ? ` on ${slot.mech_unit}` : "";
-  return `${slot.name || "(no name)"} [${slot.kind.replace("_", " ")}${unit}] ${xyz} / ${abc}${load}`;
+  const unit = slot.mech_unit ? ` on ${isolate(slot.mech_unit)}` : "";
+  return `${isolate(slot.name) || "(no name)"} [${slot.kind.replace("_", " ")}${unit}] ${xyz} / ${abc}${load}`;
 }
 
 /** What the import is doing now, in words ("" when it is done). */

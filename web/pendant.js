@@ -5,7 +5,7 @@
 // the element whose data-loc (or name) is that field, else in the panel's own error line.
 
 import { request, ApiError } from "/api.js";
-import { axesLabel, describeSession, el, fmt, incrementUnit, num, parseNumbers } from "/ui.js";
+import { axesLabel, describeSession, el, fmt, incrementUnit, isolate, num, parseNumbers } from "/ui.js";
 
 const $ = (sel, root = document) => root.querySelector(sel);
 const $$ = (sel, root = document) => [...root.querySelectorAll(sel)];
@@ -650,7 +650,7 @@ async function save() {
   note.textContent = "";
   $("#saved-note")?.remove();
   $("#open-form").append(el("p", { id: "saved-note", class: "saved", role: "status",
-    text: `Saved into ${TABLE_LABEL[table]} ${entry.number} (${entry.name}): ` +
+    text: `Saved into ${TABLE_LABEL[table]} ${entry.number} (${isolate(entry.name)}): ` +
           `${num(pose.x)} ${num(pose.y)} ${num(pose.z)} / ${num(pose.a)} ${num(pose.b)} ${num(pose.c)}` }));
 }
 

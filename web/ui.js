@@ -17,6 +17,16 @@ export function el(tag, attrs = {}, ...children) {
   return e;
 }
 
+/** A name (a user's, a slot's from a controller file) inside a line of text. One holding a
+ * bidirectional control (a right-to-left override U+202E, an embedding, an isolate) is isolated
+ * (U+2068 ... U+2069) without its own isolate marks, so it cannot reorder what follows it on
+ * the line (a slot's numbers); any other name is returned as it is. */
+export function isolate(name) {
+  const s = String(name ?? "");
+  return /[\u061c\u200e\u200f\u202a-\u202e\u2066-\u2069]/.test(s)
+    ? `\u2068${s.replace(/[\u2066-\u2069]/g, "")}\u2069` : s;
+}
+
 /** A pose coordinate: `digits` fixed decimals, no "-0.000"; "—" for no value. */
 export function num(v, digits = 3) {
   if (v === null || v === undefined) return "—";
@@ -80,7 +90,7 @@ export function describeSnapshot(snap) {
   const pose = (keys) => keys.map((k) => num(snap[k])).join(" ");
   const zero = POSE.flat().every((k) => !snap[k]);
   if (!snap.name && zero) return "(unused)";
-  return `${snap.name || "(no name)"} [${String(snap.kind || "").replace("_", " ")}] ${pose(POSE[0])} / ${pose(POSE[1])}`;
+  return `${isolate(snap.name) || "(no name)"} [${String(snap.kind || "").replace("_", " ")}] ${pose(POSE[0])} / ${pose(POSE[1])}`;
 }
 
 /** What a history row's change did, as a person reads it: the source and the quality figures. */
@@ -109,7 +119,7 @@ export function describeSession(s, label, me = null) {
   const taught = s.steps.filter((st) => st.filled).length;
   const points = required ? `${taught} of ${required} point${required === 1 ? "" : "s"} taught`
                           : `${taught} point${taught === 1 ? "" : "s"} taught`;
-  const by = s.opened_by ? ` by ${s.opened_by}${s.opened_by === me ? " (yours)" : ""}` : "";
+  const by = s.opened_by ? ` by ${isolate(s.opened_by)}${s.opened_by === me ? " (yours)" : ""}` : "";
   return `${s.title} → ${label} ${s.target_no}: ${points}, ${s.state}, opened ${when(s.created_at)}${by} (session ${s.id})`;
 }
 

@@ -3,7 +3,7 @@
 import { test } from "node:test";
 import assert from "node:assert/strict";
 import { axesLabel, backupChanges, describeChange, describeSession, describeSnapshot, fmt,
-         incrementUnit, jobText, num, parseNumbers, sig, when } from "../../web/ui.js";
+         incrementUnit, isolate, jobText, num, parseNumbers, sig, when } from "../../web/ui.js";
 
 test("num: fixed decimals, no -0.000, a dash for no value", () => {
   assert.equal(num(1.23456), "1.235");
@@ -49,6 +49,14 @@ test("incrementUnit: the rail travels in mm", () => {
 
 const snap = (over = {}) => ({ name: "tool1", kind: "tool", x_mm: 1.5, y_mm: 0, z_mm: 200, a_deg: 0,
                                b_deg: 0, c_deg: -0.00001, ...over });
+
+test("isolate: a name with a bidi control cannot reorder the rest of its line", () => {
+  assert.equal(isolate("tool1"), "tool1");
+  assert.equal(isolate(null), "");
+  assert.equal(isolate("pen\u202e"), "\u2068pen\u202e\u2069");
+  assert.equal(isolate("a\u2069\u202eb"), "\u2068a\u202eb\u2069");  // its own PDI cannot close ours
+  assert.equal(describeSnapshot(snap({ name: "\u202ex" })), "\u2068\u202ex\u2069 [tool] 1.500 0.000 200.000 / 0.000 0.000 0.000");
+});
 
 test("describeSnapshot and describeChange: who, when, source, before -> after, quality", () => {
   assert.equal(describeSnapshot(snap()), "tool1 [tool] 1.500 0.000 200.000 / 0.000 0.000 0.000");
