@@ -8,6 +8,10 @@
    it is no control character) reversed the numbers that follow it on the same line: the
    history row of tool 5 "pen" + U+202E at x, y, z = 111, 222, 333 read "000.222 000.111 000.0 /
    000.333 ..." (measured with the rendered positions). The page now isolates such a name.
+3. The first-start login link (``/login.html#token=...``) logged in whoever opened it: a link
+   with Mallory's (an Operator's) token, opened by the Administrator logged in at the pendant,
+   silently made the page Mallory's (/auth/me said mallory). Logged in already, the person is
+   now asked first.
 """
 
 from __future__ import annotations
@@ -15,7 +19,7 @@ from __future__ import annotations
 import httpx
 
 from api_helpers import ADMIN_TOKEN
-from browser_helpers import browser_page, idle, open_pendant
+from browser_helpers import browser_page, idle, log_in, open_pendant
 
 RLO = "\u202e"
 
@@ -77,3 +81,20 @@ def test_after_log_out_the_api_answers_are_not_in_the_browser_cache(chromium, si
           return out;
         }""")
         assert all(v != 200 for v in cached.values()), cached
+
+
+def test_a_login_link_does_not_silently_swap_the_login_for_the_links_user(chromium, site):
+    admin = api(site)
+    r = admin.post("/users", json={"name": "mallory", "role": "Operator"})
+    assert r.status_code == 201, r.text
+    theirs = admin.post("/users/mallory/tokens", json={}).json()["token"]
+    with browser_page(chromium, None) as page:
+        log_in(page.context, site)  # the Administrator, logged in at the pendant
+        asked: list[str] = []
+        page.on("dialog", lambda d: (asked.append(d.message), d.dismiss()))
+        page.goto(site + f"/login.html#token={theirs}")  # a link someone sent
+        page.wait_for_url(site + "/")
+        idle(page)
+        assert page.request.get(site + "/auth/me").json()["user"] == "admin"
+        assert len(asked) == 1 and "admin" in asked[0], asked
+        assert theirs not in page.url

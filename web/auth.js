@@ -36,8 +36,23 @@ function loginPage() {
   const m = location.hash.match(/token=([^&]+)/);
   if (m) {
     history.replaceState(null, "", location.pathname);  // the token leaves the address bar
-    login(decodeURIComponent(m[1]));
+    linkLogin(decodeURIComponent(m[1]));
   }
+}
+
+// A link logs in whoever opens it: one someone else sent (their own token) silently swapped
+// the person's login for theirs. Logged in already, the person is asked first.
+async function linkLogin(token) {
+  const r = await fetch("/auth/me");
+  if (r.ok) {
+    const me = await r.json();
+    if (!window.confirm(`You are logged in as ${isolate(me.user)} (${me.role}). ` +
+                        "Log in with the token of this link instead?")) {
+      location.replace("/");
+      return;
+    }
+  }
+  login(token);
 }
 
 async function badge() {
