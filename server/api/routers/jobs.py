@@ -14,16 +14,19 @@ from __future__ import annotations
 from datetime import datetime
 from typing import Any, Literal
 
-from fastapi import APIRouter, Response
+from fastapi import APIRouter, Request, Response
 from pydantic import BaseModel, ConfigDict
 
 from db import jobs
 from db.models import Job
 from server.api.deps import SessionDep
+from server.auth.guard import require
 from server.service import jobs as job_service
 
 router = APIRouter(prefix="/jobs", tags=["Jobs"])
 
+# what cancelling a job needs beyond the route's sessions:run: what starting it needed
+CANCEL_NEEDS = {"restore": "backup:restore"}
 RESULT_LINKS = {
     "analysis": lambda job: f"/analysis/{job.result['analysis_id']}",
     "restore": lambda job: f"/controllers/{job.params['controller_id']}",
@@ -80,6 +83,10 @@ def get_job(job_id: int, db: SessionDep) -> JobOut:
 
 
 @router.post("/{job_id}/cancel")
-def cancel_job(job_id: int, db: SessionDep) -> JobOut:
-    """Cancel a job: at once if queued, within a second if running; a finished job stays."""
+def cancel_job(job_id: int, db: SessionDep, request: Request) -> JobOut:
+    """Cancel a job: at once if queued, within a second if running; a finished job stays.
+    A restore's job needs ``backup:restore``, as starting it did."""
+    need = CANCEL_NEEDS.get(jobs.get(db, job_id).kind)
+    if need is not None:
+        require(request, need)
     return JobOut.of(job_service.cancel_job(db, job_id))
