@@ -29,3 +29,17 @@ def test_a_programmer_cannot_cancel_an_administrators_restore(client):
     assert "backup:restore" in r.json()["detail"][0]["msg"]
     assert ok(client.get(f"/jobs/{job}"))["state"] == "queued"
     assert ok(client.post(f"/jobs/{job}/cancel"))["state"] == "cancelled"  # its owner's role may
+
+
+def test_the_last_administrator_cannot_be_revoked(client, db_url):
+    """DELETE /users/admin by the only Administrator answered 204: nobody could administer
+    users any more, and a restart with PENDANT_ADMIN_TOKEN (the revoked admin's token) failed
+    with an IntegrityError (the first start made admin2 with the same token's hash)."""
+    r = client.delete("/users/admin")
+    assert r.status_code == 409, r.text
+    assert r.json()["detail"][0]["loc"] == ["path", "user_name"]
+    assert ok(client.get("/auth/me"))["user"] == "admin"
+    _user(client, "ada", "Administrator")  # with a second one, either may go
+    assert client.delete("/users/admin").status_code == 204
+    with make_client(db_url) as again:  # the fixed token starts the service as before
+        assert again.get("/healthz").status_code == 200

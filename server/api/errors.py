@@ -41,7 +41,7 @@ CONFLICTS = {("post", "/controllers"), ("post", S + "/touch-up"),
              ("delete", S + "/points/{step}"), ("post", S + "/compute"), ("post", S + "/save"),
              ("post", S + "/discard"), ("post", S + "/run-cycle"),
              ("post", S + "/beam-recording"), ("post", "/users"),
-             ("post", "/users/{user_name}/tokens")}
+             ("delete", "/users/{user_name}"), ("post", "/users/{user_name}/tokens")}
 ERROR_SCHEMA = {"type": "object", "required": ["detail"], "properties": {"detail": {
     "type": "array", "items": {"type": "object", "required": ["loc", "msg", "type"],
                                "properties": {"loc": {"type": "array", "items": {}},

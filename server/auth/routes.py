@@ -195,9 +195,11 @@ def add_user(body: UserIn, db: SessionDep) -> UserOut:
         raise CalibrationError((field,), reason) from None
 
 
-@router.delete("/users/{user_name}", status_code=204, responses=NOT_FOUND)
+@router.delete("/users/{user_name}", status_code=204,
+               responses={**NOT_FOUND, 409: {"description": "The last user administrator"}})
 def revoke_user(user_name: str, db: SessionDep) -> Response:
-    """Revoke the user, their tokens and browser logins (their audit records stay)."""
+    """Revoke the user, their tokens and browser logins (their audit records stay); never the
+    last active user who may administer users (409)."""
     tokens.revoke_user(db, user_name)
     return Response(status_code=204)
 

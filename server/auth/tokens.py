@@ -128,9 +128,20 @@ def add_user(db: Session, name: str, role: str) -> User:
     return u
 
 
+def user_admins(db: Session) -> list[User]:
+    """The active users whose role may administer users."""
+    admin_roles = [r.name for r in list_roles(db) if "users:admin" in r.permissions]
+    return [u for u in list_users(db) if u.role in admin_roles and u.revoked_at is None]
+
+
 def revoke_user(db: Session, name: str) -> User:
-    """Revoke a user with every token and browser login (the audit keeps their name)."""
+    """Revoke a user with every token and browser login (the audit keeps their name); never the
+    last active user who may administer users (StateConflict): nobody could then add a user
+    or a token, and the first start's token could not be given to a new one."""
     u = get_user(db, name)
+    if u.revoked_at is None and [a.id for a in user_admins(db)] == [u.id]:
+        raise StateConflict(("path", "user_name"), f"{name!r} is the last active user who may "
+                            "administer users; add another (e.g. an Administrator) first")
     now = utcnow()
     u.revoked_at = u.revoked_at or now
     for t in db.scalars(select(ApiToken).where(ApiToken.user_id == u.id,
@@ -338,8 +349,7 @@ def bootstrap_admin(db: Session, secret: str | None) -> str | None:
     and unknown, is then added to the first administrator, so a fixed deployment token works
     across restarts)."""
     ensure_default_roles(db)
-    admin_roles = [r.name for r in list_roles(db) if "users:admin" in r.permissions]
-    admins = [u for u in list_users(db) if u.role in admin_roles and u.revoked_at is None]
+    admins = user_admins(db)
     if admins:
         if secret and db.scalar(select(ApiToken).where(
                 ApiToken.token_sha256 == sha256(secret))) is None:
