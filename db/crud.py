@@ -10,7 +10,7 @@ from collections.abc import Sequence
 from datetime import datetime
 from typing import Any
 
-from sqlalchemy import Connection, bindparam, func, select
+from sqlalchemy import Connection, bindparam, func, select, update
 from sqlalchemy.exc import IntegrityError
 from sqlalchemy.orm import Session, joinedload
 
@@ -527,9 +527,14 @@ def restore_backup(db: Session, c: Controller, doc: dict[str, Any]) -> tuple[int
         apply_snapshot(e, snap)
         e.updated_at = _dt(ed.get("updated_at"))
         n_entries += 1
+    # the re-made rows go on from the versions (ETags) of the rows they replace: back at 1, an
+    # If-Match read before the restore could match a later state (a blind overwrite)
+    versions = {}
     for e in list_external(db, c.id):
+        versions[e.number] = e.version
         db.delete(e)
     db.flush()
+    remade: list[ExternalKinematic] = []
     for xd in doc.get("external_kinematics", []):
         x = ExternalKinematic(controller_id=c.id, number=int(xd["number"]))
         for f in EXT_FIELDS:
@@ -538,6 +543,13 @@ def restore_backup(db: Session, c: Controller, doc: dict[str, Any]) -> tuple[int
         x.session_id = session_ids.get(xd.get("session_id")) if xd.get("session_id") else None
         x.updated_at = _dt(xd.get("updated_at"))
         db.add(x)  # (the count stays the tool and base slots')
+        remade.append(x)
+    db.flush()
+    for x in remade:  # (the ORM writes version 1 on every insert)
+        if x.number in versions:
+            db.execute(update(ExternalKinematic).where(ExternalKinematic.id == x.id)
+                       .values(version=versions[x.number] + 1))
+            db.expire(x, ["version"])
     n_hist = 0
     for hd in doc.get("history", []) + doc.get("external_history", []):
         db.add(EntryHistory(controller_id=c.id, entry_table=hd["table"], number=int(hd["number"]),

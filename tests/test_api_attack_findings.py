@@ -43,3 +43,22 @@ def test_the_last_administrator_cannot_be_revoked(client, db_url):
     assert client.delete("/users/admin").status_code == 204
     with make_client(db_url) as again:  # the fixed token starts the service as before
         assert again.get("/healthz").status_code == 200
+
+
+def test_an_external_kinematic_keeps_its_etag_moving_through_a_restore(client):
+    """A JSON restore deleted and re-made the EX_KIN rows, so their version (the ETag) fell back
+    to "1": a client holding the ETag of an older state could write over a later one blind
+    (ABA). Measured: "2" after an edit, "1" after the restore, "2" again after the next edit."""
+    x = f"{C}/external-kinematics/1"
+    text = client.get(f"{C}/export", params={"format": "json"}).text
+    ok(edit_slot(client, x, {"name": "edited"}))
+    read = client.get(x).headers["ETag"]  # Alice reads EX_KIN 1: "edited"
+    assert finish_job(client, client.post(f"{C}/import", json={"format": "json",
+                                                              "text": text}))["state"] == "done"
+    after = client.get(x)
+    assert after.json()["name"] != "edited"  # the restore put the old one back
+    assert after.headers["ETag"] != read
+    ok(edit_slot(client, x, {"name": "bob"}))  # Bob edits the restored one
+    r = client.put(x, json={"name": "alice"}, headers={"If-Match": read})
+    assert r.status_code == 412, r.text  # Alice's stale ETag must not match Bob's version
+    assert ok(client.get(x))["name"] == "bob"
