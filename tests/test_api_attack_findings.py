@@ -62,3 +62,18 @@ def test_an_external_kinematic_keeps_its_etag_moving_through_a_restore(client):
     r = client.put(x, json={"name": "alice"}, headers={"If-Match": read})
     assert r.status_code == 412, r.text  # Alice's stale ETag must not match Bob's version
     assert ok(client.get(x))["name"] == "bob"
+
+
+def test_put_cell_external_honours_if_match(client):
+    """PUT .../cell/external ignored If-Match: a stale one ("999") answered 200 and wrote the
+    hidden errors (and an audit record). Now 412 as every other controller write, and its
+    answer carries the controller's new ETag."""
+    before = len(ok(client.get("/audit")))
+    r = client.put(f"{C}/cell/external", json={}, headers={"If-Match": '"999"'})
+    assert r.status_code == 412, r.text
+    assert r.json()["detail"][0]["loc"] == ["header", "If-Match"]
+    assert len(ok(client.get("/audit"))) == before
+    etag = client.get(C).headers["ETag"]
+    r = client.put(f"{C}/cell/external", json={}, headers={"If-Match": etag})
+    assert r.status_code == 200, r.text
+    assert r.headers["ETag"] == client.get(C).headers["ETag"]

@@ -66,13 +66,15 @@ def set_clock(db: Session, controller_id: int, clock_s: float, if_match: str | N
     return c
 
 
-def set_external_errors(db: Session, controller_id: int,
-                        errors: dict[str, Any]) -> dict[str, dict[str, float]]:
-    """Replace the external machines' hidden errors (checked, naming the field); the errors."""
-    c = crud.get_controller(db, controller_id)
+def set_external_errors(db: Session, controller_id: int, errors: dict[str, Any],
+                        if_match: str | None = None, present: Present | None = None
+                        ) -> tuple[Controller, dict[str, dict[str, float]]]:
+    """Replace the external machines' hidden errors (checked, naming the field); the controller
+    and the errors. ``if_match`` is the controller's ETag, as for its physics."""
+    c = controller(db, controller_id, if_match, present)
     external.values_of(c, "controller_id")
     doc = ext_emu.check_errors(errors)
     audit.record(db, "emulator.external", controller_id=c.id,
                  before={"external_errors": c.external_errors}, after={"external_errors": doc})
     c.external_errors = doc
-    return doc
+    return c, doc

@@ -17,6 +17,7 @@ from server.service import external as ext
 from server.service import slots
 from server.api.deps import SessionDep, quick_read
 from server.api.preconditions import IfMatch, set_etag
+from server.api.routers.controllers import controller_out
 from server.api.schemas import (ExternalErrorsIn, ExtHistoryOut, ExtSlotIn, ExtSlotOut,
                             ProvenanceOut, PoseOut)
 
@@ -90,10 +91,14 @@ def get_external_errors(controller_id: int, db: SessionDep) -> dict[str, dict[st
 
 
 @router.put("/cell/external", summary="Set the external machines' hidden errors")
-def put_external_errors(controller_id: int, body: ExternalErrorsIn,
-                        db: SessionDep) -> dict[str, dict[str, float]]:
+def put_external_errors(controller_id: int, body: ExternalErrorsIn, db: SessionDep,
+                        response: Response, if_match: IfMatch = None
+                        ) -> dict[str, dict[str, float]]:
     """Replace the hidden errors (an omitted field has none): the axis tilted against its
     machine data, a root offset, a reversed sign, a scale (gear or encoder) error, the turn
     axis missing the tilt axis. Refused naming the field for an unknown one or a value no
-    cell has."""
-    return controllers.set_external_errors(db, controller_id, body.model_dump())
+    cell has. ``If-Match`` is the controller's ETag (412 when stale)."""
+    c, errors = controllers.set_external_errors(db, controller_id, body.model_dump(), if_match,
+                                                controller_out)
+    set_etag(response, db, c)
+    return errors
