@@ -77,3 +77,12 @@ def test_put_cell_external_honours_if_match(client):
     r = client.put(f"{C}/cell/external", json={}, headers={"If-Match": etag})
     assert r.status_code == 200, r.text
     assert r.headers["ETag"] == client.get(C).headers["ETag"]
+
+
+@pytest.mark.parametrize("method,path", [("DELETE", "/webhooks/5"), ("POST", "/webhooks/5/test"),
+                                         ("GET", "/webhooks/5/deliveries")])
+def test_an_unknown_webhook_is_named_once(client, method, path):
+    """The 404 of an unknown webhook said loc ["path", "path", "webhook_id"]."""
+    r = client.request(method, path)
+    assert r.status_code == 404
+    assert r.json()["detail"][0]["loc"] == ["path", "webhook_id"]

@@ -21,7 +21,7 @@ def get_webhook(db: Session, webhook_id: int) -> Webhook:
     """The webhook ``webhook_id``; NotFound naming it if there is none."""
     hook = crud._get(db, Webhook, webhook_id)  # an id beyond the backend's range: not found
     if hook is None:
-        raise crud.NotFound(("path", "webhook_id"), f"no webhook {webhook_id}")
+        raise crud.NotFound(("webhook_id",), f"no webhook {webhook_id}")
     return hook
 
 
