@@ -86,3 +86,18 @@ def test_an_unknown_webhook_is_named_once(client, method, path):
     r = client.request(method, path)
     assert r.status_code == 404
     assert r.json()["detail"][0]["loc"] == ["path", "webhook_id"]
+
+
+@pytest.mark.parametrize("char", ["\u202e", "\u202d", "\u2066", "\u2067", "\u2068", "\u2069"])
+def test_a_slot_name_with_a_bidi_override_is_refused(client, char):
+    """A tool name "pointer\\u202etxt.ini" was stored (200): the pendant page, the exported
+    controller files and the audit then showed it reordered ("pointerini.txt"). NUL and the
+    other control characters were refused already; the bidi embeddings, overrides and
+    isolates are now too."""
+    r = client.put(f"{C}/tools/2", json={"name": f"pointer{char}txt.ini"},
+                   headers={"If-Match": "*"})
+    assert r.status_code == 422, r.text
+    assert r.json()["detail"][0]["loc"] == ["body", "name"]
+    assert ok(client.get(f"{C}/tools/2"))["name"] == ""
+    ok(client.put(f"{C}/tools/2", json={"name": "Greifer-\u00e4\u05d0"},
+                  headers={"If-Match": "*"}))  # letters of any script stay

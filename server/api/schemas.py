@@ -14,7 +14,7 @@ from pydantic import (AfterValidator, BaseModel, ConfigDict, Field, ValidationIn
                       field_validator, model_validator)
 
 from server.api.limits import IMPORT_LIMIT_BYTES
-from server.service.bounds import MAX_MM, MECH_UNIT_CHARS, ClockS, NAME_CHARS, Deg, Kg, Kgm2, Mm, check_name
+from server.service.bounds import MAX_MM, MECH_UNIT_CHARS, ClockS, NAME_CHARS, Deg, Kg, Kgm2, Mm, check_given_name
 from server.menus import METHODS
 from solvers.frames import Pose
 from solvers.report import CalibrationResult
@@ -27,7 +27,7 @@ MethodName = Literal[tuple(METHODS)]  # type: ignore[valid-type]
 EntryKind = Literal["tool", "workpiece", "base", "fixed_tool", "coordinated_base"]
 SessionState = Literal["open", "computed", "saved", "discarded"]
 SlotName = Annotated[str, Field(max_length=NAME_CHARS),
-                     AfterValidator(lambda v: check_name(v, ("name",)))]
+                     AfterValidator(lambda v: check_given_name(v, ("name",)))]
 TableName = Literal["tool", "base"]
 Vec3 = Annotated[list[Mm], Field(min_length=3, max_length=3)]
 ExportFormat = Literal["kuka", "abb", "fanuc", "ur", "json", "kuka_machine", "abb_moc"]

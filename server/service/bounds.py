@@ -76,3 +76,19 @@ def check_name(name: str, loc: tuple[str | int, ...], max_chars: int = NAME_CHAR
     if bad is not None:
         raise CalibrationError(loc, f"contains the control character U+{ord(bad):04X}")
     return name
+
+
+# the bidi embeddings, overrides and isolates (U+202A..U+202E, U+2066..U+2069): a name with one
+# shows reordered ("pointer<RLO>txt.ini" as "pointerini.txt") on the pendant, in files, the audit
+BIDI_CONTROLS = frozenset({"LRE", "RLE", "LRO", "RLO", "PDF", "LRI", "RLI", "FSI", "PDI"})
+
+
+def check_given_name(name: str, loc: tuple[str | int, ...]) -> str:
+    """:func:`check_name` of a name a client gives (a slot edit, a save), which also may not
+    hold a bidi control (a controller file's names are read as they are)."""
+    check_name(name, loc)
+    bidi = next((c for c in name if unicodedata.bidirectional(c) in BIDI_CONTROLS), None)
+    if bidi is not None:
+        raise CalibrationError(loc, f"contains the bidi control U+{ord(bidi):04X} (it shows the "
+                               "name reordered)")
+    return name

@@ -28,7 +28,7 @@ from server.formats.recording import parse_recording
 from server.menus import METHODS
 from server.menus.methods import PARAM_HELP, MethodInputs, MethodSpec, Step, TaughtData
 from server.service import external as ext
-from server.service.bounds import check_name
+from server.service.bounds import check_given_name
 from server.service.external import ext_inputs
 from server.service.preconditions import Present, check_row
 from server.service.robot import (cell_of, entry_matrix, flange_pose_of, physics_of, robot_of,
@@ -278,7 +278,7 @@ def save(db: Session, controller_id: int, session_id: int, if_match: str | None 
     if why is not None and not confirm:
         raise crud.StateConflict(("query", "confirm"), why)
     if name is not None:
-        check_name(name, ("query", "name"))
+        check_given_name(name, ("query", "name"))
     r = s.result_values()
     keys = POSE_KEYS[:3] if spec.writes == "xyz" else POSE_KEYS  # XYZ menus keep A, B, C
     values: dict[str, Any] = dict(zip(keys, r))  # type: ignore[arg-type]
