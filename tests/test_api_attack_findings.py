@@ -101,3 +101,30 @@ def test_a_slot_name_with_a_bidi_override_is_refused(client, char):
     assert ok(client.get(f"{C}/tools/2"))["name"] == ""
     ok(client.put(f"{C}/tools/2", json={"name": "Greifer-\u00e4\u05d0"},
                   headers={"If-Match": "*"}))  # letters of any script stay
+
+
+KUKA_FILE = "tests/data/kuka_config.dat"
+
+
+@pytest.mark.parametrize("method,path,body,params,loc", [
+    ("POST", "/users/pat/tokens", {"label": "a\x00b"}, None, ["body", "label"]),
+    ("POST", "/users", {"name": "q", "role": "Operator\x00"}, None, ["body", "role"]),
+    ("GET", "/audit", None, {"user": "a\x00b"}, ["query", "user"]),
+    ("POST", "/webhooks", {"url": "http://127.0.0.1:9/\x00"}, None, ["body", "url"]),
+    ("POST", "/webhooks", {"url": "http://127.0.0.1:9/x", "secret": "s" * 20 + "\x00"}, None,
+     ["body", "secret"]),
+    ("POST", f"{C}/import", "kuka-with-nul", None, ["body", "text"]),
+])
+def test_a_nul_character_is_a_422_naming_the_field(client, method, path, body, params, loc):
+    """A NUL (U+0000) in a token label, a role, the audit's user filter, a webhook URL or
+    secret, or an imported controller file (in a comment) was a 500 DataError on PostgreSQL
+    ("text fields cannot contain NUL"), and SQLite stored it. Now 422 naming the field."""
+    ok(client.post("/users", json={"name": "pat", "role": "Programmer"}))
+    if body == "kuka-with-nul":
+        with open(KUKA_FILE, encoding="latin-1") as f:
+            body = {"format": "kuka", "text": f.read().replace("\n", "\n;\x00\n", 1)}
+    before = len(ok(client.get("/audit")))
+    r = client.request(method, path, json=body, params=params)
+    assert r.status_code == 422, r.text
+    assert r.json()["detail"][0]["loc"] == loc, r.text
+    assert len(ok(client.get("/audit"))) == before

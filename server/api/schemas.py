@@ -14,7 +14,8 @@ from pydantic import (AfterValidator, BaseModel, ConfigDict, Field, ValidationIn
                       field_validator, model_validator)
 
 from server.api.limits import IMPORT_LIMIT_BYTES
-from server.service.bounds import MAX_MM, MECH_UNIT_CHARS, ClockS, NAME_CHARS, Deg, Kg, Kgm2, Mm, check_given_name
+from server.service.bounds import (MAX_MM, MECH_UNIT_CHARS, ClockS, NAME_CHARS, Deg, Kg, Kgm2,
+                                   Mm, check_given_name, no_nul)
 from server.menus import METHODS
 from solvers.frames import Pose
 from solvers.report import CalibrationResult
@@ -589,9 +590,10 @@ class SlotRefIn(In):
 
 class ImportIn(In):
     format: ImportFormat
-    text: str = Field(min_length=1, max_length=IMPORT_LIMIT_BYTES,
-                      description="the file; a controller file has at most 5 000 000 characters, "
-                                  "a JSON backup as many as the body's 64 MiB limit holds")
+    text: Annotated[str, AfterValidator(no_nul)] = Field(
+        min_length=1, max_length=IMPORT_LIMIT_BYTES,
+        description="the file; a controller file has at most 5 000 000 characters, a JSON "
+                    "backup as many as the body's 64 MiB limit holds (no NUL)")
     dry_run: bool = Field(False, description="say what would change; write nothing")
     encoding: Literal["utf-8", "cp1252"] = Field(
         "utf-8", description="the file's own encoding (the text as decoded from it): an "

@@ -9,13 +9,14 @@ from datetime import datetime, timezone
 from typing import Annotated, Any, Literal
 
 from fastapi import APIRouter, Query, Request, Response
-from pydantic import BaseModel, ConfigDict, Field
+from pydantic import AfterValidator, BaseModel, ConfigDict, Field
 
 from db.auth_models import AuditRecord
 from db.crud import MAX_ID
 from server.auth import audit, tokens
 from server.auth.guard import CSRF_COOKIE, SESSION_COOKIE, _refuse
 from server.api.deps import SessionDep
+from server.service.bounds import no_nul
 
 router = APIRouter(tags=["Auth"])
 NOT_FOUND = {404: {"description": "No such user"}}
@@ -37,9 +38,12 @@ class MeOut(BaseModel):
     idle: bool
 
 
+Text = Annotated[str, AfterValidator(no_nul)]  # no NUL: PostgreSQL cannot store one
+
+
 class UserIn(In):
-    name: str = Field(min_length=1, max_length=64)
-    role: str = Field(min_length=1, max_length=32)
+    name: Text = Field(min_length=1, max_length=64)
+    role: Text = Field(min_length=1, max_length=32)
 
 
 class UserOut(BaseModel):
@@ -52,7 +56,7 @@ class UserOut(BaseModel):
 
 class TokenIn(In):
     days: float | None = Field(90.0, gt=0, le=3650, description="lifetime; null = no expiry")
-    label: str = Field("", max_length=64)
+    label: Text = Field("", max_length=64)
 
 
 class TokenOut(BaseModel):
@@ -151,7 +155,8 @@ def get_audit(db: SessionDep,
               controller_id: Annotated[int | None, Query(ge=1, le=MAX_ID)] = None,
               table: Literal["tool", "base", "extkin"] | None = None,
               number: Annotated[int | None, Query(ge=1, le=32)] = None,
-              user: str | None = None, since: datetime | None = None,
+              user: Annotated[Text | None, Query(max_length=64)] = None,
+              since: datetime | None = None,
               until: datetime | None = None,
               format: Literal["json", "csv"] = "json",
               limit: Annotated[int, Query(ge=1, le=100000)] = 1000

@@ -68,6 +68,14 @@ def unprintable(c: str) -> bool:
     return unicodedata.category(c) in ("Cc", "Zl", "Zp")
 
 
+def no_nul(text: str) -> str:
+    """``text`` unless it holds a NUL (U+0000), which a PostgreSQL text field cannot store (a
+    500 there) and no name, label, URL or controller file has (a pydantic validator)."""
+    if "\x00" in text:
+        raise ValueError("contains the character U+0000 (NUL)")
+    return text
+
+
 def check_name(name: str, loc: tuple[str | int, ...], max_chars: int = NAME_CHARS) -> str:
     """``name`` if it has at most ``max_chars`` characters and none that breaks a line."""
     if len(name) > max_chars:
