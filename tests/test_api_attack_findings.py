@@ -128,3 +128,24 @@ def test_a_nul_character_is_a_422_naming_the_field(client, method, path, body, p
     assert r.status_code == 422, r.text
     assert r.json()["detail"][0]["loc"] == loc, r.text
     assert len(ok(client.get("/audit"))) == before
+
+
+@pytest.mark.parametrize("where", ["files", "history"])
+def test_a_backup_with_a_nul_is_refused_before_the_restore(client, where):
+    """A JSON backup whose kept controller file or history reason held a NUL passed the check
+    (202) and its restore job failed with a 500 DataError on PostgreSQL; SQLite restored it.
+    The check now refuses it at once, naming the field."""
+    import json
+
+    with open(KUKA_FILE, encoding="latin-1") as f:
+        ok(client.post(f"{C}/import", json={"format": "kuka", "text": f.read()}))
+    doc = json.loads(client.get(f"{C}/export", params={"format": "json"}).text)
+    if where == "files":
+        doc["files"][0]["text"] += "\x00"
+        loc = ["body", "text", "files", 0, "text"]
+    else:
+        doc["history"][0]["reason"] = "edit\x00"
+        loc = ["body", "text", "history", 0, "reason"]
+    r = client.post(f"{C}/import", json={"format": "json", "text": json.dumps(doc)})
+    assert r.status_code == 422, r.text
+    assert r.json()["detail"][0]["loc"] == loc

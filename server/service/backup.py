@@ -296,6 +296,22 @@ def _no_constant(name: str) -> None:
     raise CalibrationError(("text",), f"{name} is not a number: a backup holds finite numbers only")
 
 
+def _nul_at(doc: Any) -> tuple[str | int, ...] | None:
+    """The path of the first string (key or value) of ``doc`` holding a NUL, which a PostgreSQL
+    text field cannot store (the restore failed there with a 500); None if none does."""
+    todo: list[tuple[tuple[str | int, ...], Any]] = [((), doc)]
+    while todo:  # a loop, not recursion: the document may be nested deep
+        path, v = todo.pop()
+        if isinstance(v, str) and "\x00" in v:
+            return path
+        items = v.items() if isinstance(v, dict) else enumerate(v) if isinstance(v, list) else ()
+        for k, item in items:
+            if isinstance(k, str) and "\x00" in k:
+                return path
+            todo.append(((*path, k), item))
+    return None
+
+
 def parse_backup(text: str) -> dict[str, Any]:
     """The checked ``pendant-backup/1`` document of ``text`` as plain JSON values.
 
@@ -312,6 +328,9 @@ def parse_backup(text: str) -> dict[str, Any]:
     if not isinstance(doc, dict) or doc.get("format") != FORMAT:
         raise CalibrationError(("text", "format"), f"must be a {FORMAT} document "
                                "(GET .../export?format=json)")
+    nul = _nul_at(doc)
+    if nul is not None:
+        raise CalibrationError(("text", *nul), "contains the character U+0000 (NUL)")
     try:
         backup = BackupIn.model_validate(doc)
     except ValidationError as exc:
