@@ -149,3 +149,28 @@ def test_a_backup_with_a_nul_is_refused_before_the_restore(client, where):
     r = client.post(f"{C}/import", json={"format": "json", "text": json.dumps(doc)})
     assert r.status_code == 422, r.text
     assert r.json()["detail"][0]["loc"] == loc
+
+
+def test_a_beam_id_with_a_nul_is_refused(client):
+    """A light-barrier session took a beam id "bx\\u0000" (201) from its params and from a posted
+    beam recording (200): the session then sat in the controller's JSON backup, which no
+    longer restored (a 500 on PostgreSQL; now the backup check's 422). Both are refused at
+    the door, naming the field."""
+    from test_menu_light_barrier import beam_recording
+
+    beam = {"id": "bx\x00", "point_mm": [0, 0, 0], "direction": [1, 0, 0]}
+    r = client.post(f"{C}/sessions", json={"method": "tool.light_barrier", "target_no": 8,
+                                           "params": {"beams": [beam]}})
+    assert r.status_code == 422, r.text
+    assert r.json()["detail"][0]["loc"] == ["body", "params", "beams", 0, "id"]
+    doc = beam_recording(client)
+    first = doc["sensor"]["beams"][0]["id"]
+    doc["sensor"]["beams"][0]["id"] = first + "\x00"
+    for sample in doc["samples"]:
+        if sample["beam"] == first:
+            sample["beam"] = first + "\x00"
+    s = ok(client.post(f"{C}/sessions", json={"method": "tool.light_barrier", "target_no": 7}))
+    r = client.post(f"{C}/sessions/{s['id']}/beam-recording", json=doc)
+    assert r.status_code == 422, r.text
+    assert r.json()["detail"][0]["loc"][-1] == "id", r.text
+    assert all(not st["filled"] for st in ok(client.get(f"{C}/sessions/{s['id']}"))["steps"])

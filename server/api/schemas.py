@@ -402,7 +402,7 @@ class ExternalErrorsIn(In):
 # ---------------------------------------------------------------------------------- sessions
 
 class BeamIn(In):
-    id: str = Field(min_length=1, max_length=32)
+    id: Annotated[str, AfterValidator(no_nul)] = Field(min_length=1, max_length=32)
     point_mm: Vec3
     direction: Vec3
 
