@@ -114,11 +114,17 @@ KUKA_FILE = "tests/data/kuka_config.dat"
     ("POST", "/webhooks", {"url": "http://127.0.0.1:9/x", "secret": "s" * 20 + "\x00"}, None,
      ["body", "secret"]),
     ("POST", f"{C}/import", "kuka-with-nul", None, ["body", "text"]),
+    ("POST", "/controllers", {"name": "c2", "custom_robot": {
+        "name": "arm\x00", "dh_convention": "standard",
+        "joints": [{"a_mm": 0.0, "alpha_deg": 90.0, "d_mm": 400.0}] * 6}}, None,
+     ["body", "custom_robot", "name"]),
 ])
 def test_a_nul_character_is_a_422_naming_the_field(client, method, path, body, params, loc):
     """A NUL (U+0000) in a token label, a role, the audit's user filter, a webhook URL or
     secret, or an imported controller file (in a comment) was a 500 DataError on PostgreSQL
-    ("text fields cannot contain NUL"), and SQLite stored it. Now 422 naming the field."""
+    ("text fields cannot contain NUL"), and SQLite stored it. A custom arm's name with one was
+    stored on both (201), and the controller's JSON backup then did not restore. Now 422
+    naming the field."""
     ok(client.post("/users", json={"name": "pat", "role": "Programmer"}))
     if body == "kuka-with-nul":
         with open(KUKA_FILE, encoding="latin-1") as f:

@@ -107,7 +107,7 @@ class DHJointIn(In):
 class RobotIn(In):
     """A custom arm: DH table (standard or modified), mounting and flange poses."""
 
-    name: str = Field("custom", max_length=64)
+    name: Annotated[str, AfterValidator(no_nul)] = Field("custom", max_length=64)
     dh_convention: Literal["standard", "modified"]
     joints: list[DHJointIn] = Field(min_length=1, max_length=7)
     base_pose: PoseIn | None = None
