@@ -180,3 +180,21 @@ def test_a_beam_id_with_a_nul_is_refused(client):
     assert r.status_code == 422, r.text
     assert r.json()["detail"][0]["loc"][-1] == "id", r.text
     assert all(not st["filled"] for st in ok(client.get(f"{C}/sessions/{s['id']}"))["steps"])
+
+
+def test_plan_recording_honours_the_idempotency_key(client):
+    """POST /plan/recording stores a recording, but ignored Idempotency-Key: a retry with the
+    same key stored a second one (ids 1 and 2, measured) and a 300-character key passed. Now
+    the retry answers the first one's stored answer, and a bad key is a 400."""
+    body = {"robot": "ur10", "joints_deg": [[0.0, -90.0, 90.0, 0.0, 90.0, 0.0]] * 4}
+    key = {"Idempotency-Key": "plan-rec-1"}
+    first = client.post("/plan/recording", json=body, headers=key)
+    assert first.status_code == 201, first.text
+    again = client.post("/plan/recording", json=body, headers=key)
+    assert again.status_code == 201 and again.json() == first.json()
+    assert client.get(f"/recordings/{first.json()['id'] + 1}").status_code == 404
+    other = client.post("/plan/recording", json={**body, "seed": 1}, headers=key)
+    assert other.status_code == 422 and other.json()["detail"][0]["loc"] == \
+        ["header", "Idempotency-Key"]
+    r = client.post("/plan/recording", json=body, headers={"Idempotency-Key": "k" * 300})
+    assert r.status_code == 400, r.text

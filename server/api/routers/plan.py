@@ -20,6 +20,7 @@ from fastapi import APIRouter, Request
 from pydantic import BaseModel, Field
 from starlette.concurrency import run_in_threadpool
 
+from server.api import idempotency
 from server.service import transaction
 from server.service.bounds import Deg, Mm
 from server.service.recordings import store_recording
@@ -59,6 +60,8 @@ class PlanRecordingIn(BaseModel):
 def _store(request: Request, doc: dict[str, Any]) -> int:
     with transaction.writing(request.app.state.sessionmaker,
                              operation="record_from_plan") as db:
+        if idempotency.has_key(request):  # claimed with the recording it stores
+            idempotency.claim(db, request)
         return store_recording(db, doc)
 
 
@@ -85,7 +88,10 @@ async def make_plan(body: PlanIn) -> dict[str, Any]:
 
 @router.post("/plan/recording", status_code=201)
 async def record_from_plan(request: Request, body: PlanRecordingIn) -> dict[str, Any]:
-    """Measure the plan's poses on a simulated arm with ``physics``; stores the recording."""
+    """Measure the plan's poses on a simulated arm with ``physics``; stores the recording.
+    An ``Idempotency-Key`` works as on every command: its retry answers the stored recording."""
+    if idempotency.has_key(request):
+        await idempotency.read_body(request)  # a key that is no key: 400 before the work
     robot = _robot(body.robot)
     for k, q in enumerate(body.joints_deg):
         if len(q) != robot.dof:
