@@ -155,7 +155,7 @@ def get_audit(db: SessionDep,
               controller_id: Annotated[int | None, Query(ge=1, le=MAX_ID)] = None,
               table: Literal["tool", "base", "extkin"] | None = None,
               number: Annotated[int | None, Query(ge=1, le=32)] = None,
-              user: Annotated[Text | None, Query(max_length=64)] = None,
+              user: Annotated[str | None, Query(max_length=64)] = None,
               since: datetime | None = None,
               until: datetime | None = None,
               format: Literal["json", "csv"] = "json",
@@ -164,6 +164,11 @@ def get_audit(db: SessionDep,
     """The audit trail, oldest first: filter by controller, slot (``table`` + ``number``;
     ``extkin`` for an external kinematic), user and time (ISO 8601, UTC if no zone);
     ``format=csv`` for a spreadsheet."""
+    if user is not None and "\x00" in user:  # PostgreSQL cannot compare with it (a 500)
+        from solvers.errors import CalibrationError
+
+        raise CalibrationError(("query", "user"), "contains the character U+0000 (NUL)")
+
     def utc(t: datetime | None) -> datetime | None:
         return t if t is None or t.tzinfo else t.replace(tzinfo=timezone.utc)
 
