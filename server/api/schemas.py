@@ -15,7 +15,7 @@ from pydantic import (AfterValidator, BaseModel, ConfigDict, Field, ValidationIn
 
 from server.api.limits import IMPORT_LIMIT_BYTES
 from server.service.bounds import (MAX_MM, MECH_UNIT_CHARS, ClockS, NAME_CHARS, Deg, Kg, Kgm2,
-                                   Mm, check_given_name, no_nul)
+                                   Mm, Text, check_given_name)
 from server.menus import METHODS
 from solvers.frames import Pose
 from solvers.report import CalibrationResult
@@ -107,7 +107,7 @@ class DHJointIn(In):
 class RobotIn(In):
     """A custom arm: DH table (standard or modified), mounting and flange poses."""
 
-    name: Annotated[str, AfterValidator(no_nul)] = Field("custom", max_length=64)
+    name: Text = Field("custom", max_length=64)
     dh_convention: Literal["standard", "modified"]
     joints: list[DHJointIn] = Field(min_length=1, max_length=7)
     base_pose: PoseIn | None = None
@@ -402,7 +402,7 @@ class ExternalErrorsIn(In):
 # ---------------------------------------------------------------------------------- sessions
 
 class BeamIn(In):
-    id: Annotated[str, AfterValidator(no_nul)] = Field(min_length=1, max_length=32)
+    id: Text = Field(min_length=1, max_length=32)
     point_mm: Vec3
     direction: Vec3
 
@@ -590,7 +590,7 @@ class SlotRefIn(In):
 
 class ImportIn(In):
     format: ImportFormat
-    text: Annotated[str, AfterValidator(no_nul)] = Field(
+    text: Text = Field(
         min_length=1, max_length=IMPORT_LIMIT_BYTES,
         description="the file; a controller file has at most 5 000 000 characters, a JSON "
                     "backup as many as the body's 64 MiB limit holds (no NUL)")

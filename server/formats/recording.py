@@ -21,10 +21,10 @@ from datetime import datetime
 from typing import Annotated, Any, Literal, Union
 
 import numpy as np
-from pydantic import (AfterValidator, BaseModel, ConfigDict, Field, TypeAdapter, ValidationError,
+from pydantic import (BaseModel, ConfigDict, Field, TypeAdapter, ValidationError,
                       field_validator, model_validator)
 
-from server.service.bounds import no_nul
+from server.service.bounds import Text
 from solvers.dh import DHJoint, RobotModel
 from solvers.errors import CalibrationError
 from solvers.frames import Pose
@@ -154,7 +154,7 @@ class PayloadIn(_Model):
 class BeamIn(_Model):
     """One light beam: a point on it and its direction, robot base frame."""
 
-    id: Annotated[str, AfterValidator(no_nul)] = Field(min_length=1)
+    id: Text = Field(min_length=1)
     point_mm: Vec3
     direction: Vec3
 

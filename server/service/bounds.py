@@ -16,7 +16,7 @@ import math
 import unicodedata
 from typing import Annotated
 
-from pydantic import Field
+from pydantic import AfterValidator, Field
 
 from solvers.errors import CalibrationError
 
@@ -74,6 +74,9 @@ def no_nul(text: str) -> str:
     if "\x00" in text:
         raise ValueError("contains the character U+0000 (NUL)")
     return text
+
+
+Text = Annotated[str, AfterValidator(no_nul)]  # a text field a client sends (no NUL)
 
 
 def check_name(name: str, loc: tuple[str | int, ...], max_chars: int = NAME_CHARS) -> str:

@@ -8,11 +8,11 @@ docs/events.md has the receiver's side.
 from __future__ import annotations
 
 from datetime import datetime
-from typing import Annotated, Literal
+from typing import Literal
 from urllib.parse import urlsplit
 
 from fastapi import APIRouter, Response
-from pydantic import AfterValidator, Field, field_validator
+from pydantic import Field, field_validator
 from sqlalchemy import select
 
 from db.models import Delivery, Event, Webhook
@@ -20,7 +20,7 @@ from db.outbox import KINDS
 from server.api.deps import SessionDep
 from server.api.schemas import In, Out
 from server.service import webhooks as subscriptions
-from server.service.bounds import no_nul
+from server.service.bounds import Text
 
 router = APIRouter(prefix="/webhooks", tags=["Events"])
 
@@ -30,9 +30,9 @@ assert set(EventKind.__args__) == set(KINDS)  # type: ignore[attr-defined]
 
 
 class WebhookIn(In):
-    url: Annotated[str, AfterValidator(no_nul)] = Field(
+    url: Text = Field(
         max_length=2048, description="http(s) URL that receives the POSTs")
-    secret: Annotated[str, AfterValidator(no_nul)] | None = Field(
+    secret: Text | None = Field(
         None, min_length=16, max_length=128,
         description="HMAC key; a random one is made (and shown once) when absent")
     kinds: list[EventKind] | None = Field(None, description="the event kinds to send; all "
