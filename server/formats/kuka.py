@@ -360,7 +360,12 @@ def _bounded(v: float, unit: str, line: int, fld: str) -> float:
 
 
 def parse_load(text: str, line: int, fld: str) -> LoadData | None:
-    agg = parse_aggregate(text, line, fld)
+    """``{M ..., CM {...}, J {...}}`` read (:func:`load_of`)."""
+    return load_of(parse_aggregate(text, line, fld), line, fld)
+
+
+def load_of(agg: dict[str, object], line: int, fld: str) -> LoadData | None:
+    """The load of a ``LOAD_DATA`` aggregate (``M`` -1: none), every number checked."""
     missing = [k for k in ("M", "CM", "J") if k not in agg]
     extra = [k for k in agg if k not in ("M", "CM", "J")]
     if missing or extra:

@@ -195,19 +195,6 @@ def _frame_merge(value: str, var: str) -> Callable[[object], tuple[EntryIn, bool
     return merge
 
 
-def _krl(agg: dict[str, object], fld: str) -> str:
-    """An aggregate of numbers back as KRL (exact reals)."""
-    parts = []
-    for k, v in agg.items():
-        if isinstance(v, dict):
-            parts.append(f"{k} {_krl(v, f'{fld}.{k}')}")
-        elif isinstance(v, float):
-            parts.append(f"{k} {kuka.krl_real(v)}")
-        else:
-            raise KvpError(f"{fld}.{k}: expected a number")
-    return "{" + ",".join(parts) + "}"
-
-
 def _load_merge(value: str, var: str) -> Callable[[object], tuple[EntryIn, bool]]:
     """``LOAD_DATA[n]`` := ``value`` on the load as it is: ``{M 4.5}`` keeps CM and J;
     ``M -1`` clears the load."""
@@ -227,7 +214,7 @@ def _load_merge(value: str, var: str) -> Callable[[object], tuple[EntryIn, bool]
             old = now.get(k)
             now[k] = {**old, **v} if isinstance(v, dict) and isinstance(old, dict) else v
         try:
-            new = kuka.parse_load(_krl(now, var), 1, var)
+            new = kuka.load_of(now, 1, var)
         except FormatError as err:
             raise KvpError(f"{'.'.join(str(x) for x in err.loc[2:])}: {err.reason}") from None
         if new is None:
