@@ -234,6 +234,7 @@ class PendantOpcUa:
         self.rules = access.PendantRules(self.make_session, self.auth, iserver=self.server.iserver)
         access.install_login_checks(self.server.iserver)
         access.unguessable_subscription_ids(self.server.iserver.subscription_service)
+        access.bounded_monitored_items(self.server.iserver.subscription_service)
         access.unguessable_session_tokens(self.server.iserver)
         access.republish_with_status(self.server.iserver.subscription_service)
         cert, key = await pki.server_certificate(self.pki_dir, space.PENDANT_URI)
